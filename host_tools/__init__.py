@@ -1,0 +1,1 @@
+"""Host tools: DBC codec, CAN and serial links to the C estimator, host emulation loop."""

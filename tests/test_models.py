@@ -1,0 +1,58 @@
+import numpy as np
+import pytest
+import torch
+
+from fleetlab.models import batched_logits, build, flatten, load_flat, load_model, n_params, save_model
+from fleetlab.models.train import class_weights, predict, train_classifier
+
+
+def test_parameter_counts():
+    assert n_params("sn-s") == 543 and n_params("sn-d") == 12547
+    assert sum(p.numel() for p in build("sn-s").parameters()) == 543
+
+
+@pytest.mark.parametrize("arch", ["sn-s", "sn-d"])
+def test_batched_forward_equals_module(arch):
+    models = [build(arch, seed=s).eval() for s in range(3)]
+    x = torch.randn(40, 12) * 5
+    flat = torch.stack([flatten(m) for m in models])
+    out = batched_logits(arch, flat, x)
+    for m, o in zip(models, out):
+        torch.testing.assert_close(o, m(x), atol=2e-5, rtol=1e-5)
+
+
+def test_flat_roundtrip_and_size_check():
+    a, b = build("sn-s", seed=0), build("sn-s", seed=1)
+    load_flat(b, flatten(a))
+    assert torch.equal(flatten(a), flatten(b))
+    with pytest.raises(ValueError, match="542 values"):
+        load_flat(b, torch.zeros(542))
+
+
+def test_class_weights_formula():
+    w = class_weights(np.array([0, 0, 0, 0, 1, 1, 2, 2]))
+    torch.testing.assert_close(w, torch.tensor([8 / 12, 8 / 6, 8 / 6]))
+    assert class_weights(np.array([0, 0, 1]))[2] == 0
+
+
+def test_training_is_seeded_and_learns():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(300, 12)).astype(np.float32)
+    y = (x[:, 0] > 0).astype(int) + (x[:, 1] > 1).astype(int)
+    m1 = train_classifier(build("sn-s", seed=0), x, y, epochs=15, seed=5)
+    m2 = train_classifier(build("sn-s", seed=0), x, y, epochs=15, seed=5)
+    assert torch.equal(flatten(m1), flatten(m2))
+    assert (predict(m1, x) == y).mean() > 0.85
+
+
+def test_save_load_roundtrip_and_refusals(tmp_path):
+    m = build("sn-s", seed=0)
+    p = save_model(tmp_path / "m.pt", m, {"seed": 0, "note": "x"})
+    back, meta = load_model(p)
+    assert torch.equal(flatten(back), flatten(m)) and meta["arch"] == "sn-s" and meta["seed"] == 0
+    p.write_bytes(p.read_bytes()[:100])
+    with pytest.raises(ValueError, match="cannot read model file"):
+        load_model(p)
+    torch.save({"weights": 1}, tmp_path / "other.pt")
+    with pytest.raises(ValueError, match="not a fleetlab model file"):
+        load_model(tmp_path / "other.pt")

@@ -1,0 +1,35 @@
+"""`fleetlab bench KIND`: benchmarks that print their figures (and JSON with --json).
+
+Each kind lives next to the code it measures and provides `add_arguments(parser)`
+and `run(args) -> int`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+
+KINDS: dict[str, tuple[str, str]] = {
+    "data": ("fleetlab.data.bench", "featurisation (raw samples/s) and simulation speed (simulated s per wall s)"),
+    "fusion": ("fleetlab.fusion.bench", "AcoMerge: batched vs one-ant-at-a-time generation, full-run time"),
+    "c": ("fleetlab.host_tools.bench_c", "C estimator: host ns/inference vs onnxruntime and torch, Cortex-M4 cost and size"),
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="kind", metavar="KIND", required=True)
+    for kind, (module, help_text) in KINDS.items():
+        p = sub.add_parser(kind, help=help_text, description=help_text)
+        p.set_defaults(_bench_module=module)
+        try:
+            importlib.import_module(module).add_arguments(p)
+        except ModuleNotFoundError as e:
+            if e.name != module:
+                raise
+            p.set_defaults(_bench_missing=True)
+
+
+def run(args: argparse.Namespace) -> int:
+    if getattr(args, "_bench_missing", False):
+        raise ValueError(f"benchmark {args.kind!r} is not available in this build")
+    return importlib.import_module(args._bench_module).run(args)

@@ -1,0 +1,80 @@
+"""`fleetlab` command line: one subcommand per everyday task.
+
+Each subcommand lives in its own module, which provides
+`add_arguments(parser)` and `run(args) -> int`. The module is imported only
+when its subcommand runs, so `fleetlab --help` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import sys
+
+# name -> (module, one-line help, longer description)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "simulate": ("fleetlab.data.simulator.cli", "simulate rover telemetry and write window CSVs (built-in fleet scenario)"),
+    "data": ("fleetlab.data.info", "inspect a dataset folder: rows, roles, class mix, feature statistics"),
+    "fuse": ("fleetlab.fusion.cli", "train the experts and fuse them with AcoMerge into one model"),
+    "evaluate": ("fleetlab.evaluation.cli", "Monte Carlo cross-validation of AcoMerge against the paper's baselines"),
+    "export": ("fleetlab.export.cli", "export a model to ONNX, fixed-point C headers and test vectors"),
+    "emulate": ("fleetlab.host_tools.emulate", "run the C estimator in the host emulation loop and compare bit for bit"),
+    "stream": ("fleetlab.host_tools.stream", "stream telemetry or features to the estimator over CAN or serial"),
+    "monitor": ("fleetlab.host_tools.monitor", "watch slip estimates and status frames on a CAN bus"),
+    "bench": ("fleetlab.bench", "benchmarks: featurisation and simulation, fusion, C inference"),
+    "demo": ("fleetlab.demo", "the whole pipeline on built-in defaults, ending in a report"),
+}
+
+
+def _available() -> dict[str, tuple[str, str]]:
+    """Commands whose module is installed (a command lands with its module)."""
+    found = {}
+    for name, entry in COMMANDS.items():
+        try:
+            if importlib.util.find_spec(entry[0]) is not None:
+                found[name] = entry
+        except ModuleNotFoundError:
+            pass
+    return found
+
+
+def build_parser(selected: str | None = None) -> argparse.ArgumentParser:
+    """The parser; only the `selected` subcommand's module is imported for its options."""
+    from . import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="fleetlab",
+        description="Lunar-rover wheel-slip estimation: simulate or load fleet data, fuse expert "
+        "models with AcoMerge, export to fixed-point C, and verify the C estimator bit for bit.",
+        epilog="Run 'fleetlab COMMAND --help' for the options of one command.",
+    )
+    parser.add_argument("--version", action="version", version=f"fleetlab {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (module, help_text) in _available().items():
+        p = sub.add_parser(name, help=help_text, description=help_text[0].upper() + help_text[1:] + ".")
+        p.set_defaults(_module=module)
+        if name == selected:
+            importlib.import_module(module).add_arguments(p)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    args = build_parser(argv[0] if argv else None).parse_args(argv)
+    if not getattr(args, "_module", None):
+        build_parser().print_help()
+        return 2
+    try:
+        return int(importlib.import_module(args._module).run(args) or 0)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, OSError) as e:
+        # Bad input: one clear line naming what is wrong, no traceback. Bugs still show theirs.
+        print(f"fleetlab {args.command}: error: {e}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

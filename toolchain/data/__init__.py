@@ -1,0 +1,1 @@
+"""Data layer: contracts, featurisation, labels, CSV I/O, dataset folders, splits, simulator."""

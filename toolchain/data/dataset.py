@@ -1,0 +1,139 @@
+"""Dataset folders: which window files play which role.
+
+Roles: `earth` (target rover in the Earth analog, D_Earth), `fleet_<rover>` (one
+per fleet rover on the Moon), `target` (target rover on the Moon: D_Cal and test).
+A folder made by `fleetlab simulate` carries `dataset.json`; a folder of the
+original Fleet-To-Lab files is recognised by the file names alone.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .csvio import CsvFormatError, WindowTable, read_windows_csv
+
+MANIFEST_NAME = "dataset.json"
+MANIFEST_FORMAT = "fleetlab-dataset/1"
+
+EARTH = "earth"
+TARGET = "target"
+FLEET_PREFIX = "fleet_"
+
+# Fleet-To-Lab file names: training_data_<rover>_<environment>_..._part<k>.csv
+_F2L_PATTERN = re.compile(r"^training_data_(?P<rover>leo_rover|cadre|husky)_(?P<env>lunalab|default_moon)_.*\.csv$")
+_F2L_TARGET_ROVER = "leo_rover"
+
+
+def role_of_fleet_to_lab_file(name: str) -> str | None:
+    """Role of an original Fleet-To-Lab file from its name, or None if it is not one."""
+    m = _F2L_PATTERN.match(name)
+    if not m:
+        return None
+    rover, env = m["rover"], m["env"]
+    if rover == _F2L_TARGET_ROVER:
+        return EARTH if env == "lunalab" else TARGET
+    return FLEET_PREFIX + rover if env == "default_moon" else None
+
+
+def _part_number(name: str) -> int:
+    m = re.search(r"part(\d+)", name)
+    return int(m.group(1)) if m else 0
+
+
+@dataclass
+class DataFile:
+    path: Path
+    role: str
+    table: WindowTable
+
+
+@dataclass
+class Dataset:
+    root: Path
+    files: list[DataFile]
+    source: str  # "manifest" or "fleet-to-lab names"
+
+    @property
+    def roles(self) -> list[str]:
+        order = {EARTH: 0, TARGET: 2}
+        return sorted({f.role for f in self.files}, key=lambda r: (order.get(r, 1), r))
+
+    @property
+    def fleet_roles(self) -> list[str]:
+        return [r for r in self.roles if r.startswith(FLEET_PREFIX)]
+
+    def files_of(self, role: str) -> list[DataFile]:
+        return [f for f in self.files if f.role == role]
+
+    def table(self, role: str) -> WindowTable:
+        files = self.files_of(role)
+        if not files:
+            raise KeyError(f"{self.root}: no files with role {role!r} (roles: {', '.join(self.roles)})")
+        return WindowTable.concat([f.table for f in files])
+
+    def xy(self, role: str) -> tuple[np.ndarray, np.ndarray]:
+        t = self.table(role)
+        return t.features.astype(np.float32), t.label
+
+    def groups(self, role: str) -> np.ndarray:
+        """File (traverse) index of every row of `table(role)`, for leakage-free splits."""
+        return np.concatenate([np.full(len(f.table), i) for i, f in enumerate(self.files_of(role))])
+
+    @property
+    def rejected_nonfinite(self) -> int:
+        return sum(f.table.rejected_nonfinite for f in self.files)
+
+    def check_roles(self) -> None:
+        """The roles that fusion needs: earth, target and at least one fleet rover."""
+        missing = [r for r in (EARTH, TARGET) if r not in self.roles]
+        if not self.fleet_roles:
+            missing.append("fleet_<rover>")
+        if missing:
+            raise ValueError(f"{self.root}: dataset has no {', '.join(missing)} files (found roles: {self.roles})")
+
+
+def load_dataset(root: Path | str) -> Dataset:
+    """Load every window file of a dataset folder with its role."""
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root}: not a directory")
+    manifest = root / MANIFEST_NAME
+    if manifest.exists():
+        try:
+            meta = json.loads(manifest.read_text())
+        except json.JSONDecodeError as e:
+            raise ValueError(f"{manifest}: not valid JSON ({e})") from None
+        if meta.get("format") != MANIFEST_FORMAT:
+            raise ValueError(f"{manifest}: unknown format {meta.get('format')!r}, expected {MANIFEST_FORMAT!r}")
+        entries = [(root / name, info["role"]) for name, info in meta["files"].items()]
+        source = "manifest"
+    else:
+        entries = []
+        for p in sorted(root.glob("*.csv"), key=lambda p: (p.name.split("_part")[0], _part_number(p.name))):
+            role = role_of_fleet_to_lab_file(p.name)
+            if role is not None:
+                entries.append((p, role))
+        source = "fleet-to-lab names"
+        if not entries:
+            raise ValueError(
+                f"{root}: no {MANIFEST_NAME} and no files named like the Fleet-To-Lab originals "
+                "(training_data_<leo_rover|cadre|husky>_<lunalab|default_moon>_..._partN.csv)"
+            )
+    files = []
+    for path, role in entries:
+        if not path.exists():
+            raise CsvFormatError(path, None, f"listed in {MANIFEST_NAME} but missing")
+        files.append(DataFile(path=path, role=role, table=read_windows_csv(path)))
+    return Dataset(root=root, files=files, source=source)
+
+
+def write_manifest(root: Path, files: dict[str, dict], extra: dict) -> Path:
+    """Write dataset.json mapping each file name to {'role': ..., ...}."""
+    path = Path(root) / MANIFEST_NAME
+    path.write_text(json.dumps({"format": MANIFEST_FORMAT, **extra, "files": files}, indent=2) + "\n")
+    return path

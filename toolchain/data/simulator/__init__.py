@@ -1,0 +1,1 @@
+"""Simulated rover telemetry: terramechanics, rovers, terrains, driver, sensors, scenarios."""

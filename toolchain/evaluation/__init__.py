@@ -1,0 +1,1 @@
+"""Monte Carlo cross-validation, metrics, statistics, tables and plots."""

@@ -1,0 +1,1 @@
+"""Model fusion: Git Re-Basin alignment, AcoMerge, merging baselines."""

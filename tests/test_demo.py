@@ -1,0 +1,31 @@
+"""`fleetlab demo --quick`: the whole pipeline, as the README's main job runs it."""
+
+import json
+import subprocess
+import sys
+
+from fleetlab.data.dataset import load_dataset
+
+
+def test_demo_quick_end_to_end(tmp_path):
+    out = tmp_path / "demo"
+    r = subprocess.run([sys.executable, "-m", "fleetlab.cli", "demo", "--quick", "--out", str(out)],
+                       capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    report = (out / "report.md").read_text()
+    assert "**All stages green**" in report and "FAILED" not in report
+    for stage in ("Simulate", "AcoMerge", "MCCV", "Export", "host", "Cortex-M4", "SLCAN", "cost"):
+        assert stage in report, stage
+    # the report's figures are the run's own files
+    manifest = json.loads((out / "bundle" / "manifest.json").read_text())
+    assert manifest["content_hash"] in report
+    emu = json.loads((out / "emulate.json").read_text())
+    assert emu["mismatches"] == 0 and emu["windows"] > 0 and emu["bit_exact"] == emu["windows"]
+    assert f"| {emu['windows']} | {emu['bit_exact']} | 0 |" in report
+    rows = sum(len(f.table) for f in load_dataset(out / "data").files)
+    assert f"{rows} windows" in report
+    assert "100% tests passed" in report
+    html = (out / "report.html").read_text()
+    assert "<table>" in html and "convergence.png" in html
+    for png in ("features.png", "fuse/convergence.png", "fixed_vs_float.png"):
+        assert (out / png).stat().st_size > 5000, png

@@ -1,0 +1,186 @@
+"""The demo report: DIR/report.md and DIR/report.html, built from the files the stages wrote.
+
+Every number comes from a stage's output file (data info JSON, fuse report, MCCV results,
+bundle manifest and accuracy report, ctest logs, emulation JSON, C benchmark JSON).
+A section whose stage failed or did not run says so instead of showing numbers.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import re
+import shlex
+from pathlib import Path
+
+from . import __version__
+from .data.contracts import CLASS_NAMES
+
+
+def _img(path: Path, out: Path, alt: str) -> str:
+    return f"![{alt}]({path.relative_to(out).as_posix()})" if path.exists() else f"_(no {alt} plot)_"
+
+
+def _json_or_none(path: Path):
+    try:
+        return json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+
+
+def _demote(md: str, levels: int = 2) -> str:
+    """Push a sub-report's headings down so they nest under the demo's sections."""
+    return re.sub(r"^(#+)", lambda m: "#" * min(6, len(m.group(1)) + levels), md, flags=re.M)
+
+
+def _section_data(out: Path, stage) -> list[str]:
+    info = json.loads(stage.outputs["stdout"])
+    lines = ["## Data", "", f"{info['total_rows']} windows (2 s each) in {len(info['files'])} traverse files "
+             f"of `{Path(info['path']).name}`; rows rejected for NaN/Inf: {info['rejected_nonfinite_rows']}.", "",
+             "| role | traverses | windows | " + " | ".join(CLASS_NAMES) + " |", "|---|---:|---:|---:|---:|---:|"]
+    for role, r in info["roles"].items():
+        n = max(r["rows"], 1)
+        mix = " | ".join(f"{c} ({100 * c / n:.0f} %)" for c in r["classes"])
+        lines.append(f"| {role} | {r['files']} | {r['rows']} | {mix} |")
+    return lines + ["", _img(out / "features.png", out, "per-class feature histograms"), ""]
+
+
+def _section_fuse(out: Path) -> list[str]:
+    fuse = out / "fuse"
+    return ["## Fusion (one calibration draw)", "", _demote((fuse / "report.md").read_text()).strip(), "",
+            _img(fuse / "convergence.png", out, "AcoMerge convergence"), ""]
+
+
+def _section_evaluate(out: Path) -> list[str]:
+    ev = out / "evaluate"
+    res = json.loads((ev / "results.json").read_text())
+    lines = ["## Comparison by Monte Carlo cross-validation", "",
+             f"{res['config']['runs']} runs, each with a fresh calibration draw (protocol `{res['config']['protocol']}`); "
+             "experts trained once on the source data.", "", (ev / "table.md").read_text().strip(), ""]
+    lines += [_img(p, out, p.stem.replace("_", " ")) for p in sorted(ev.glob("*.png"))]
+    return lines + [""]
+
+
+def _agreement_plot(acc: dict, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [(f"{Path(d['path']).name}/{role}", s) for d in acc["datasets"] for role, s in d["roles"].items()]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 0.5 * len(rows) + 1.8))
+    names = [r[0] for r in rows]
+    a1.barh(names, [100 * s["agreement"] for _, s in rows], color="tab:green")
+    a1.axvline(100 * acc["targets"]["agreement"], color="k", ls="--", lw=1, label="target")
+    a1.set_xlim(min(99.0, min(100 * s["agreement"] for _, s in rows) - 0.5), 100.05)
+    a1.set_xlabel("fixed-point vs float class agreement (%)")
+    a1.legend(loc="lower left")
+    y = range(len(rows))
+    a2.barh([i + 0.2 for i in y], [s["bacc_float"] for _, s in rows], height=0.4, label="float")
+    a2.barh([i - 0.2 for i in y], [s["bacc_fixed"] for _, s in rows], height=0.4, label="fixed point")
+    a2.set_yticks(list(y), [""] * len(rows))
+    a2.set_xlabel("balanced accuracy")
+    a2.legend(loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def _section_export(out: Path) -> list[str]:
+    bundle = out / "bundle"
+    man = json.loads((bundle / "manifest.json").read_text())
+    lines = ["## Export bundle", "", f"Model content hash: `{man['content_hash']}` (the C library reports "
+             f"`{man['content_hash32']}` at run time). ONNX opset {man['onnx']['opset']}, max |ONNX − torch| = "
+             f"{man['onnx']['max_abs_diff_vs_torch']:.2e}.", "", "| file | bytes |", "|---|---:|"]
+    lines += [f"| `{p.name}` | {p.stat().st_size:,} |" for p in sorted(bundle.iterdir()) if p.is_file()]
+    acc = _json_or_none(bundle / "accuracy.json")
+    if acc:
+        lines += ["", _demote((bundle / "accuracy.md").read_text()).strip(), "",
+                  _img(_agreement_plot(acc, out / "fixed_vs_float.png"), out, "fixed-point vs float agreement")]
+    return lines + [""]
+
+
+def _ctest_summary(log: Path) -> str:
+    m = re.findall(r"^\d+% tests passed, \d+ tests failed out of \d+", log.read_text(), flags=re.M)
+    return m[-1] if m else "no ctest summary in the log"
+
+
+def _section_c(out: Path, by_name: dict, cortex_note: str | None) -> list[str]:
+    lines = ["## C estimator builds", "", "| build | ctest |", "|---|---|"]
+    lines.append(f"| host (x86-64) | {_ctest_summary(out / 'logs' / 'build_host.log')} |")
+    if "build_m4" in by_name:
+        lines.append(f"| Cortex-M4 under QEMU (mps2-an386) | {_ctest_summary(out / 'logs' / 'build_m4.log')} |")
+    else:
+        lines.append(f"| Cortex-M4 under QEMU | {cortex_note} |")
+    return lines + [""]
+
+
+def _section_emulate(out: Path) -> list[str]:
+    e = json.loads((out / "emulate.json").read_text())
+    lat = e.get("latency_us", {})
+    return ["## Host emulation loop (SLCAN over a pseudo-terminal)", "",
+            "| windows | bit-exact | mismatches | flagged | rejected frames | dropped | latency p50 / p99 (µs) |",
+            "|---:|---:|---:|---:|---:|---:|---|",
+            f"| {e['windows']} | {e['bit_exact']} | {e['mismatches']} | {e['flagged_windows']} | "
+            f"{e['rejected_frames']} | {e['dropped_frames']} | {lat.get('p50', 0):.0f} / {lat.get('p99', 0):.0f} |", ""]
+
+
+def _section_bench(stage) -> list[str]:
+    b = json.loads(stage.outputs["stdout"])
+    rows = [(k, v) for k, v in b.items() if isinstance(v, (int, float))]
+    return ["## Cost and size of the C estimator", "", "| figure | value |", "|---|---:|",
+            *[f"| {k} | {v:,.1f} |" if isinstance(v, float) else f"| {k} | {v:,} |" for k, v in rows], ""]
+
+
+def write_report(out: Path, stages: list, total_s: float, args, prof, cortex_note: str | None) -> Path:
+    by_name = {s.name: s for s in stages}
+    ok = all(s.ok for s in stages)
+    lines = [
+        "# fleetlab demo report", "",
+        f"Generated {_dt.datetime.now().isoformat(timespec='seconds')} by fleetlab {__version__}: "
+        f"`fleetlab demo --out {args.out}{' --quick' if args.quick else ''} --seed {args.seed}`.", "",
+        f"**{'All stages green' if ok else 'Some stages FAILED'}** — total {total_s:.0f} s.", "",
+        "| stage | status | time (s) | command (repeat it on your own data) |", "|---|---|---:|---|",
+    ]
+    for s in stages:
+        status = {True: "green", False: "**FAILED**", None: "not run"}[s.ok]
+        cmd = "<br>".join(f"`{shlex.join(c).replace(sys_prefix(c), 'fleetlab')}`" for c in s.commands)
+        lines.append(f"| {s.title} | {status}{(' — ' + s.note) if s.note else ''} | {s.seconds:.1f} | {cmd} |")
+    lines.append("")
+    sections = [
+        ("data", lambda: _section_data(out, by_name["data"])),
+        ("fuse", lambda: _section_fuse(out)),
+        ("evaluate", lambda: _section_evaluate(out)),
+        ("export", lambda: _section_export(out)),
+        ("build_host", lambda: _section_c(out, by_name, cortex_note)),
+        ("emulate", lambda: _section_emulate(out)),
+        ("bench_c", lambda: _section_bench(by_name["bench_c"])),
+    ]
+    for name, make in sections:
+        if name not in by_name:
+            lines += [f"## {name}", "", f"_not part of this run: {cortex_note}._", ""]
+        elif by_name[name].ok:
+            lines += make()
+        else:
+            lines += [f"## {name}", "", "_stage did not complete; no figures._", ""]
+    md = "\n".join(lines)
+    (out / "report.md").write_text(md)
+    _write_html(md, out / "report.html")
+    return out / "report.md"
+
+
+def sys_prefix(cmd: list[str]) -> str:
+    """The interpreter + module prefix of an in-tree `fleetlab` call, shown as plain `fleetlab`."""
+    return shlex.join(cmd[:3]) if cmd[1:3] == ["-m", "fleetlab.cli"] else "\0"
+
+
+def _write_html(md: str, path: Path) -> None:
+    import markdown
+
+    body = markdown.markdown(md, extensions=["tables", "fenced_code"])
+    style = ("body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}"
+             "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px}"
+             "img{max-width:100%}code{background:#f4f4f4}")
+    path.write_text(f"<!doctype html><meta charset='utf-8'><title>fleetlab demo report</title>"
+                    f"<style>{style}</style>\n{body}\n")

@@ -1,0 +1,106 @@
+"""The built-in fleet scenario, mirroring the Fleet-to-Lab setting.
+
+* `earth`: the target rover in an Earth analog facility (g = 9.81, firm analog
+  sand with loose patches, gentle slopes) - mostly low slip.
+* `fleet_scout`, `fleet_hauler`: two fleet rovers on three lunar terrains
+  (g = 1.62) - more moderate and high slip.
+* `target`: the target rover on three lunar terrains with a soil no fleet rover
+  has driven on, split over several traverses so that calibration and test can
+  come from different traverses.
+
+`write_scenario` writes one Fleet-To-Lab CSV per traverse plus `dataset.json`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from ..contracts import DEFAULT_RATE_HZ, RAW_CHANNELS
+from ..csvio import WindowTable, write_windows_csv
+from ..dataset import EARTH, FLEET_PREFIX, TARGET, write_manifest
+from ..features import WindowSpec
+from .engine import Trace, TraverseSpec, simulate_batch
+from .rovers import GRAVITY_EARTH, GRAVITY_MOON
+
+GENERATOR = "fleetlab.data.simulator/1"
+
+
+@dataclass(frozen=True)
+class TraverseGroup:
+    role: str
+    rover: str
+    terrains: tuple[str, ...]  # assigned to traverses in turn
+    gravity: float
+    n_traverses: int
+    duration_s: float  # per traverse at scale 1
+
+
+SCENARIO: tuple[TraverseGroup, ...] = (
+    TraverseGroup(EARTH, "leo", ("analog_hall",), GRAVITY_EARTH, 10, 402.0),
+    TraverseGroup(FLEET_PREFIX + "scout", "scout", ("mare_plain", "highland_slope", "crater_rim"), GRAVITY_MOON, 10, 382.0),
+    TraverseGroup(FLEET_PREFIX + "hauler", "hauler", ("mare_plain", "highland_slope", "crater_rim"), GRAVITY_MOON, 10, 382.0),
+    TraverseGroup(TARGET, "leo", ("polar_crater", "ejecta_field", "rille_wall"), GRAVITY_MOON, 8, 352.0),
+)
+
+
+def traverse_seed(seed: int, group: int, traverse: int) -> int:
+    """Independent, reproducible seed of one traverse of the scenario."""
+    return int(np.random.SeedSequence([seed, group, traverse]).generate_state(1)[0])
+
+
+def scenario_specs(seed: int, scale: float = 1.0) -> list[tuple[str, str, TraverseSpec]]:
+    """(role, file stem, spec) of every traverse; `scale` shrinks the number and length of traverses."""
+    if not (0.0 < scale <= 10.0):
+        raise ValueError(f"scale must be in (0, 10], got {scale}")
+    out = []
+    for gi, grp in enumerate(SCENARIO):
+        n = max(2, round(grp.n_traverses * math.sqrt(scale)))
+        duration = max(20.0, grp.duration_s * scale * grp.n_traverses / n)
+        for t in range(n):
+            terrain = grp.terrains[t % len(grp.terrains)]
+            stem = f"{grp.role}_{terrain}_{t + 1:02d}"
+            out.append((grp.role, stem, TraverseSpec.make(grp.rover, terrain, grp.gravity, duration,
+                                                         traverse_seed(seed, gi, t))))
+    return out
+
+
+def scenario_traces(seed: int, scale: float = 1.0, rate_hz: float = DEFAULT_RATE_HZ,
+                    progress: bool = False) -> list[tuple[str, str, Trace]]:
+    """Simulate the built-in scenario: (role, name, Trace) per traverse."""
+    entries = scenario_specs(seed, scale)
+    specs = [spec for _, _, spec in entries]
+    total = sum(int(round(s.duration_s * rate_hz)) for s in specs)
+    with tqdm(total=total, desc="simulating", unit="sample", unit_scale=True, disable=not progress) as bar:
+        traces = simulate_batch(specs, rate_hz, progress=bar)
+    return [(role, name, trace) for (role, name, _), trace in zip(entries, traces)]
+
+
+def write_scenario(out_dir: Path | str, seed: int, scale: float = 1.0, rate_hz: float = DEFAULT_RATE_HZ,
+                   raw: bool = False, progress: bool = False) -> Path:
+    """Write one window CSV per traverse and dataset.json into out_dir (created); returns out_dir.
+
+    With `raw`, also one .npz per traverse with the raw samples and distance increments.
+    """
+    WindowSpec.for_rate(rate_hz)  # refuse a rate too low for 2 s windows before simulating
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files: dict[str, dict] = {}
+    for role, name, trace in scenario_traces(seed, scale, rate_hz, progress):
+        table = WindowTable.from_windows(trace.windows())
+        write_windows_csv(out / f"{name}.csv", table)
+        entry = {"role": role, **{k: trace.meta[k] for k in ("rover", "terrain", "soils", "gravity", "seed")},
+                 "duration_s": trace.meta["duration_s"], "windows": len(table),
+                 "class_counts": table.class_counts()}
+        if raw:
+            np.savez_compressed(out / f"{name}.npz", samples=trace.samples, d_actual_step=trace.d_actual_step,
+                                d_cmd_step=trace.d_cmd_step, rate_hz=trace.rate_hz,
+                                channels=np.array(RAW_CHANNELS), **{f"truth_{k}": v for k, v in trace.truth.items()})
+            entry["raw"] = f"{name}.npz"
+        files[f"{name}.csv"] = entry
+    write_manifest(out, files, {"generator": GENERATOR, "seed": seed, "scale": scale, "rate_hz": rate_hz})
+    return out

@@ -1,0 +1,13 @@
+# Shared part of the Cortex-M toolchain files: arm-none-eabi-gcc + newlib (nano), bare metal.
+set(CMAKE_SYSTEM_NAME Generic)
+set(CMAKE_SYSTEM_PROCESSOR arm)
+set(CMAKE_C_COMPILER arm-none-eabi-gcc)
+set(CMAKE_TRY_COMPILE_TARGET_TYPE STATIC_LIBRARY)
+find_program(SLIPEST_ARM_NM arm-none-eabi-nm REQUIRED)
+find_program(SLIPEST_ARM_SIZE arm-none-eabi-size REQUIRED)
+find_program(SLIPEST_QEMU qemu-system-arm)
+set(CMAKE_FIND_ROOT_PATH_MODE_PROGRAM NEVER)
+set(CMAKE_FIND_ROOT_PATH_MODE_LIBRARY ONLY)
+set(CMAKE_FIND_ROOT_PATH_MODE_INCLUDE ONLY)
+set(CMAKE_C_FLAGS_INIT "${SLIPEST_CPU_FLAGS} -ffunction-sections -fdata-sections")
+set(CMAKE_EXE_LINKER_FLAGS_INIT "${SLIPEST_CPU_FLAGS} --specs=nano.specs -nostartfiles -Wl,--gc-sections")

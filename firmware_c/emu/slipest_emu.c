@@ -1,0 +1,357 @@
+/* slipest_emu: the estimator firmware main loop on Linux.
+ *
+ *   slipest_emu --port /dev/pts/N --link slcan|cobs   serve a tty (raw mode)
+ *   slipest_emu --stdio --link slcan|cobs             serve stdin/stdout
+ *   slipest_emu --pty --link slcan|cobs               open a pty pair, print "PTY <path>"
+ *   slipest_emu --vectors vectors.bin [--verbose]     batch check of a bundle's vectors
+ *
+ * Frames in, estimate and status frames out (host_tools/slipest.dbc). Non-blocking I/O
+ * with an output queue: when the queue is full the loop stops reading input until it
+ * drains, so nothing is dropped. Exits on SIGTERM/SIGINT or EOF and prints the counters
+ * to stderr.
+ */
+#define _XOPEN_SOURCE 700
+#define _DEFAULT_SOURCE
+
+#include <errno.h>
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <termios.h>
+#include <unistd.h>
+
+#include "slipest_codec.h"
+#include "slipest_infer.h"
+#include "slipest_node.h"
+#include "slipest_vectors.h"
+
+#define OUT_QUEUE 65536u
+/* stop reading below this: one read chunk can complete ~40 frames of <= 9 x 23 output bytes */
+#define OUT_HIGH_WATER (OUT_QUEUE - 16384u)
+#define READ_CHUNK 256u
+
+enum link_kind { LINK_SLCAN, LINK_COBS };
+
+typedef struct {
+    int in_fd, out_fd;
+    enum link_kind link;
+    slipest_node_t node;
+    slipest_slcan_rx_t slcan;
+    slipest_cobs_rx_t cobs;
+    uint8_t out[OUT_QUEUE];
+    size_t out_head, out_len; /* ring buffer */
+} emu_t;
+
+static volatile sig_atomic_t stop_requested = 0;
+
+static void on_signal(int sig)
+{
+    (void)sig;
+    stop_requested = 1;
+}
+
+static void queue_bytes(emu_t *e, const void *data, size_t n)
+{
+    const uint8_t *p = data;
+    size_t i;
+    /* callers keep out_len below OUT_HIGH_WATER before feeding more input */
+    for (i = 0; i < n && e->out_len < OUT_QUEUE; i++) {
+        e->out[(e->out_head + e->out_len) % OUT_QUEUE] = p[i];
+        e->out_len++;
+    }
+}
+
+static void queue_frames(emu_t *e, const slipest_frame_t *f, int n)
+{
+    int i;
+    for (i = 0; i < n; i++) {
+        uint8_t buf[40];
+        int len = e->link == LINK_SLCAN ? slipest_slcan_format(&f[i], (char *)buf, sizeof buf)
+                                        : slipest_cobs_format(&f[i], buf, sizeof buf);
+        if (len > 0) queue_bytes(e, buf, (size_t)len);
+    }
+}
+
+static void handle_frame(emu_t *e, const slipest_frame_t *in)
+{
+    slipest_frame_t out[SLIPEST_NODE_MAX_OUT];
+    int n = slipest_node_handle(&e->node, in, out, SLIPEST_NODE_MAX_OUT);
+    if (n > 0) queue_frames(e, out, n);
+}
+
+static void feed_byte(emu_t *e, uint8_t b)
+{
+    slipest_frame_t f;
+    int r;
+    if (e->link == LINK_SLCAN) {
+        char reply[SLIPEST_SLCAN_REPLY_MAX];
+        size_t reply_len = 0;
+        r = slipest_slcan_rx_feed(&e->slcan, b, &f, reply, &reply_len);
+        if (r == SLIPEST_SLCAN_FRAME) handle_frame(e, &f);
+        else if (r < 0) slipest_node_link_error(&e->node);
+        if (reply_len > 0) queue_bytes(e, reply, reply_len);
+    } else {
+        r = slipest_cobs_rx_feed(&e->cobs, b, &f);
+        if (r == 1) handle_frame(e, &f);
+        else if (r < 0) slipest_node_link_error(&e->node);
+    }
+}
+
+/* write as much of the queue as the fd takes now; -1 on a fatal error */
+static int flush_some(emu_t *e)
+{
+    while (e->out_len > 0) {
+        size_t chunk = e->out_len;
+        ssize_t w;
+        if (e->out_head + chunk > OUT_QUEUE) chunk = OUT_QUEUE - e->out_head;
+        w = write(e->out_fd, e->out + e->out_head, chunk);
+        if (w < 0) {
+            if (errno == EINTR) continue;
+            if (errno == EAGAIN || errno == EWOULDBLOCK) return 0;
+            return -1;
+        }
+        e->out_head = (e->out_head + (size_t)w) % OUT_QUEUE;
+        e->out_len -= (size_t)w;
+    }
+    return 0;
+}
+
+static int set_raw_nonblock(int fd)
+{
+    struct termios t;
+    int flags;
+    if (isatty(fd)) {
+        if (tcgetattr(fd, &t) != 0) return -1;
+        cfmakeraw(&t);
+        t.c_cc[VMIN] = 1;
+        t.c_cc[VTIME] = 0;
+        if (tcsetattr(fd, TCSANOW, &t) != 0) return -1;
+    }
+    flags = fcntl(fd, F_GETFL);
+    if (flags < 0 || fcntl(fd, F_SETFL, flags | O_NONBLOCK) != 0) return -1;
+    return 0;
+}
+
+static int serve(emu_t *e)
+{
+    int eof = 0;
+    while (!stop_requested && !(eof && e->out_len == 0)) {
+        struct pollfd p[2];
+        int np = 0, in_idx = -1, out_idx = -1, r;
+        if (!eof && e->out_len < OUT_HIGH_WATER) {
+            p[np].fd = e->in_fd;
+            p[np].events = POLLIN;
+            in_idx = np++;
+        }
+        if (e->out_len > 0) {
+            if (e->out_fd == e->in_fd && in_idx >= 0) {
+                p[in_idx].events |= POLLOUT;
+                out_idx = in_idx;
+            } else {
+                p[np].fd = e->out_fd;
+                p[np].events = POLLOUT;
+                out_idx = np++;
+            }
+        }
+        r = poll(p, (nfds_t)np, 200);
+        if (r < 0) {
+            if (errno == EINTR) continue;
+            perror("slipest_emu: poll");
+            return 1;
+        }
+        if (out_idx >= 0 && (p[out_idx].revents & (POLLOUT | POLLERR))) {
+            if (flush_some(e) != 0) {
+                if (errno == EIO || errno == EPIPE) return 0; /* peer went away */
+                perror("slipest_emu: write");
+                return 1;
+            }
+        }
+        if (in_idx >= 0 && (p[in_idx].revents & (POLLIN | POLLHUP | POLLERR))) {
+            uint8_t buf[READ_CHUNK];
+            ssize_t n = read(e->in_fd, buf, sizeof buf);
+            if (n > 0) {
+                ssize_t i;
+                for (i = 0; i < n; i++) feed_byte(e, buf[i]);
+                if (flush_some(e) != 0 && errno != EAGAIN) return errno == EIO ? 0 : 1;
+            } else if (n == 0 || (errno != EAGAIN && errno != EINTR && errno != EWOULDBLOCK)) {
+                eof = 1; /* EOF, or EIO when the other side of a pty closed */
+                if (e->out_fd == e->in_fd) return 0;
+            }
+        }
+    }
+    return 0;
+}
+
+static void print_counters(const emu_t *e)
+{
+    slipest_counters_t c;
+    slipest_node_counters(&e->node, &c);
+    fprintf(stderr,
+            "slipest_emu: frames_received=%lu frames_rejected=%lu samples_dropped=%lu windows_flagged=%lu "
+            "windows_done=%lu saturations=%lu\n",
+            (unsigned long)c.frames_received, (unsigned long)c.frames_rejected, (unsigned long)c.samples_dropped,
+            (unsigned long)c.windows_flagged, (unsigned long)c.windows_done, (unsigned long)c.saturations);
+}
+
+static int run_vectors(const char *path, int verbose)
+{
+    FILE *fp = fopen(path, "rb");
+    uint8_t *buf;
+    long size;
+    slipest_vectors_t v;
+    const char *why = "";
+    uint32_t i, q_fail = 0, f_fail = 0;
+    if (fp == NULL) {
+        fprintf(stderr, "slipest_emu: cannot open %s: %s\n", path, strerror(errno));
+        return 2;
+    }
+    if (fseek(fp, 0, SEEK_END) != 0 || (size = ftell(fp)) < 0 || fseek(fp, 0, SEEK_SET) != 0) {
+        fprintf(stderr, "slipest_emu: cannot size %s\n", path);
+        fclose(fp);
+        return 2;
+    }
+    buf = malloc(size > 0 ? (size_t)size : 1u);
+    if (buf == NULL || fread(buf, 1, (size_t)size, fp) != (size_t)size) {
+        fprintf(stderr, "slipest_emu: cannot read %s\n", path);
+        free(buf);
+        fclose(fp);
+        return 2;
+    }
+    fclose(fp);
+    if (slipest_vectors_parse(buf, (size_t)size, &v, &why) != 0) {
+        fprintf(stderr, "slipest_emu: %s: %s\n", path, why);
+        free(buf);
+        return 2;
+    }
+    for (i = 0; i < v.n; i++) {
+        int32_t q[3];
+        float f[3];
+        int fq = slipest_vectors_check_q(&v, i, q);
+        int ff = slipest_vectors_check_f32(&v, i, 1e-5f, f);
+        q_fail += fq != 0;
+        f_fail += ff != 0;
+        if (verbose)
+            printf("%lu q_class=%d q_logits=%ld,%ld,%ld f32_logits=%.9g,%.9g,%.9g q_fail=%d f32_fail=%d %s\n",
+                   (unsigned long)i,
+                   q[1] > q[0] ? (q[2] > q[1] ? 2 : 1) : (q[2] > q[0] ? 2 : 0), (long)q[0], (long)q[1], (long)q[2], (double)f[0], (double)f[1], (double)f[2],
+                   fq, ff, (fq | ff) ? "FAIL" : "ok");
+    }
+    printf("vectors=%lu q_exact=%lu f32_within_1e-5=%lu model_hash=%s %s\n", (unsigned long)v.n,
+           (unsigned long)(v.n - q_fail), (unsigned long)(v.n - f_fail), slipest_model_hash_hex(),
+           (q_fail == 0 && f_fail == 0) ? "PASS" : "FAIL");
+    free(buf);
+    return (q_fail == 0 && f_fail == 0) ? 0 : 1;
+}
+
+static void usage(FILE *to)
+{
+    fprintf(to,
+            "usage: slipest_emu (--port TTY | --stdio | --pty) [--link slcan|cobs]\n"
+            "       slipest_emu --vectors vectors.bin [--verbose]\n"
+            "  --port TTY     serve a serial device / pty slave (set to raw mode)\n"
+            "  --stdio        serve stdin/stdout\n"
+            "  --pty          create a pseudo-terminal and print 'PTY <slave path>' on stdout\n"
+            "  --link KIND    slcan (ASCII tIIILDD..\\r, default) or cobs (COBS + CRC-16 packets)\n"
+            "  --vectors F    check every test vector (fixed-point logits exact, float within 1e-5)\n"
+            "  --version      print library version and model hash\n");
+}
+
+int main(int argc, char **argv)
+{
+    static emu_t e; /* 64 KB queue: not on the stack */
+    const char *port = NULL, *vectors = NULL;
+    int use_stdio = 0, use_pty = 0, verbose = 0, i, rc, slave_keep = -1;
+    struct sigaction sa;
+
+    e.link = LINK_SLCAN;
+    for (i = 1; i < argc; i++) {
+        if (strcmp(argv[i], "--port") == 0 && i + 1 < argc) port = argv[++i];
+        else if (strcmp(argv[i], "--stdio") == 0) use_stdio = 1;
+        else if (strcmp(argv[i], "--pty") == 0) use_pty = 1;
+        else if (strcmp(argv[i], "--vectors") == 0 && i + 1 < argc) vectors = argv[++i];
+        else if (strcmp(argv[i], "--verbose") == 0) verbose = 1;
+        else if (strcmp(argv[i], "--link") == 0 && i + 1 < argc) {
+            const char *k = argv[++i];
+            if (strcmp(k, "slcan") == 0) e.link = LINK_SLCAN;
+            else if (strcmp(k, "cobs") == 0) e.link = LINK_COBS;
+            else {
+                fprintf(stderr, "slipest_emu: unknown link '%s' (slcan or cobs)\n", k);
+                return 2;
+            }
+        } else if (strcmp(argv[i], "--version") == 0) {
+            printf("slipest %u.%u model %s\n", slipest_lib_version() >> 8, slipest_lib_version() & 0xFFu,
+                   slipest_model_hash_hex());
+            return 0;
+        } else if (strcmp(argv[i], "--help") == 0 || strcmp(argv[i], "-h") == 0) {
+            usage(stdout);
+            return 0;
+        } else {
+            fprintf(stderr, "slipest_emu: bad argument '%s'\n", argv[i]);
+            usage(stderr);
+            return 2;
+        }
+    }
+    if (vectors != NULL) return run_vectors(vectors, verbose);
+    if ((port != NULL) + use_stdio + use_pty != 1) {
+        usage(stderr);
+        return 2;
+    }
+
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigaction(SIGTERM, &sa, NULL);
+    sigaction(SIGINT, &sa, NULL);
+    signal(SIGPIPE, SIG_IGN);
+
+    slipest_node_init(&e.node);
+    slipest_slcan_rx_init(&e.slcan);
+    slipest_cobs_rx_init(&e.cobs);
+    if (use_stdio) {
+        e.in_fd = STDIN_FILENO;
+        e.out_fd = STDOUT_FILENO;
+        if (set_raw_nonblock(e.in_fd) != 0 || set_raw_nonblock(e.out_fd) != 0) {
+            perror("slipest_emu: stdio");
+            return 1;
+        }
+    } else if (use_pty) {
+        int m = posix_openpt(O_RDWR | O_NOCTTY);
+        const char *name;
+        if (m < 0 || grantpt(m) != 0 || unlockpt(m) != 0 || (name = ptsname(m)) == NULL) {
+            perror("slipest_emu: pty");
+            return 1;
+        }
+        /* keep a slave fd open so the master does not see a hang-up between host opens */
+        slave_keep = open(name, O_RDWR | O_NOCTTY);
+        if (slave_keep < 0 || set_raw_nonblock(slave_keep) != 0) {
+            perror("slipest_emu: pty slave");
+            return 1;
+        }
+        printf("PTY %s\n", name);
+        fflush(stdout);
+        e.in_fd = e.out_fd = m;
+        if (set_raw_nonblock(m) != 0) {
+            perror("slipest_emu: pty master");
+            return 1;
+        }
+    } else {
+        int fd = open(port, O_RDWR | O_NOCTTY | O_NONBLOCK);
+        if (fd < 0) {
+            fprintf(stderr, "slipest_emu: cannot open %s: %s\n", port, strerror(errno));
+            return 1;
+        }
+        if (set_raw_nonblock(fd) != 0) {
+            fprintf(stderr, "slipest_emu: cannot configure %s: %s\n", port, strerror(errno));
+            return 1;
+        }
+        e.in_fd = e.out_fd = fd;
+    }
+    fprintf(stderr, "slipest_emu: ready link=%s model=%s lib=%u.%u\n", e.link == LINK_SLCAN ? "slcan" : "cobs",
+            slipest_model_hash_hex(), slipest_lib_version() >> 8, slipest_lib_version() & 0xFFu);
+    rc = serve(&e);
+    print_counters(&e);
+    if (slave_keep >= 0) close(slave_keep);
+    return rc;
+}

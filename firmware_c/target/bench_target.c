@@ -1,0 +1,187 @@
+/* Cortex-M cost image, run with qemu -icount shift=0 (1 instruction = 1 ns of virtual time):
+ * SysTick ticks for a calibration loop of known length and for many inferences; host side
+ * (fleetlab bench c) turns ticks into instructions. Also paints the stack to measure the
+ * peak stack use of one fixed-point inference. Prints key=value lines. */
+#include <stdint.h>
+
+#include "semihost.h"
+#include "slipest_infer.h"
+#include "slipest_node.h"
+#include "slipest_vectors.h"
+
+#define SYST_CSR (*(volatile uint32_t *)0xE000E010u)
+#define SYST_RVR (*(volatile uint32_t *)0xE000E014u)
+#define SYST_CVR (*(volatile uint32_t *)0xE000E018u)
+#define N_BENCH 64u
+#define REPS 16u
+#define PAINT 0xC5C5C5C5u
+
+static uint8_t file_buf[1024u * 1024u];
+static int16_t q_in[N_BENCH][12];
+static float f_in[N_BENCH][12];
+static volatile int32_t sink;
+static slipest_node_t node;
+static slipest_slcan_rx_t slcan;
+static uint32_t node_out_bytes;
+
+static uint32_t ticks_now(void) { return SYST_CVR; }
+static uint32_t ticks_since(uint32_t start) { return (start - SYST_CVR) & 0xFFFFFFu; }
+
+__attribute__((noinline)) static void calibration_loop(uint32_t n)
+{
+    /* exactly 2 instructions per iteration */
+    __asm volatile("1: subs %0, %0, #1\n\tbne 1b" : "+r"(n) : : "cc");
+}
+
+__attribute__((noinline)) static void one_q(uint32_t i)
+{
+    int32_t logits[3];
+    uint16_t sat;
+    sink += slipest_infer_q(q_in[i], logits, &sat) + logits[0];
+}
+
+#ifndef SLIPEST_Q_ONLY
+__attribute__((noinline)) static void one_f32(uint32_t i)
+{
+    float logits[3];
+    sink += slipest_infer_f32(f_in[i], logits) + (logits[0] > 0.0f);
+}
+#endif
+
+static slipest_frame_t last_frame, last_out[SLIPEST_NODE_MAX_OUT];
+
+/* the frame that completes a window: features, both inference paths (q only in the q
+ * image) and the output frames, straight into the node (buffers static, not on the stack) */
+__attribute__((noinline)) static void node_last_frame(uint32_t unused)
+{
+    (void)unused;
+    node_out_bytes += (uint32_t)slipest_node_handle(&node, &last_frame, last_out, SLIPEST_NODE_MAX_OUT);
+}
+
+/* Peak stack bytes used by fn below the caller's stack pointer. */
+__attribute__((noinline)) static uint32_t stack_use(void (*fn)(uint32_t))
+{
+    uint32_t sp;
+    volatile uint32_t *p, *lo; /* volatile: no memset call, which would use the painted stack */
+    __asm volatile("mov %0, sp" : "=r"(sp));
+    lo = (volatile uint32_t *)(sp - 4096u);
+    for (p = lo; p < (volatile uint32_t *)sp; p++) *p = PAINT; /* nothing lives below sp */
+    fn(0);
+    for (p = lo; p < (volatile uint32_t *)sp && *p == PAINT; p++) {
+    }
+    return sp - (uint32_t)(uintptr_t)p;
+}
+
+/* ---- the node main loop: telemetry frames as SLCAN text in, estimate frames out ---- */
+
+static void telem_frame(slipest_frame_t *f, uint32_t id, uint16_t counter, int16_t a, int16_t b, int16_t c)
+{
+    f->id = id;
+    f->dlc = (id == 0x101u) ? 8u : 6u;
+    f->data[0] = (uint8_t)counter;
+    f->data[1] = (uint8_t)(counter >> 8);
+    f->data[2] = (uint8_t)a;
+    f->data[3] = (uint8_t)((uint16_t)a >> 8);
+    f->data[4] = (uint8_t)b;
+    f->data[5] = (uint8_t)((uint16_t)b >> 8);
+    f->data[6] = (uint8_t)c;
+    f->data[7] = (uint8_t)((uint16_t)c >> 8);
+}
+
+/* one sample = 3 frames, each formatted to SLCAN, parsed back byte by byte, handled by the
+ * node; outputs formatted as SLCAN and COBS (what the firmware would transmit) */
+__attribute__((noinline)) static void node_sample(uint32_t k)
+{
+    static const uint32_t ids[3] = {0x100u, 0x101u, 0x102u};
+    uint16_t counter = (uint16_t)k;
+    int t;
+    for (t = 0; t < 3; t++) {
+        slipest_frame_t f, in, out[SLIPEST_NODE_MAX_OUT];
+        char line[32], reply[SLIPEST_SLCAN_REPLY_MAX];
+        uint8_t pkt[32];
+        size_t rl;
+        int n, i, r = 0;
+        telem_frame(&f, ids[t], counter, (int16_t)(1000 + (k * 7u) % 300u), (int16_t)(200 - (int)(k % 50u)),
+                    (int16_t)(9810 + (int)(k % 13u)));
+        n = slipest_slcan_format(&f, line, sizeof line);
+        for (i = 0; i < n; i++) r = slipest_slcan_rx_feed(&slcan, (uint8_t)line[i], &in, reply, &rl);
+        if (r != SLIPEST_SLCAN_FRAME) continue;
+        n = slipest_node_handle(&node, &in, out, SLIPEST_NODE_MAX_OUT);
+        for (i = 0; i < n; i++) {
+            int a = slipest_slcan_format(&out[i], line, sizeof line);
+            int b = slipest_cobs_format(&out[i], pkt, sizeof pkt);
+            node_out_bytes += (uint32_t)(a + b);
+        }
+    }
+}
+
+static void put_kv(const char *k, uint32_t v)
+{
+    semihost_puts(k);
+    semihost_puts("=");
+    semihost_put_uint(v);
+    semihost_puts("\n");
+}
+
+int main(void)
+{
+    slipest_vectors_t v;
+    const char *why = "";
+    size_t len = 0;
+    uint32_t i, r, t;
+    if (semihost_read_file(SLIPEST_VECTORS_PATH, file_buf, sizeof file_buf, &len) != 0 ||
+        slipest_vectors_parse(file_buf, len, &v, &why) != 0) {
+        semihost_puts("cannot load vectors\n");
+        return 2;
+    }
+    for (i = 0; i < N_BENCH; i++) {
+        slipest_vectors_q_input(&v, i % v.n, q_in[i]);
+        slipest_vectors_input(&v, i % v.n, f_in[i]);
+    }
+    SYST_RVR = 0xFFFFFFu;
+    SYST_CVR = 0;
+    SYST_CSR = 5u; /* enable, processor clock, no interrupt */
+
+    t = ticks_now();
+    calibration_loop(1000000u);
+    put_kv("calib_instructions", 2000000u);
+    put_kv("calib_ticks", ticks_since(t));
+
+    t = ticks_now();
+    for (r = 0; r < REPS; r++)
+        for (i = 0; i < N_BENCH; i++) sink += (int32_t)i; /* loop overhead only */
+    put_kv("empty_ticks", ticks_since(t));
+
+    t = ticks_now();
+    for (r = 0; r < REPS; r++)
+        for (i = 0; i < N_BENCH; i++) one_q(i);
+    put_kv("q_ticks", ticks_since(t));
+#ifndef SLIPEST_Q_ONLY
+    t = ticks_now();
+    for (r = 0; r < REPS; r++)
+        for (i = 0; i < N_BENCH; i++) one_f32(i);
+    put_kv("f32_ticks", ticks_since(t));
+    put_kv("stack_f32", stack_use(one_f32));
+#endif
+    put_kv("inferences", REPS * N_BENCH);
+
+    slipest_node_init(&node);
+    slipest_slcan_rx_init(&slcan);
+    t = ticks_now();
+    for (i = 0; i < 99u; i++) node_sample(i); /* one window minus its last sample */
+    put_kv("node_99_samples_ticks", ticks_since(t));
+    {
+        /* sample 99: wheel and IMU frames normally, the attitude frame under the stack meter */
+        slipest_frame_t f, out[SLIPEST_NODE_MAX_OUT];
+        telem_frame(&f, 0x100u, 99u, 1000, 200, 0);
+        slipest_node_handle(&node, &f, out, SLIPEST_NODE_MAX_OUT);
+        telem_frame(&f, 0x101u, 99u, 10, -20, 9810);
+        slipest_node_handle(&node, &f, out, SLIPEST_NODE_MAX_OUT);
+        telem_frame(&last_frame, 0x102u, 99u, 5, -7, 0);
+        put_kv("stack_node_window", stack_use(node_last_frame));
+    }
+    put_kv("node_windows", node.c.windows_done);
+    put_kv("stack_q", stack_use(one_q));
+    put_kv("node_bytes", (uint32_t)sizeof(slipest_node_t));
+    return 0;
+}

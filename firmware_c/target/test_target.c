@@ -1,0 +1,90 @@
+/* Cortex-M test image: every test vector through the kernels (fixed-point logits must equal
+ * q_logits; float logits within 1e-5 of torch_logits, same class), plus an extractor check
+ * that exercises the int64 paths on the target. Exit code via semihosting: 0 = pass. */
+#include <stdint.h>
+
+#include "semihost.h"
+#include "slipest_features.h"
+#include "slipest_infer.h"
+#include "slipest_vectors.h"
+
+#ifndef SLIPEST_VECTORS_PATH
+#error "SLIPEST_VECTORS_PATH must name the bundle's vectors.bin"
+#endif
+
+static uint8_t file_buf[1024u * 1024u];
+
+static int check_extractor(void)
+{
+    slipest_extractor_t ex;
+    slipest_window_t out[SLIPEST_MAX_CLOSED];
+    int16_t s[7], feat[12];
+    int i, c, r, fails = 0, closed = 0;
+    slipest_extractor_init(&ex);
+    for (i = 0; i < 200; i++) {
+        for (c = 0; c < 7; c++) s[c] = (int16_t)((i % 2) ? 3000 * (c + 1) : -3000 * (c + 1));
+        r = slipest_extractor_push(&ex, (uint16_t)(65530u + (unsigned)i), s, out);
+        if (r < 0) fails++;
+        if (r > 0) {
+            closed++;
+            if (slipest_window_features_q(&out[0], feat) != 0) fails++;
+            if (feat[0] != 0 || feat[1] != 3000 || feat[9] != 15000 || feat[11] != 0) fails++;
+        }
+    }
+    return fails + (closed != 2);
+}
+
+int main(void)
+{
+    slipest_vectors_t v;
+    const char *why = "";
+    size_t len = 0;
+    uint32_t i, q_fail = 0, f_fail = 0;
+    int ex_fail;
+    if (semihost_read_file(SLIPEST_VECTORS_PATH, file_buf, sizeof file_buf, &len) != 0) {
+        semihost_puts("cannot read " SLIPEST_VECTORS_PATH "\n");
+        return 2;
+    }
+    if (slipest_vectors_parse(file_buf, len, &v, &why) != 0) {
+        semihost_puts(why);
+        semihost_puts("\n");
+        return 2;
+    }
+    for (i = 0; i < v.n; i++) {
+        int32_t q[3];
+        if (slipest_vectors_check_q(&v, i, q) != 0) {
+            if (q_fail < 5) {
+                semihost_puts("q mismatch at vector ");
+                semihost_put_uint(i);
+                semihost_puts("\n");
+            }
+            q_fail++;
+        }
+#ifndef SLIPEST_Q_ONLY
+        {
+            float f[3];
+            if (slipest_vectors_check_f32(&v, i, 1e-5f, f) != 0) {
+                if (f_fail < 5) {
+                    semihost_puts("f32 mismatch at vector ");
+                    semihost_put_uint(i);
+                    semihost_puts("\n");
+                }
+                f_fail++;
+            }
+        }
+#endif
+    }
+    ex_fail = check_extractor();
+    semihost_puts("vectors=");
+    semihost_put_uint(v.n);
+    semihost_puts(" q_fail=");
+    semihost_put_uint(q_fail);
+    semihost_puts(" f32_fail=");
+    semihost_put_uint(f_fail);
+    semihost_puts(" extractor_fail=");
+    semihost_put_uint((uint32_t)ex_fail);
+    semihost_puts(" model=");
+    semihost_puts(slipest_model_hash_hex());
+    semihost_puts((q_fail || f_fail || ex_fail) ? " FAIL\n" : " PASS\n");
+    return (q_fail || f_fail || ex_fail) ? 1 : 0;
+}

@@ -1,0 +1,424 @@
+"""firmware_c: real CMake builds (host + sanitizers, Cortex-M4/M3 under QEMU), the soft-float
+check, the fuzzers, and the C extractor/node checked against the Python references through
+the ctypes library and the emulator on real pseudo-terminals.
+
+Builds happen once per module (fixtures); FLEETLAB_FUZZ_SECONDS sets the fuzzing time per
+target (default 60, the three targets run in parallel).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import re
+import select
+import signal
+import subprocess
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import cantools
+import numpy as np
+import pytest
+from cobs import cobs
+
+from fleetlab.data.features import featurise
+from fleetlab.data.features_int import CHANNEL_LSB, FLAG_GAP, FLAG_INVALID, featurise_int
+from fleetlab.host_tools.bench_c import REPO, cmake_build, library_footprint, target_costs
+
+BUNDLE = REPO / "firmware_c" / "bundles" / "example"
+DBC = cantools.database.load_file(str(REPO / "host_tools" / "slipest.dbc"))
+
+
+# --------------------------------------------------------------------------- builds
+@pytest.fixture(scope="module")
+def builds(tmp_path_factory):
+    """host (plain, for ctypes/emulator), host with ASan+UBSan, Cortex-M4, Cortex-M3 — built two at a time."""
+    root = tmp_path_factory.mktemp("fw")
+    jobs = {
+        "host": lambda: cmake_build(root / "host", BUNDLE, jobs=1),
+        "asan": lambda: cmake_build(root / "asan", BUNDLE, options={"SLIPEST_SANITIZE": "ON"}, jobs=1),
+        "cortex-m4": lambda: cmake_build(root / "cortex-m4", BUNDLE, cpu="cortex-m4", jobs=1),
+        "cortex-m3": lambda: cmake_build(root / "m3", BUNDLE, cpu="cortex-m3", jobs=1),
+    }
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        futures = {name: pool.submit(fn) for name, fn in jobs.items()}
+        done = {name: f.result() for name, f in futures.items()}
+    done["root"] = root
+    return done
+
+
+def ctest(build: Path, *regex: str) -> str:
+    cmd = ["ctest", "--test-dir", str(build), "--output-on-failure", "-V"]
+    for r in regex:
+        cmd += ["-R", r]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
+    assert "100% tests passed" in proc.stdout
+    return proc.stdout
+
+
+def test_host_ctest_with_sanitizers(builds):
+    out = ctest(builds["asan"])
+    for name in ("test_codecs", "test_features", "test_node", "vectors_host"):
+        assert re.search(rf"Test +#\d+: {name} \.+ +Passed", out), name
+    assert re.search(r"vectors=(\d+) q_exact=\1 f32_within_1e-5=\1 .* PASS", out)
+
+
+@pytest.mark.parametrize("cpu", ["cortex-m4", "cortex-m3"])
+def test_cortex_m_images_check_every_vector(builds, cpu):
+    out = ctest(builds[cpu], "vectors")
+    n = int(np.load(BUNDLE / "vectors.npz")["inputs"].shape[0])
+    # full image (q + f32) and the fixed-point-only image, every vector
+    assert len(re.findall(rf"vectors={n} q_fail=0 f32_fail=0 extractor_fail=0 model=\w+ PASS", out)) == 2
+
+
+def test_m3_fixed_point_image_has_no_soft_float(builds):
+    out = ctest(builds["cortex-m3"], "softfloat")
+    assert "slipest_test_q.elf: 0 soft-float helper symbols (expected absent)" in out
+    # the same check finds the helpers in the float image: it can fail
+    assert re.search(r"slipest_test_vectors.elf: [1-9]\d* soft-float helper symbols \(expected present\)", out)
+
+
+def test_m4_cost_and_size_are_measured(builds):
+    cost = target_costs("cortex-m4", builds["cortex-m4"])
+    assert 39.0 < cost["instructions_per_tick"] < 41.0  # 25 MHz SysTick at 1 ns per instruction
+    assert 100 < cost["q"] < 100_000 and 100 < cost["f32"] < 100_000
+    assert 0 < cost["stack_q"] <= cost["stack_node_window"]
+    # RAM budget of library + model: node context + peak stack of a window-closing frame
+    assert cost["node_bytes"] + cost["stack_node_window"] <= 1024
+    lib = library_footprint(builds["cortex-m4"] / "slipest_bench_target_q.elf.map", "libslipest_q.a")
+    assert {"slipest_infer_q.c.obj", "slipest_node.c.obj", "slipest_features.c.obj"} <= set(lib)
+    assert all(o["ram"] == 0 for o in lib.values())  # no static mutable state in the library
+    # flash budget (6 KB) for library + model with the one link a firmware uses (COBS)
+    assert sum(o["flash"] for name, o in lib.items() if name != "slipest_slcan.c.obj") <= 6144
+
+
+def test_bench_c_prints_one_json_object(builds, capsys):
+    """`fleetlab bench c --json` end to end, reusing this module's host and M4 builds."""
+    import argparse
+    import json
+
+    from fleetlab.host_tools import bench_c
+
+    parser = argparse.ArgumentParser()
+    bench_c.add_arguments(parser)
+    args = parser.parse_args(["--bundle", str(BUNDLE), "--build-dir", str(builds["root"]), "--iterations", "200", "--json"])
+    assert bench_c.run(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    for key in ("host_ns_per_inference_q", "host_ns_per_inference_f32", "onnxruntime_ns_per_inference",
+                "torch_ns_per_inference", "speedup_vs_onnxruntime", "m4_instructions_per_inference_q",
+                "m4_instructions_per_inference_f32", "m4_flash_bytes", "m4_ram_bytes"):
+        assert out[key] > 0, key
+    assert out["speedup_vs_onnxruntime"] == pytest.approx(out["onnxruntime_ns_per_inference"] / out["host_ns_per_inference_q"])
+
+
+# --------------------------------------------------------------------------- fuzzing
+def test_fuzzers_run_clean(tmp_path):
+    seconds = int(os.environ.get("FLEETLAB_FUZZ_SECONDS", "60"))
+    proc = subprocess.run(
+        [str(REPO / "scripts" / "fuzz.sh"), str(seconds), str(tmp_path / "fuzz")],
+        capture_output=True, text=True, timeout=seconds * 3 + 300,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr[-4000:]
+    execs = dict(re.findall(r"^(fuzz_\w+) executions=(\d+)", proc.stdout, flags=re.M))
+    assert set(execs) == {"fuzz_slcan", "fuzz_cobs", "fuzz_push"}
+    assert all(int(v) > 1000 for v in execs.values()), execs
+    print(proc.stdout)
+
+
+# --------------------------------------------------------------------------- ctypes
+class Frame(ctypes.Structure):
+    _fields_ = [("id", ctypes.c_uint32), ("dlc", ctypes.c_uint8), ("data", ctypes.c_uint8 * 8)]
+
+
+class Window(ctypes.Structure):
+    _fields_ = [("sum", ctypes.c_int32 * 7), ("sumsq", ctypes.c_int64 * 7), ("index", ctypes.c_uint32),
+                ("n", ctypes.c_uint8), ("flags", ctypes.c_uint8)]
+
+
+class Counters(ctypes.Structure):
+    _fields_ = [(n, ctypes.c_uint32) for n in ("frames_received", "frames_rejected", "samples_dropped",
+                                               "windows_flagged", "windows_done", "saturations")]
+
+
+@pytest.fixture(scope="module")
+def lib(builds):
+    so = ctypes.CDLL(str(builds["host"] / "libslipest_host.so"))
+    assert so.slipest_frame_size() == ctypes.sizeof(Frame)
+    assert so.slipest_window_size() == ctypes.sizeof(Window)
+    so.slipest_model_hash32.restype = ctypes.c_uint32
+    return so
+
+
+def c_extract(lib, samples: np.ndarray, counters: np.ndarray):
+    ex = ctypes.create_string_buffer(lib.slipest_extractor_size())
+    lib.slipest_extractor_init(ex)
+    out = (Window * 2)()
+    windows = []
+    s = (ctypes.c_int16 * 7)()
+    for x, c in zip(samples.tolist(), counters.tolist()):
+        s[:] = x
+        r = lib.slipest_extractor_push(ex, ctypes.c_uint16(c & 0xFFFF), s, out)
+        assert r >= 0 or r == -4  # SLIPEST_E_ORDER
+        for k in range(max(r, 0)):
+            feat = (ctypes.c_int16 * 12)()
+            featf = (ctypes.c_float * 12)()
+            sat = lib.slipest_window_features_q(ctypes.byref(out[k]), feat)
+            assert lib.slipest_window_features_f32(ctypes.byref(out[k]), featf) == 0
+            windows.append((out[k].index, out[k].n, out[k].flags, list(feat), sat, list(featf)))
+    return windows, ex
+
+
+def test_c_extractor_matches_features_int_on_streams_with_gaps(lib):
+    rng = np.random.default_rng(11)
+    for trial in range(6):
+        n = 3000
+        steps = rng.choice([1] * 40 + [2, 3, 0, -2, 120, 30000], size=n)
+        counters = (int(rng.integers(65536)) + np.cumsum(steps)) & 0xFFFF
+        scale = [50, 3000, 32768][trial % 3]
+        x = rng.integers(-scale, scale, size=(n, 7)).clip(-32768, 32767).astype(np.int16)
+        got, _ = c_extract(lib, x, counters)
+        ref = featurise_int(x, counters)
+        assert [g[0] for g in got] == ref.window_index.tolist()
+        assert [g[1] for g in got] == ref.n_samples.tolist()
+        assert np.array_equal(np.array([g[3] for g in got], np.int16).reshape(-1, 12), ref.features)
+        assert [g[4] for g in got] == ref.saturations.tolist()
+        assert [g[2] for g in got] == (ref.flags & (FLAG_GAP | FLAG_INVALID)).tolist()
+        assert ref.samples_dropped > 0 and ref.samples_rejected > 0 and (ref.flags & FLAG_GAP).any()
+
+
+def test_c_float_features_match_numpy(lib):
+    rng = np.random.default_rng(3)
+    x = (rng.normal(0, 1, size=(2000, 7)) * [300, 2000, 500, 500, 800, 400, 400] + [1500, 500, 0, 0, 9810, 0, 0])
+    x = x.round().clip(-32768, 32767).astype(np.int16)
+    got, _ = c_extract(lib, x, np.arange(len(x)))
+    want = featurise(x * CHANNEL_LSB)
+    assert len(got) == len(want) == 20
+    np.testing.assert_allclose(np.array([g[5] for g in got]), want, rtol=1e-6, atol=1e-9)
+
+
+# --------------------------------------------------------------------------- node, end to end
+def telemetry_frames(x: np.ndarray, counters: np.ndarray) -> list[tuple[int, bytes]]:
+    frames = []
+    for s, c in zip(x.tolist(), counters.tolist()):
+        phys = np.asarray(s) * CHANNEL_LSB
+        c &= 0xFFFF
+        for name, sig in (
+            ("TELEM_WHEEL", {"wheel_speed": phys[0], "motor_current": phys[1]}),
+            ("TELEM_IMU", {"acc_x": phys[2], "acc_y": phys[3], "acc_z": phys[4]}),
+            ("TELEM_ATTITUDE", {"roll": phys[5], "pitch": phys[6]}),
+        ):
+            m = DBC.get_message_by_name(name)
+            frames.append((m.frame_id, m.encode({"sample_counter": c, **sig})))
+    return frames
+
+
+def node_run(lib, frames: list[tuple[int, bytes]]):
+    node = ctypes.create_string_buffer(lib.slipest_node_size())
+    lib.slipest_node_init(node)
+    out = (Frame * 9)()
+    outputs, statuses = [], []
+    for fid, data in frames:
+        f = Frame(fid, len(data), (ctypes.c_uint8 * 8)(*data))
+        n = lib.slipest_node_handle(node, ctypes.byref(f), out, 9)
+        for k in range(max(n, 0)):
+            outputs.append((out[k].id, bytes(out[k].data[: out[k].dlc])))
+    c = Counters()
+    lib.slipest_node_counters(node, ctypes.byref(c))
+    return outputs, c
+
+
+def estimates(outputs):
+    """(SLIP_ESTIMATE, logits) per window from the node's output frames, decoded with cantools."""
+    res, cur = [], None
+    for fid, data in outputs:
+        msg = DBC.decode_message(fid, data, decode_choices=False, scaling=False)
+        name = DBC.get_message_by_frame_id(fid).name
+        if name == "SLIP_ESTIMATE":
+            cur = dict(msg)
+        elif name == "SLIP_LOGITS_01":
+            cur["logits"] = [msg["logit_0"], msg["logit_1"]]
+        elif name == "SLIP_LOGITS_2":
+            assert msg["window_counter"] == cur["window_counter"]
+            cur["logits"].append(msg["logit_2"])
+            res.append(cur)
+    return res
+
+
+def sim_stream(n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    walk = np.cumsum(rng.normal(0, 1, size=(n, 7)), axis=0)
+    x = walk * [20, 30, 40, 40, 40, 10, 10] + [1500, 800, 0, 0, 9810, 200, -300]
+    return x.round().clip(-32768, 32767).astype(np.int16)
+
+
+def test_node_is_bit_exact_with_the_python_references(lib):
+    from fleetlab.export.bundle import load_bundle
+    from fleetlab.export.intref import q_logits_of
+
+    b = load_bundle(BUNDLE)
+    x = sim_stream(2400, seed=4)
+    counters = np.arange(len(x)) + 65000
+    frames = telemetry_frames(x, counters)
+    # faults: a duplicated frame, a late frame, a lost frame (sample 250 incomplete), unknown ID
+    frames.insert(100, frames[99])
+    frames.insert(500, frames[300])
+    del frames[3 * 250 + 1 + 2]
+    frames.append((0x123, bytes(8)))
+    outputs, c = node_run(lib, frames)
+    est = estimates(outputs)
+    keep = np.ones(len(x), bool)
+    keep[250] = False
+    ref = featurise_int(x[keep], counters[keep])
+    q, sat = q_logits_of(b.qparams, ref.features, return_saturations=True)
+    assert len(est) == len(ref.features) == 24
+    assert [e["window_counter"] for e in est] == ref.window_index.tolist()
+    assert [e["logits"] for e in est] == q.tolist()
+    assert [e["n_samples"] for e in est] == ref.n_samples.tolist()
+    assert [e["saturations"] for e in est] == (np.asarray(sat) + ref.saturations).tolist()
+    assert [e["flags"] & FLAG_GAP for e in est] == (ref.flags & FLAG_GAP).tolist()
+    assert est[2]["flags"] & FLAG_GAP and est[2]["n_samples"] == 99
+    assert (c.frames_received, c.frames_rejected) == (len(frames), 3)
+    assert (c.samples_dropped, c.windows_flagged, c.windows_done) == (1, 1, 24)
+    assert lib.slipest_model_hash32() == int(b.manifest["content_hash"][:8], 16)
+
+
+def test_node_features_frames_round_trip_through_the_dbc(lib):
+    """Random FEATURES frames encoded by cantools, decoded by the generated C codec."""
+    from fleetlab.export.intref import q_logits_of
+
+    rng = np.random.default_rng(9)
+    q_in = rng.integers(-32768, 32767, size=(40, 12)).astype(np.int16)
+    frames = []
+    for w, row in enumerate(q_in.tolist()):
+        for part in range(4):
+            m = DBC.get_message_by_name(f"FEATURES_{part}")
+            names = [s.name for s in m.signals if s.name != "window_counter"]
+            frames.append((m.frame_id, m.encode({"window_counter": w, **dict(zip(names, row[3 * part: 3 * part + 3]))},
+                                                scaling=False)))
+    outputs, c = node_run(lib, frames)
+    est = estimates(outputs)
+    assert [e["window_counter"] for e in est] == list(range(40))
+    assert all(e["flags"] & 0x08 for e in est)
+    assert [e["logits"] for e in est] == q_logits_of(BUNDLE, q_in).tolist()
+    # status frames after every 10 windows: 4 x 3 frames
+    assert sum(1 for fid, _ in outputs if fid == 0x300) == 4 and c.windows_done == 40
+
+
+# --------------------------------------------------------------------------- emulator on a pty
+class Emulator:
+    def __init__(self, build: Path, link: str):
+        self.proc = subprocess.Popen([str(build / "slipest_emu"), "--pty", "--link", link],
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        line = self.proc.stdout.readline().decode()
+        assert line.startswith("PTY "), line
+        self.fd = os.open(line.split()[1], os.O_RDWR | os.O_NOCTTY)
+        import tty
+
+        tty.setraw(self.fd)
+
+    def exchange(self, data: bytes, settle: float = 1.0) -> bytes:
+        """Write data while reading replies; return everything read until `settle` s of silence."""
+        got, view = bytearray(), memoryview(data)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            r, w, _ = select.select([self.fd], [self.fd] if len(view) else [], [], settle)
+            if r:
+                got += os.read(self.fd, 65536)
+            if w:
+                view = view[os.write(self.fd, view[:4096]):]
+            if not r and not w:  # silence for `settle` seconds with nothing left to write
+                break
+        return bytes(got)
+
+    def stop(self) -> tuple[int, str]:
+        self.proc.send_signal(signal.SIGTERM)
+        rc = self.proc.wait(timeout=10)
+        os.close(self.fd)
+        return rc, self.proc.stderr.read().decode()
+
+
+def slcan_encode(frames) -> bytes:
+    return b"".join(b"t%03X%d%s\r" % (fid, len(d), d.hex().upper().encode()) for fid, d in frames)
+
+
+def slcan_decode(data: bytes):
+    return [(int(l[1:4], 16), bytes.fromhex(l[5: 5 + 2 * int(l[4:5])].decode()))
+            for l in (line.lstrip(b"\a") for line in data.split(b"\r")) if l.startswith(b"t")]
+
+
+def crc16(data: bytes) -> int:
+    import crcmod.predefined
+
+    return crcmod.predefined.mkCrcFun("crc-ccitt-false")(data)
+
+
+def cobs_encode(frames) -> bytes:
+    out = b""
+    for fid, d in frames:
+        payload = fid.to_bytes(2, "little") + bytes([len(d)]) + d
+        out += cobs.encode(payload + crc16(payload).to_bytes(2, "little")) + b"\x00"
+    return out
+
+
+def cobs_decode(data: bytes):
+    res = []
+    for pkt in data.split(b"\x00")[:-1]:
+        p = cobs.decode(pkt)
+        assert crc16(p[:-2]) == int.from_bytes(p[-2:], "little")
+        res.append((int.from_bytes(p[:2], "little"), p[3: 3 + p[2]]))
+    return res
+
+
+@pytest.mark.parametrize("link", ["slcan", "cobs"])
+def test_emulator_on_a_pty_matches_the_library(builds, lib, link):
+    x = sim_stream(1000, seed=8)
+    frames = telemetry_frames(x, np.arange(len(x)))
+    want, _ = node_run(lib, frames)
+    emu = Emulator(builds["host"], link)
+    try:
+        if link == "slcan":
+            assert emu.exchange(b"C\rS6\rO\rV\r", settle=0.3) == b"\r\r\rV0101\r"
+            raw = emu.exchange(slcan_encode(frames) + b"t10X\r" + slcan_encode([(0xF0, bytes([2, 0]))]))
+            got = slcan_decode(raw)
+            assert b"\a" in raw  # the malformed line was answered with BEL
+        else:
+            bad = bytearray(cobs_encode([(0x100, bytes(6))]))
+            bad[3] ^= 0xFF  # CRC or COBS error
+            raw = emu.exchange(cobs_encode(frames) + bytes(bad) + cobs_encode([(0xF0, bytes([2, 0]))]))
+            got = cobs_decode(raw)
+    finally:
+        rc, err = emu.stop()
+    assert rc == 0
+    assert got[: len(want)] == want and len(want) == 30 + 3  # 10 windows + one status burst
+    rx = DBC.decode_message(0x301, got[-2][1])
+    assert (rx["frames_received"], rx["frames_rejected"]) == (len(frames) + 2, 1)
+    assert "windows_done=10" in err
+
+
+def test_python_can_slcan_adapter_talks_to_the_emulator(builds):
+    """python-can's own slcan interface opens, queries and uses the emulator's pty."""
+    import can
+
+    proc = subprocess.Popen([str(builds["host"] / "slipest_emu"), "--pty", "--link", "slcan"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        port = proc.stdout.readline().decode().split()[1]
+        bus = can.Bus(interface="slcan", channel=port, bitrate=500000)
+        try:
+            assert bus.get_version(2.0) == (1, 1)
+            assert bus.get_serial_number(2.0) == "SLP1"
+            control = DBC.get_message_by_name("CONTROL")
+            bus.send(can.Message(arbitration_id=control.frame_id, is_extended_id=False,
+                                 data=control.encode({"command": 2, "argument": 0})))
+            got = [bus.recv(5.0) for _ in range(3)]
+        finally:
+            bus.shutdown()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 0
+    assert [m.arbitration_id for m in got] == [0x300, 0x301, 0x302]
+    rx = DBC.decode_message(0x301, got[1].data)
+    assert rx == {"frames_received": 1, "frames_rejected": 0}

@@ -1,0 +1,421 @@
+"""`fleetlab emulate`: run the C estimator in the host emulation loop and compare bit for bit.
+
+The host builds the emulator for a bundle (CMake), starts it on a pty (or loads the C
+library in-process), streams a source through the chosen link at full speed, collects
+every estimate, and checks each against the torch integer reference (logits, class,
+saturations) and the float model (class). With `--inject`, faults are injected and the
+estimator's status counters are checked against the host's prediction for every
+estimator lifetime. Exit code 0 only when everything agrees and nothing was lost uncounted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import queue
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from fleetlab.data.features_int import FLAG_GAP, FLAG_INVALID, SAMPLES_PER_WINDOW
+
+from . import faults as fault_mod
+from .compare import EstimatorModel, WindowVerdict, compare_status, compare_windows
+from .dbc import OutputAssembler, StatusReport, WindowEstimate
+from .emulator import EmulatorProcess, build, default_bundle, find_artifact
+from .links import InprocLink, Link, SerialLink, SlcanLink
+from .reference import Reference
+from .serial_framing import Rejected
+from .sources import FeatureSource, TelemetrySource, resolve, sim_source
+
+LINKS = ("slcan", "serial", "inproc")
+DEFAULT_SCALE = 0.08
+SAMPLE_RATE_HZ = 50.0
+REALTIME_FRAMES_PER_S = 150.0  # 50 Hz rover, three telemetry frames per sample
+REALTIME_WINDOWS_PER_S = 0.5
+CHUNK = 64  # wire items per write; the reader thread drains answers meanwhile
+
+
+EPILOG = """\
+Output: a summary; with --json FILE the same as JSON: windows, bit_exact, mismatches,
+flagged_windows, rejected_frames (estimator's count), dropped_frames (sent but never
+received, uncounted), injected_faults, detected_faults, latency_us {p50, p99} (from the
+frame that closes a window to its SLIP_ESTIMATE, full-speed stream), plus detail keys.
+Exit status 0 only if every window is bit-exact, every status counter matches the host's
+prediction, nothing was lost uncounted and every injected fault was detected.
+
+Faults (--inject): bad_crc (serial: CRC inverted; slcan: malformed line), wrong_length,
+unknown_id, dropped_sample, reordered_samples, duplicated_frame, restart (kill the
+emulator mid-window, start it again, CONTROL reset, resume at the next window boundary).
+"""
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.epilog = EPILOG
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
+    p.add_argument("--bundle", type=Path, default=None,
+                   help="export bundle directory (default: the committed example bundle firmware_c/bundles/example)")
+    p.add_argument("--source", default="sim",
+                   help="'sim' (simulated raw telemetry, TELEM frames), 'vectors' (the bundle's test vectors, "
+                        "FEATURES frames) or a folder of window CSV files (FEATURES frames); default sim")
+    p.add_argument("--link", choices=LINKS, default="slcan",
+                   help="slcan: python-can slcan bus on the emulator's pty; serial: COBS+CRC packets on its pty; "
+                        "inproc: the C library via ctypes on a python-can virtual bus (default slcan)")
+    p.add_argument("--inject", default=None, metavar="KINDS",
+                   help=f"faults to inject: comma list of {', '.join(fault_mod.KINDS)}, or 'all'")
+    p.add_argument("--inject-rate", type=float, default=0.05, metavar="R",
+                   help="probability that a window carries one fault (default 0.05)")
+    p.add_argument("--restart-every", type=int, default=0, metavar="N",
+                   help="also kill and restart the estimator every N windows (0: never)")
+    p.add_argument("--soak", type=int, default=0, metavar="FRAMES",
+                   help="throughput soak: stream at least FRAMES telemetry frames (simulator data, repeated) "
+                        "at full speed and report frames/s and windows/s")
+    p.add_argument("--max-windows", type=int, default=0, metavar="N",
+                   help="stream only the first N windows of the source (0: all)")
+    p.add_argument("--realtime", action="store_true",
+                   help="pace like the rover (one sample = 3 frames every 20 ms, or one feature set per 2 s) "
+                        "instead of full speed; latency then measures the estimator, not a queue")
+    p.add_argument("--seed", type=int, default=0, help="simulator and fault-injection seed (default 0)")
+    p.add_argument("--scale", type=float, default=DEFAULT_SCALE,
+                   help=f"simulator scenario scale (default {DEFAULT_SCALE}, >= 500 windows)")
+    p.add_argument("--json", type=Path, default=None, metavar="FILE", help="write the summary as JSON")
+    p.add_argument("--timeout", type=float, default=20.0,
+                   help="seconds to wait for the estimator's answers at the end of a lifetime (default 20)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+@dataclass
+class SegmentResult:
+    verdicts: list[WindowVerdict]
+    unexplained: list[WindowEstimate]
+    status: StatusReport | None
+    status_problems: list[str]
+    expected_received: int
+    frames_sent: int
+
+
+@dataclass
+class EmulationResult:
+    link: str
+    source: str
+    segments: list[SegmentResult] = field(default_factory=list)
+    faults: list[fault_mod.Fault] = field(default_factory=list)
+    latencies_us: list[float] = field(default_factory=list)
+    host_rx_errors: list[str] = field(default_factory=list)
+    wall_s: float = 0.0  # whole run, including restarts and the comparison
+    stream_s: float = 0.0  # writing frames until the last status answer arrived
+    frames_sent: int = 0
+    realtime: bool = False
+    restarts: int = 0
+    samples_lost_to_restart: int = 0
+    samples_skipped_by_restart: int = 0
+    windows_lost_to_restart: int = 0
+    model_hash_problems: list[str] = field(default_factory=list)
+
+    def summary(self) -> dict:
+        verdicts = [v for s in self.segments for v in s.verdicts]
+        mism = [v for v in verdicts if not v.bit_exact]
+        flagged = [v for v in verdicts if v.got is not None and v.got.flags & (FLAG_GAP | FLAG_INVALID)]
+        unflagged_mism = [v for v in mism if not v.expected.flags & (FLAG_GAP | FLAG_INVALID)]
+        rejected = sum(s.status.frames_rejected for s in self.segments if s.status)
+        dropped = sum(max(0, s.expected_received - (s.status.frames_received if s.status else 0))
+                      for s in self.segments)
+        lat = np.array(self.latencies_us) if self.latencies_us else np.zeros(1)
+        n_windows = len(verdicts)
+        return {
+            "windows": n_windows,
+            "bit_exact": len(verdicts) - len(mism),
+            "mismatches": len(mism),
+            "flagged_windows": len(flagged),
+            "rejected_frames": int(rejected),
+            "dropped_frames": int(dropped),
+            "injected_faults": len(self.faults),
+            "detected_faults": sum(f.detected for f in self.faults),
+            "latency_us": {"p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99))},
+            "link": self.link,
+            "source": self.source,
+            "mismatches_unflagged": len(unflagged_mism),
+            "unexplained_windows": sum(len(s.unexplained) for s in self.segments),
+            "status_problems": [p for s in self.segments for p in s.status_problems] + self.model_hash_problems,
+            "host_rx_errors": self.host_rx_errors[:20],
+            "faults_by_kind": _faults_by_kind(self.faults),
+            "restarts": self.restarts,
+            "samples_lost_to_restart": self.samples_lost_to_restart,
+            "samples_skipped_by_restart": self.samples_skipped_by_restart,
+            "windows_lost_to_restart": self.windows_lost_to_restart,
+            "frames_sent": self.frames_sent,
+            "realtime": self.realtime,
+            "samples_dropped_reported": sum(s.status.samples_dropped for s in self.segments if s.status),
+            "wall_s": round(self.wall_s, 3),
+            "stream_s": round(self.stream_s, 3),
+            "frames_per_s": round(self.frames_sent / self.stream_s, 1) if self.stream_s else 0.0,
+            "windows_per_s": round(n_windows / self.stream_s, 2) if self.stream_s else 0.0,
+            "realtime_need": {"frames_per_s": REALTIME_FRAMES_PER_S, "windows_per_s": REALTIME_WINDOWS_PER_S},
+            "first_problems": [f"window {v.expected.window_counter}: {'; '.join(v.problems)}" for v in mism[:10]],
+        }
+
+    def ok(self) -> bool:
+        s = self.summary()
+        return (s["mismatches"] == 0 and s["dropped_frames"] == 0 and s["unexplained_windows"] == 0
+                and not s["status_problems"] and not self.host_rx_errors
+                and s["detected_faults"] == s["injected_faults"])
+
+
+def _faults_by_kind(faults: list[fault_mod.Fault]) -> dict[str, dict[str, int]]:
+    out: dict[str, dict[str, int]] = {}
+    for f in faults:
+        d = out.setdefault(f.kind, {"injected": 0, "detected": 0})
+        d["injected"] += 1
+        d["detected"] += int(f.detected)
+    return out
+
+
+class _Endpoint:
+    """The estimator at the other end of the link, and how to kill/restart it."""
+
+    def __init__(self, link_kind: str, bundle: Path):
+        self.kind = link_kind
+        self.emu: EmulatorProcess | None = None
+        self.link: Link | None = None
+        if link_kind == "inproc":
+            self.lib = find_artifact(build(bundle), "libslipest_host.so")
+        else:
+            self.emu = EmulatorProcess.for_bundle(bundle, "slcan" if link_kind == "slcan" else "cobs")
+
+    def connect(self) -> Link:
+        if self.kind == "inproc":
+            self.link = InprocLink(self.lib)
+        else:
+            assert self.emu is not None
+            pty = self.emu.start()
+            self.link = SlcanLink(pty, batched=True) if self.kind == "slcan" else SerialLink(pty)
+        return self.link
+
+    def restart(self) -> Link:
+        """Kill the estimator mid-stream and bring up a fresh one."""
+        if self.kind == "inproc":
+            assert isinstance(self.link, InprocLink)
+            self.link.restart()
+            return self.link
+        assert self.emu is not None and self.link is not None
+        self.emu.kill()
+        self.link.close()
+        return self.connect()
+
+    def close(self) -> None:
+        if self.link is not None:
+            self.link.close()
+        if self.emu is not None:
+            self.emu.stop()
+
+
+def _drain(link: Link, asm: OutputAssembler, windows: list[WindowEstimate], statuses: list[StatusReport],
+           errors: list[str]) -> None:
+    while True:
+        try:
+            item, t = link.rx.get_nowait()
+        except queue.Empty:
+            return
+        if isinstance(item, Rejected):
+            errors.append(f"undecodable answer from the estimator ({item.reason}): {item.raw[:20]!r}")
+            continue
+        out = asm.feed(item, t)
+        if isinstance(out, WindowEstimate):
+            windows.append(out)
+        elif isinstance(out, StatusReport):
+            statuses.append(out)
+
+
+def emulate(
+    bundle: Path | str | None,
+    source: TelemetrySource | FeatureSource,
+    link_kind: str,
+    kinds: list[str] | None = None,
+    rate: float = 0.0,
+    restart_every: int = 0,
+    seed: int = 0,
+    timeout: float = 20.0,
+    progress: bool = True,
+    realtime: bool = False,
+) -> EmulationResult:
+    if link_kind not in LINKS:
+        raise ValueError(f"--link must be one of {', '.join(LINKS)}, got {link_kind!r}")
+    bundle = Path(bundle) if bundle else default_bundle()
+    ref = Reference.load(bundle)
+    kinds = kinds or []
+    if isinstance(source, TelemetrySource):
+        plan = fault_mod.plan_telemetry(source.samples_q, kinds, rate, seed, restart_every)
+    else:
+        plan = fault_mod.plan_features(source.feat_q, kinds, rate, seed, restart_every)
+    result = EmulationResult(link_kind, source.name, faults=plan.faults, realtime=realtime)
+    endpoint = _Endpoint(link_kind, bundle)
+    bar = tqdm(total=plan.n_frames, unit="frame", desc=f"emulate over {link_kind}", disable=not progress,
+               unit_scale=True)
+    t0 = time.perf_counter()
+    try:
+        link = endpoint.connect()
+        for si, seg in enumerate(plan.segments):
+            if si > 0:
+                link = endpoint.restart()
+                result.restarts += 1
+            result.segments.append(_run_segment(link, seg, ref, timeout, bar, result, realtime))
+            result.samples_lost_to_restart += seg.samples_lost_to_restart
+            result.samples_skipped_by_restart += seg.samples_skipped_by_restart
+            result.windows_lost_to_restart += seg.windows_lost_to_restart
+            result.frames_sent += len(seg.items)
+    finally:
+        result.wall_s = time.perf_counter() - t0
+        bar.close()
+        endpoint.close()
+    _mark_detected(plan, result)
+    return result
+
+
+def _run_segment(link: Link, seg: fault_mod.Segment, ref: Reference, timeout: float, bar: tqdm,
+                 result: EmulationResult, realtime: bool = False) -> SegmentResult:
+    model = EstimatorModel()
+    asm = OutputAssembler()
+    windows: list[WindowEstimate] = []
+    statuses: list[StatusReport] = []
+    errors: list[str] = []
+    items = seg.items
+    chunk_times: list[tuple[float, float]] = []  # (start, end) of each chunk's write
+    item_chunk = np.zeros(len(items), dtype=np.int64)  # chunk index of every item
+    # real time: after the leading CONTROL reset, one chunk = one sample's three frames
+    # (or one feature set) per period; otherwise chunks of CHUNK items at full speed
+    if realtime:
+        telemetry = any(it.frame.can_id < 0x110 for it in items[1:4])
+        step, period = (3, 1 / SAMPLE_RATE_HZ) if telemetry else (4, 2.0)
+        starts = [0] + list(range(1, len(items), step))
+    else:
+        period, starts = 0.0, list(range(0, len(items), CHUNK))
+    bounds = starts + [len(items)]
+    t_start = time.perf_counter()
+    for c in range(len(starts)):
+        i, chunk = bounds[c], items[bounds[c] : bounds[c + 1]]
+        item_chunk[bounds[c] : bounds[c + 1]] = c
+        if period:
+            delay = t_start + c * period - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+        ta = time.perf_counter()
+        link.write(chunk)
+        chunk_times.append((ta, time.perf_counter()))
+        for j, it in enumerate(chunk):
+            model.feed(it, i + j)
+        _drain(link, asm, windows, statuses, errors)
+        bar.update(len(chunk))
+        if link.reader_error is not None:
+            raise OSError(f"{link.name}: the link failed mid-stream: {link.reader_error}")
+    expected_counters = model.status_snapshot()
+    # the last item is CONTROL status: wait for the answer generated after it
+    deadline = time.monotonic() + timeout
+    final: StatusReport | None = None
+    while time.monotonic() < deadline:
+        _drain(link, asm, windows, statuses, errors)
+        done = [s for s in statuses if s.frames_received >= expected_counters.frames_received]
+        if done:
+            final = done[0]
+            break
+        time.sleep(0.005)
+    if final is None and statuses:
+        final = statuses[-1]
+    result.stream_s += time.perf_counter() - t_start
+    expected = model.windows()
+    verdicts, unexplained = compare_windows(expected, windows, ref.q_logits, ref.f32_logits)
+    for v in verdicts:
+        k = v.expected.trigger_item
+        if v.got is not None and k >= 0:
+            # the k-th item of a chunk left the host at about ta + (pos+1)/len * (tb - ta)
+            c = int(item_chunk[k])
+            ta, tb = chunk_times[c]
+            t_sent = ta + (k - bounds[c] + 1) / (bounds[c + 1] - bounds[c]) * (tb - ta)
+            result.latencies_us.append(max(0.0, (v.got.t_recv - t_sent) * 1e6))
+    problems = compare_status(expected_counters, final)
+    if final is not None and ref.model_hash32 is not None and final.model_hash != ref.model_hash32:
+        result.model_hash_problems.append(
+            f"STATUS_MODEL hash {final.model_hash:08x} != bundle {ref.model_hash32:08x}")
+    result.host_rx_errors.extend(errors + asm.errors)
+    return SegmentResult(verdicts, unexplained, final, problems, expected_counters.frames_received, len(items))
+
+
+def _mark_detected(plan: fault_mod.Plan, result: EmulationResult) -> None:
+    """A fault is detected when its lifetime's counters match the prediction (which includes its
+    effect) and, for faults that must flag their window, the estimator flagged that window."""
+    for f in plan.faults:
+        seg = result.segments[f.segment] if f.segment < len(result.segments) else None
+        if seg is None or seg.status is None or seg.status_problems:
+            continue
+        if f.kind == "restart":
+            # the next lifetime started from zero: its counters match a fresh estimator's
+            nxt = result.segments[f.segment + 1] if f.segment + 1 < len(result.segments) else None
+            f.detected = nxt is not None and nxt.status is not None and not nxt.status_problems
+            continue
+        if f.flags_window:
+            wins = [v for v in seg.verdicts if v.expected.window_index == f.window]
+            f.detected = bool(wins) and wins[0].got is not None and bool(wins[0].got.flags & FLAG_GAP)
+        else:
+            f.detected = True
+
+
+def soak_source(frames: int, seed: int, scale: float, base: TelemetrySource | None = None) -> TelemetrySource:
+    """Simulator samples (or `base`) repeated until at least `frames` telemetry frames (whole windows)."""
+    base = base or sim_source(seed, scale)
+    n_samples = -(-frames // 3)
+    n_samples = -(-n_samples // SAMPLES_PER_WINDOW) * SAMPLES_PER_WINDOW
+    reps = -(-n_samples // len(base.samples_q))
+    samples = np.tile(base.samples_q, (reps, 1))[:n_samples]
+    return TelemetrySource(f"soak({frames} frames of {base.name})", samples, [("soak", n_samples // 100)])
+
+
+def _first_windows(source: TelemetrySource | FeatureSource, n: int) -> TelemetrySource | FeatureSource:
+    if isinstance(source, TelemetrySource):
+        return TelemetrySource(f"{source.name}[:{n} windows]", source.samples_q[: n * SAMPLES_PER_WINDOW], [])
+    return FeatureSource(f"{source.name}[:{n} windows]", source.feat_q[:n])
+
+
+def print_summary(s: dict) -> None:
+    print(f"emulate over {s['link']} from {s['source']}")
+    print(f"  windows {s['windows']}: bit-exact {s['bit_exact']}, mismatches {s['mismatches']} "
+          f"(unflagged {s['mismatches_unflagged']}), flagged {s['flagged_windows']}, "
+          f"unexplained {s['unexplained_windows']}")
+    print(f"  frames sent {s['frames_sent']}, rejected {s['rejected_frames']}, lost uncounted {s['dropped_frames']}")
+    print(f"  faults injected {s['injected_faults']}, detected {s['detected_faults']} {s['faults_by_kind'] or ''}")
+    if s["restarts"]:
+        print(f"  restarts {s['restarts']}: {s['samples_lost_to_restart']} samples "
+              f"({s['samples_skipped_by_restart']} never sent) / {s['windows_lost_to_restart']} windows lost to restart")
+    pace = "real-time" if s.get("realtime") else "full-speed"
+    print(f"  latency p50 {s['latency_us']['p50']:.0f} us, p99 {s['latency_us']['p99']:.0f} us ({pace} stream)")
+    print(f"  throughput {s['frames_per_s']:.0f} frames/s, {s['windows_per_s']:.1f} windows/s in {s['stream_s']:.2f} s "
+          f"(real time needs {REALTIME_FRAMES_PER_S:.0f} frames/s, {REALTIME_WINDOWS_PER_S} windows/s: "
+          f"x{s['frames_per_s'] / REALTIME_FRAMES_PER_S:.0f})")
+    for p in s["status_problems"] + s["host_rx_errors"] + s["first_problems"]:
+        print(f"  PROBLEM: {p}")
+
+
+def run(args: argparse.Namespace) -> int:
+    bundle = args.bundle or default_bundle()
+    if args.soak:
+        if args.source != "sim":
+            raise ValueError("--soak streams simulator telemetry; drop --source")
+        source: TelemetrySource | FeatureSource = soak_source(args.soak, args.seed, args.scale)
+    else:
+        source = resolve(args.source, args.seed, args.scale, bundle)
+    if args.max_windows < 0:
+        raise ValueError("--max-windows must be >= 0")
+    if args.max_windows:
+        source = _first_windows(source, args.max_windows)
+    kinds = fault_mod.parse_kinds(args.inject, args.link, isinstance(source, FeatureSource))
+    if args.restart_every < 0:
+        raise ValueError("--restart-every must be >= 0")
+    result = emulate(bundle, source, args.link, kinds, args.inject_rate, args.restart_every, args.seed,
+                     args.timeout, progress=not args.no_progress, realtime=args.realtime)
+    s = result.summary()
+    print_summary(s)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(s, indent=2) + "\n")
+    return 0 if result.ok() else 1

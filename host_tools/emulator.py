@@ -1,0 +1,214 @@
+"""Build the C estimator (CMake) and run the host emulator `slipest_emu` on a pseudo-terminal.
+
+`fleetlab emulate` builds on demand: one build directory per bundle under `build/emulate*`,
+configured with `-DSLIPEST_BUNDLE=<bundle>`, guarded by a file lock so concurrent
+runs do not race. The emulator opens a pty itself and prints its path; we read it from
+the emulator's stdout.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import fleetlab.host_tools as _pkg
+
+EMULATOR_TARGET = "slipest_emu"
+HOST_LIBRARY_TARGET = "slipest_host"
+PTY_RE = re.compile(rb"(/dev/pts/\d+|/dev/tty\w+)")
+
+
+def repo_root() -> Path:
+    """The source tree this package was installed from (editable install: host_tools/..)."""
+    root = Path(_pkg.__file__).resolve().parent.parent
+    if not (root / "CMakeLists.txt").is_file():
+        raise OSError(f"{root}: no CMakeLists.txt; `fleetlab emulate` needs the fleetlab source tree")
+    return root
+
+
+def default_bundle() -> Path:
+    return repo_root() / "firmware_c" / "bundles" / "example"
+
+
+def build_dir_for(bundle: Path) -> Path:
+    bundle = bundle.resolve()
+    # our own build dirs (not build/host, which people configure by hand, e.g. with sanitizers
+    # that a ctypes load cannot take)
+    if bundle == default_bundle().resolve():
+        return repo_root() / "build" / "emulate"
+    tag = hashlib.sha256(str(bundle).encode()).hexdigest()[:10]
+    return repo_root() / "build" / f"emulate-{tag}"
+
+
+def _bundle_stamp(bundle: Path) -> str:
+    """Content hash of the bundle's headers: a changed bundle forces a rebuild."""
+    h = hashlib.sha256()
+    for name in sorted(p.name for p in bundle.glob("*.h")):
+        h.update(name.encode() + (bundle / name).read_bytes())
+    return h.hexdigest()
+
+
+_BUILT: set[tuple[Path, tuple[str, ...], str]] = set()  # up to date in this process
+
+
+def build(bundle: Path | str | None = None, targets: tuple[str, ...] = (EMULATOR_TARGET, HOST_LIBRARY_TARGET),
+          quiet: bool = True) -> Path:
+    """Configure (if needed) and build the host targets for `bundle`; returns the build dir.
+
+    CMake's own up-to-date check takes about a second, so a process asks it once per
+    bundle and target set.
+    """
+    bundle = Path(bundle) if bundle else default_bundle()
+    if not (bundle / "slipest_model_q.h").is_file():
+        raise OSError(f"{bundle}: not an export bundle (no slipest_model_q.h)")
+    for tool in ("cmake",):
+        if shutil.which(tool) is None:
+            raise OSError(f"{tool} not found on PATH (scripts/setup.sh installs it)")
+    bdir = build_dir_for(bundle)
+    bdir.mkdir(parents=True, exist_ok=True)
+    stamp = _bundle_stamp(bundle)
+    key = (bdir, tuple(targets), stamp)
+    if key in _BUILT:
+        return bdir
+    out = subprocess.DEVNULL if quiet else None
+    with open(bdir / ".fleetlab.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        stamp_file = bdir / ".fleetlab-bundle-stamp"
+        if not (bdir / "CMakeCache.txt").is_file() or not stamp_file.is_file() or stamp_file.read_text() != stamp:
+            cmd = ["cmake", "-S", str(repo_root()), "-B", str(bdir), f"-DSLIPEST_BUNDLE={bundle.resolve()}",
+                   "-DCMAKE_BUILD_TYPE=Release", "-DSLIPEST_SANITIZE=OFF", "-DSLIPEST_FUZZ=OFF",
+                   f"-DPython3_EXECUTABLE={sys.executable}"]
+            r = subprocess.run(cmd, stdout=out, stderr=subprocess.PIPE, text=True)
+            if r.returncode:
+                raise OSError(f"cmake configure failed for bundle {bundle}:\n{r.stderr[-2000:]}")
+        r = subprocess.run(["cmake", "--build", str(bdir), "--parallel", str(os.cpu_count() or 2),
+                            "--target", *targets], stdout=out, stderr=subprocess.PIPE, text=True)
+        if r.returncode:
+            raise OSError(f"cmake build failed ({', '.join(targets)}):\n{r.stderr[-2000:]}")
+        stamp_file.write_text(stamp)
+    _BUILT.add(key)
+    return bdir
+
+
+def find_artifact(bdir: Path, name: str) -> Path:
+    hits = sorted(p for p in bdir.rglob(name) if p.is_file())
+    if not hits:
+        raise OSError(f"{bdir}: built, but no {name} found")
+    return hits[0]
+
+
+def host_library(bundle: Path | str | None = None) -> Path:
+    """Path of the ctypes library (libslipest_host.so) for `bundle`, built if needed."""
+    bdir = build(bundle)
+    return find_artifact(bdir, "libslipest_host.so")
+
+
+class EmulatorProcess:
+    """The `slipest_emu` process on a pty (`--link slcan` or `--link cobs`)."""
+
+    def __init__(self, exe: Path, link: str, start_timeout: float = 10.0):
+        if link not in ("slcan", "cobs"):
+            raise ValueError(f"emulator link must be 'slcan' or 'cobs', got {link!r}")
+        self.exe, self.link, self.start_timeout = Path(exe), link, start_timeout
+        self.proc: subprocess.Popen | None = None
+        self.pty_path: str | None = None
+        self.starts = 0
+        self._stderr_tail: list[str] = []
+
+    @classmethod
+    def for_bundle(cls, bundle: Path | str | None, link: str) -> "EmulatorProcess":
+        bdir = build(bundle)
+        return cls(find_artifact(bdir, EMULATOR_TARGET), link)
+
+    def start(self) -> str:
+        """Start the emulator; returns the pty path it serves."""
+        if self.proc is not None:
+            raise RuntimeError("emulator already running")
+        self.proc = subprocess.Popen([str(self.exe), "--pty", "--link", self.link], stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, start_new_session=True)
+        self.starts += 1
+        line_buf = b""
+        deadline = time.monotonic() + self.start_timeout
+        assert self.proc.stdout is not None
+        while time.monotonic() < deadline:
+            line = self.proc.stdout.readline()
+            if not line:
+                break
+            line_buf += line
+            m = PTY_RE.search(line)
+            if m:
+                self.pty_path = m.group(1).decode()
+                break
+        if self.pty_path is None:
+            err = self._drain_stderr()
+            self.stop()
+            raise OSError(f"{self.exe.name} did not report its pty: {line_buf[-200:]!r} {err}")
+        # keep stdout/stderr from filling up and blocking the emulator
+        for stream, keep in ((self.proc.stdout, False), (self.proc.stderr, True)):
+            threading.Thread(target=self._pump, args=(stream, keep), daemon=True).start()
+        return self.pty_path
+
+    def _pump(self, stream, keep: bool) -> None:
+        for line in iter(stream.readline, b""):
+            if keep:
+                self._stderr_tail = (self._stderr_tail + [line.decode(errors="replace").rstrip()])[-20:]
+
+    def _drain_stderr(self) -> str:
+        if self.proc is None or self.proc.stderr is None:
+            return ""
+        try:
+            self.proc.wait(timeout=0.2)
+            return self.proc.stderr.read().decode(errors="replace")[-1000:]
+        except subprocess.TimeoutExpired:
+            return ""
+
+    @property
+    def running(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    def kill(self) -> None:
+        """Hard kill (fault injection: the estimator dies mid-stream)."""
+        if self.proc is not None:
+            if self.proc.poll() is None:
+                self.proc.send_signal(signal.SIGKILL)
+            self.proc.wait(timeout=5)
+            self.proc = None
+            self.pty_path = None
+
+    def stop(self) -> int | None:
+        """Polite stop (SIGTERM, then SIGKILL); returns the exit code."""
+        if self.proc is None:
+            return None
+        p = self.proc
+        if p.poll() is None:
+            p.terminate()
+            try:
+                p.wait(timeout=3)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(timeout=3)
+        self.proc, self.pty_path = None, None
+        return p.returncode
+
+    def restart(self) -> str:
+        self.kill()
+        return self.start()
+
+    def stderr_tail(self) -> str:
+        return "\n".join(self._stderr_tail)
+
+    def __enter__(self) -> "EmulatorProcess":
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()

@@ -1,0 +1,135 @@
+"""`fleetlab monitor can`: watch slip estimates and status frames on a CAN bus (or replay a log).
+
+Every frame is decoded with the DBC (cantools); estimates are shown once their three
+frames arrived, status frames as one line. Frames the DBC does not know, or with the
+wrong length, are counted and shown — never skipped silently.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import can
+
+from .dbc import Frame, OutputAssembler, StatusReport, WindowEstimate, by_id
+from .links import from_message, open_can_bus
+from .serial_framing import Rejected
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest="transport", metavar="TRANSPORT", required=True)
+    c = sub.add_parser("can", help="listen on a python-can bus", description="Listen on a python-can bus and "
+                       "decode every frame with host_tools/slipest.dbc, or replay a python-can log (--replay).")
+    c.add_argument("--interface", default="virtual", help="python-can interface (default virtual)")
+    c.add_argument("--channel", default=None, help="bus channel (vcan0, /dev/ttyACM0, ...)")
+    c.add_argument("--bitrate", type=int, default=None, help="bitrate for slcan/socketcan")
+    c.add_argument("--replay", type=Path, default=None, metavar="LOG",
+                   help="decode a python-can log (.log/.asc/.blf) instead of a live bus")
+    c.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: until Ctrl-C)")
+    c.add_argument("--count", type=int, default=0, help="stop after this many estimates (0: no limit)")
+    c.add_argument("--log", type=Path, default=None, metavar="FILE", help="also log every frame (python-can format)")
+    c.add_argument("--all", action="store_true", help="print every decoded frame, not only estimates and status")
+
+
+@dataclass
+class MonitorStats:
+    frames: int = 0
+    estimates: list[WindowEstimate] = field(default_factory=list)
+    statuses: list[StatusReport] = field(default_factory=list)
+    unknown: int = 0  # frames not in the DBC or not decodable
+    problems: list[str] = field(default_factory=list)
+
+
+class Monitor:
+    """Decodes a stream of frames; `feed` returns a printable line or None."""
+
+    def __init__(self, show_all: bool = False) -> None:
+        self.asm = OutputAssembler()
+        self.stats = MonitorStats()
+        self.show_all = show_all
+
+    def feed(self, frame: Frame | Rejected, t: float = 0.0) -> str | None:
+        self.stats.frames += 1
+        if isinstance(frame, Rejected):
+            self.stats.unknown += 1
+            return f"? undecodable frame ({frame.reason})"
+        codec = by_id().get(frame.can_id)
+        if codec is None or len(frame.data) != codec.length:
+            self.stats.unknown += 1
+            why = "not in the DBC" if codec is None else f"{len(frame.data)} bytes, DBC says {codec.length}"
+            return f"? 0x{frame.can_id:03X} [{frame.data.hex()}] {why}"
+        n_err = len(self.asm.errors)
+        out = self.asm.feed(frame, t) if codec.name.startswith(("SLIP_", "STATUS_")) else None
+        if len(self.asm.errors) > n_err:
+            self.stats.problems.extend(self.asm.errors[n_err:])
+            return "! " + self.asm.errors[-1]
+        if isinstance(out, WindowEstimate):
+            self.stats.estimates.append(out)
+            cls = "invalid" if out.slip_class == 255 else str(out.slip_class)
+            return (f"estimate window {out.window_counter}: class {cls} (f32 {out.slip_class_f32}) flags "
+                    f"{out.flags:#04x} n {out.n_samples} sat {out.saturations} logits {out.logits}")
+        if isinstance(out, StatusReport):
+            self.stats.statuses.append(out)
+            return (f"status: model {out.model_hash:08x} v{out.lib_version >> 8}.{out.lib_version & 0xFF} "
+                    f"windows {out.windows_done} rx {out.frames_received} rejected {out.frames_rejected} "
+                    f"dropped {out.samples_dropped} flagged {out.windows_flagged}")
+        if self.show_all:
+            return f"{codec.name} {codec.decode_dict(frame.data)}"
+        return None
+
+
+def monitor_bus(bus: can.BusABC, duration: float = 0.0, count: int = 0, show: Callable[[str], None] | None = print,
+                logger: can.Listener | None = None, show_all: bool = False) -> MonitorStats:
+    mon = Monitor(show_all)
+    end = time.monotonic() + duration if duration > 0 else None
+    while end is None or time.monotonic() < end:
+        msg = bus.recv(timeout=0.1)
+        if msg is None:
+            continue
+        if logger is not None:
+            logger(msg)
+        line = mon.feed(from_message(msg), msg.timestamp)
+        if line and show:
+            show(line)
+        if count and len(mon.stats.estimates) >= count:
+            break
+    return mon.stats
+
+
+def monitor_log(path: Path, show: Callable[[str], None] | None = print, show_all: bool = False) -> MonitorStats:
+    if not path.is_file():
+        raise OSError(f"{path}: no such log file")
+    mon = Monitor(show_all)
+    for msg in can.LogReader(str(path)):
+        if msg.is_error_frame:
+            continue
+        line = mon.feed(from_message(msg), msg.timestamp)
+        if line and show:
+            show(line)
+    return mon.stats
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.replay:
+        stats = monitor_log(args.replay, show_all=args.all)
+    else:
+        kw = {"bitrate": args.bitrate} if args.bitrate else {}
+        bus = open_can_bus(args.interface, args.channel, **kw)
+        logger = can.Logger(str(args.log)) if args.log else None
+        try:
+            stats = monitor_bus(bus, args.duration, args.count, print, logger, args.all)
+        except KeyboardInterrupt:
+            stats = None
+        finally:
+            if logger is not None:
+                logger.stop()
+            bus.shutdown()
+        if stats is None:
+            return 130
+    print(f"{stats.frames} frames: {len(stats.estimates)} estimates, {len(stats.statuses)} status reports, "
+          f"{stats.unknown} unknown/undecodable, {len(stats.problems)} problems")
+    return 0

@@ -1,0 +1,114 @@
+"""Where streamed data comes from: the simulator, a bundle's test vectors, a CSV folder, a CAN log.
+
+Telemetry sources give int16 raw samples (whole windows only, like the Python
+featuriser, which drops a trailing partial window); feature sources give int16
+feature vectors in raw LSB units (`quantize_features`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from fleetlab.data.features_int import SAMPLES_PER_WINDOW, quantize_features, quantize_samples
+
+from .dbc import Frame
+
+
+@dataclass
+class TelemetrySource:
+    name: str
+    samples_q: np.ndarray  # (n,7) int16, n a multiple of 100
+    traces: list[tuple[str, int]]  # (trace name, windows it contributes)
+
+    @property
+    def n_windows(self) -> int:
+        return len(self.samples_q) // SAMPLES_PER_WINDOW
+
+
+@dataclass
+class FeatureSource:
+    name: str
+    feat_q: np.ndarray  # (N,12) int16
+
+    @property
+    def n_windows(self) -> int:
+        return len(self.feat_q)
+
+
+def sim_source(seed: int, scale: float) -> TelemetrySource:
+    """The built-in fleet scenario, each traverse cut to whole windows and streamed back to back.
+
+    Windows of consecutive traverses line up with the estimator's grid, so one continuous
+    stream gives exactly the windows of every traverse.
+    """
+    try:
+        from fleetlab.data.simulator import scenario_traces
+    except ImportError:  # older layout: only the scenario module exports it
+        from fleetlab.data.simulator.scenario import scenario_traces
+
+    parts, traces = [], []
+    for role, name, trace in scenario_traces(seed=seed, scale=scale):
+        q = quantize_samples(np.asarray(trace.samples))
+        n = len(q) - len(q) % SAMPLES_PER_WINDOW
+        if n:
+            parts.append(q[:n])
+            traces.append((f"{role}/{name}", n // SAMPLES_PER_WINDOW))
+    if not parts:
+        raise ValueError(f"the simulator gave no whole window at scale {scale}")
+    return TelemetrySource(f"sim(seed={seed}, scale={scale})", np.concatenate(parts).astype(np.int16), traces)
+
+
+def vectors_source(bundle_dir: Path | str) -> FeatureSource:
+    """The bundle's test vectors (`q_inputs`), checked by the bundle loader."""
+    from fleetlab.export.bundle import load_bundle
+    from fleetlab.export.vectors import read_vectors
+
+    load_bundle(bundle_dir)  # verifies every file's hash first
+    q = np.asarray(read_vectors(Path(bundle_dir)).q_inputs, dtype=np.int16)
+    return FeatureSource(f"vectors({bundle_dir})", q)
+
+
+def csv_dir_source(path: Path | str) -> FeatureSource:
+    """Every window row of the Fleet-To-Lab CSV files in a folder (sorted by name)."""
+    from fleetlab.data.csvio import WindowTable, read_windows_csv
+
+    root = Path(path)
+    files = sorted(root.glob("*.csv"))
+    if not files:
+        raise ValueError(f"{root}: no *.csv window files")
+    table = WindowTable.concat([read_windows_csv(f) for f in files])
+    return FeatureSource(f"csv({root}, {len(files)} files)", quantize_features(table.features))
+
+
+def log_frames(path: Path | str) -> Iterator[tuple[Frame, float]]:
+    """Frames of a python-can log (.log candump, .asc, .blf, .csv ...) with their timestamps."""
+    import can
+
+    p = Path(path)
+    if not p.is_file():
+        raise OSError(f"{p}: no such log file")
+    for msg in can.LogReader(str(p)):
+        if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
+            continue
+        yield Frame(msg.arbitration_id, bytes(msg.data)), float(msg.timestamp)
+
+
+LOG_SUFFIXES = (".log", ".asc", ".blf", ".trc", ".mf4")
+
+
+def resolve(spec: str, seed: int, scale: float, bundle: Path | str | None) -> TelemetrySource | FeatureSource:
+    """`sim`, `vectors` (needs the bundle) or a CSV folder."""
+    if spec == "sim":
+        return sim_source(seed, scale)
+    if spec == "vectors":
+        if bundle is None:
+            raise ValueError("--source vectors needs --bundle")
+        return vectors_source(bundle)
+    p = Path(spec)
+    if p.is_dir():
+        return csv_dir_source(p)
+    raise ValueError(f"--source {spec!r}: expected 'sim', 'vectors' or a folder of window CSV files")

@@ -45,6 +45,8 @@ if(SLIPEST_QEMU)
   set_tests_properties(vectors_${SLIPEST_CPU} vectors_q_${SLIPEST_CPU} bench_image_${SLIPEST_CPU}
                        PROPERTIES FAIL_REGULAR_EXPRESSION "FAIL|FAULT")
 endif()
+# the example main loops of docs/integrating_slipest.md, on the fixed-point library
+include("${FW}/examples/examples.cmake")
 # the fixed-point image must not contain soft-float helpers; the full image on a core
 # without FPU must (proves the check can fail)
 add_test(NAME no_softfloat_q_${SLIPEST_CPU}

@@ -5,6 +5,7 @@
 #include <stdint.h>
 
 #include "semihost.h"
+#include "slipest_dbc.h"
 #include "slipest_infer.h"
 #include "slipest_node.h"
 #include "slipest_vectors.h"
@@ -77,7 +78,7 @@ __attribute__((noinline)) static uint32_t stack_use(void (*fn)(uint32_t))
 static void telem_frame(slipest_frame_t *f, uint32_t id, uint16_t counter, int16_t a, int16_t b, int16_t c)
 {
     f->id = id;
-    f->dlc = (id == 0x101u) ? 8u : 6u;
+    f->dlc = (id == SLIPEST_DBC_TELEM_IMU_FRAME_ID) ? 8u : 6u;
     f->data[0] = (uint8_t)counter;
     f->data[1] = (uint8_t)(counter >> 8);
     f->data[2] = (uint8_t)a;
@@ -92,7 +93,8 @@ static void telem_frame(slipest_frame_t *f, uint32_t id, uint16_t counter, int16
  * node; outputs formatted as SLCAN and COBS (what the firmware would transmit) */
 __attribute__((noinline)) static void node_sample(uint32_t k)
 {
-    static const uint32_t ids[3] = {0x100u, 0x101u, 0x102u};
+    static const uint32_t ids[3] = {SLIPEST_DBC_TELEM_WHEEL_FRAME_ID, SLIPEST_DBC_TELEM_IMU_FRAME_ID,
+                                     SLIPEST_DBC_TELEM_ATTITUDE_FRAME_ID};
     uint16_t counter = (uint16_t)k;
     int t;
     for (t = 0; t < 3; t++) {
@@ -173,11 +175,11 @@ int main(void)
     {
         /* sample 99: wheel and IMU frames normally, the attitude frame under the stack meter */
         slipest_frame_t f, out[SLIPEST_NODE_MAX_OUT];
-        telem_frame(&f, 0x100u, 99u, 1000, 200, 0);
+        telem_frame(&f, SLIPEST_DBC_TELEM_WHEEL_FRAME_ID, 99u, 1000, 200, 0);
         slipest_node_handle(&node, &f, out, SLIPEST_NODE_MAX_OUT);
-        telem_frame(&f, 0x101u, 99u, 10, -20, 9810);
+        telem_frame(&f, SLIPEST_DBC_TELEM_IMU_FRAME_ID, 99u, 10, -20, 9810);
         slipest_node_handle(&node, &f, out, SLIPEST_NODE_MAX_OUT);
-        telem_frame(&last_frame, 0x102u, 99u, 5, -7, 0);
+        telem_frame(&last_frame, SLIPEST_DBC_TELEM_ATTITUDE_FRAME_ID, 99u, 5, -7, 0);
         put_kv("stack_node_window", stack_use(node_last_frame));
     }
     put_kv("node_windows", node.c.windows_done);

@@ -1,0 +1,243 @@
+"""Write, load and check an export bundle (one directory per model).
+
+Files: model.onnx, slipest_model_f32.h, slipest_model_q.h, vectors.npz, vectors.bin,
+accuracy.json/.md (when data was given) and manifest.json, which records the sha256 of every
+other file and the content hash embedded in both headers. `load_bundle` refuses a bundle whose
+files were truncated or edited, or whose headers disagree with the manifest.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from fleetlab.data.contracts import CLASS_NAMES, FEATURE_NAMES
+from fleetlab.data.features_int import FEATURE_LSB, quantize_features
+from fleetlab.models.mlp import arch_of
+
+from . import headers, manifest, onnx_export, vectors
+from .quant import FloatParams, QParams, quantize
+
+ONNX_FILE = "model.onnx"
+# Every file a bundle can hold; an export removes the ones it does not rewrite (never other files).
+BUNDLE_FILES = (ONNX_FILE, "slipest_model_f32.h", "slipest_model_q.h", "vectors.npz", "vectors.bin",
+                "accuracy.json", "accuracy.md", "manifest.json")
+ROUNDING = {
+    "rsr": "rsr(x,k) = floor((x + 2^(k-1)) / 2^k) for k >= 1, x for k = 0 (round half up)",
+    "parameters": "round half away from zero (float64) at export",
+    "features": "round half away from zero of x / LSB, saturated to int16 (counted)",
+    "argmax": "first maximum (ties to the lowest class)",
+    "saturation": "u (GELU input) saturates to int16, eps is capped at 2^30; each event counts one saturation",
+}
+
+
+@dataclass
+class Bundle:
+    path: Path
+    manifest: dict[str, Any]
+    fparams: FloatParams | None
+    qparams: QParams | None
+
+    @property
+    def content_hash(self) -> str:
+        return self.manifest["content_hash"]
+
+
+def _json_safe(meta: dict) -> dict:
+    return json.loads(json.dumps(meta, default=str))
+
+
+def _versions() -> dict[str, str]:
+    import onnx
+    import onnxruntime
+
+    from fleetlab import __version__
+
+    return {
+        "fleetlab": __version__, "torch": torch.__version__, "onnx": onnx.__version__,
+        "onnxruntime": onnxruntime.__version__, "numpy": np.__version__, "python": platform.python_version(),
+    }
+
+
+def _flat_hash(model: torch.nn.Module) -> str:
+    h = hashlib.sha256(manifest.CONTENT_TAG + b"onnx-only\n")
+    for p in model.parameters():
+        h.update(p.detach().numpy().astype("<f4").tobytes())
+    return h.hexdigest()
+
+
+def export_bundle(
+    model: torch.nn.Module,
+    out: Path,
+    *,
+    inputs: np.ndarray,
+    meta: dict | None = None,
+    model_path: Path | None = None,
+    data_dirs: list[Path] | None = None,
+    onnx_only: bool = False,
+    vector_sources: dict | None = None,
+) -> Bundle:
+    """Export `model` into directory `out` (created; existing bundle files are replaced)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for name in BUNDLE_FILES:
+        (out / name).unlink(missing_ok=True)
+    arch = arch_of(model)
+    if arch != "sn-s" and not onnx_only:
+        raise ValueError(
+            f"{model_path or 'model'}: architecture {arch} cannot go to the fixed-point C path (SN-S only: "
+            "12->30->3 with one LayerNorm); use --onnx-only to export ONNX alone"
+        )
+    model.eval()
+    steps = tqdm(total=5, desc="export", leave=False)
+    names = [ONNX_FILE]
+    opset = onnx_export.export_onnx(model, out / ONNX_FILE)
+    steps.update()
+
+    fp = qp = None
+    if onnx_only:
+        with torch.no_grad():
+            tl = model(torch.from_numpy(np.asarray(inputs, np.float32))).numpy()
+        onnx_diff = onnx_export.check_onnx(out / ONNX_FILE, inputs, tl)
+        content = _flat_hash(model)
+        vec_info = None
+    else:
+        fp = FloatParams.from_model(model)
+        qp = quantize(fp)
+        content = manifest.content_hash(qp, fp)
+        names += [p.name for p in headers.write_headers(out, qp, fp, content)]
+        steps.update()
+        v = vectors.make_vectors(model, qp, inputs)
+        names += [p.name for p in vectors.write_vectors(out, v)]
+        onnx_diff = onnx_export.check_onnx(out / ONNX_FILE, v.inputs, v.torch_logits)
+        steps.update()
+        vec_info = {
+            "n": len(v), "npz": "vectors.npz", "bin": vectors.bin_layout(len(v)),
+            "sources": vector_sources or {}, "input_saturations": v.input_saturations,
+            "q_saturations": int(v.q_saturations.sum()),
+            "class_agreement": float(np.mean(v.q_class == v.f_class)),
+        }
+        if data_dirs:
+            from . import accuracy
+
+            rep = accuracy.report(model, qp, list(data_dirs))
+            names += [p.name for p in accuracy.write_report(out, rep)]
+    steps.update()
+
+    m = {
+        "format": manifest.FORMAT,
+        "arch": arch,
+        "source_model": {
+            "path": str(model_path) if model_path else None,
+            "sha256": manifest.file_sha256(model_path) if model_path else None,
+            "meta": _json_safe(meta or {}),
+        },
+        "feature_names": list(FEATURE_NAMES),
+        "feature_lsb": [float(v) for v in FEATURE_LSB],
+        "class_names": list(CLASS_NAMES),
+        "onnx": {
+            "file": ONNX_FILE, "opset": opset, "input": onnx_export.INPUT_NAME, "output": onnx_export.OUTPUT_NAME,
+            "dynamic_batch": True, "max_abs_diff_vs_torch": onnx_diff, "tolerance": onnx_export.ONNX_TOLERANCE,
+        },
+        "versions": _versions(),
+        "content_hash": content,
+        "content_hash32": f"0x{content[:8]}",
+    }
+    if qp is not None:
+        m["quantization"] = {
+            **qp.scalars(),
+            "rounding": ROUNDING,
+            "arrays": {
+                h_name: {"from": attr, "ctype": ctype, "shape": list(np.shape(getattr(qp, attr)))}
+                for h_name, attr, ctype, _, _ in headers.Q_ARRAYS
+            },
+        }
+        m["headers"] = {"fixed_point": headers.Q_HEADER, "float": headers.F32_HEADER}
+        m["vectors"] = vec_info
+    m["files"] = manifest.file_entries(out, names)
+    manifest.write_manifest(out, m)
+    steps.update()
+    steps.close()
+    return Bundle(out, m, fp, qp)
+
+
+def load_bundle(path: Path | str) -> Bundle:
+    """Load a bundle, refusing missing, truncated or edited files and inconsistent hashes."""
+    path = Path(path)
+    if not path.is_dir():
+        raise FileNotFoundError(f"{path}: not a bundle directory")
+    m = manifest.read_manifest(path)
+    manifest.verify_files(path, m)
+    if "quantization" not in m:  # ONNX-only bundle (SN-D)
+        return Bundle(path, m, None, None)
+
+    qfile, ffile = path / headers.Q_HEADER, path / headers.F32_HEADER
+    for f in (qfile, ffile):
+        if f.name not in m["files"]:
+            raise ValueError(f"{path / manifest.MANIFEST}: does not list {f.name}")
+    farr, eps, fhash, fhash32 = headers.read_f32_header(ffile)
+    fp = FloatParams(**farr, eps=eps)
+    qsc, qarr, qhash, qhash32 = headers.read_q_header(qfile)
+    msc = m["quantization"]
+    for key, value in qsc.items():
+        if msc.get(key) != value:
+            raise ValueError(f"{qfile}: {headers.Q_MACROS[key]} = {value}, manifest.json says {msc.get(key)}")
+    qp = QParams(
+        w1=qarr["w1"], b1=qarr["b1"], g=qarr["g"], bb=qarr["bb"], w2=qarr["w2"], b2=qarr["b2"], gelu=qarr["gelu"],
+        rsqrt_seed=qarr["rsqrt_seed"].astype(np.int64), fg=qsc["fg"], fy=qsc["fy"], eps_m=qsc["eps_m"],
+        eps_e=qsc["eps_e"], s1=float(msc["s1"]), s2=float(msc["s2"]),
+    )
+    qp.check_bounds()
+    content = manifest.content_hash(qp, fp)
+    for where, h, h32 in ((qfile, qhash, qhash32), (ffile, fhash, fhash32)):
+        if h != m["content_hash"] or h32 != manifest.hash32(h):
+            raise ValueError(f"{where}: model hash {h[:16]}... disagrees with manifest.json {m['content_hash'][:16]}...")
+    if content != m["content_hash"]:
+        raise ValueError(f"{path}: parameters in the headers hash to {content[:16]}..., manifest.json says {m['content_hash'][:16]}...")
+    return Bundle(path, m, fp, qp)
+
+
+def check_bundle(path: Path | str, model: torch.nn.Module | None = None) -> list[str]:
+    """Re-run every check of a bundle; return one line per passed check, raise ValueError on failure."""
+    from .intref import argmax_lowest, run
+
+    b = load_bundle(path)
+    done = [f"files and hashes verified (content hash {b.content_hash[:16]}...)"]
+    if b.qparams is None:
+        return done + ["ONNX-only bundle: no fixed-point checks"]
+    v = vectors.read_vectors(b.path)
+    onnx_file = b.path / ONNX_FILE
+    ref_model = b.fparams.to_model()
+    with torch.no_grad():
+        tl = ref_model(torch.from_numpy(v.inputs)).numpy()
+        if model is not None:
+            tl_given = model.eval()(torch.from_numpy(v.inputs)).numpy()
+            if not np.allclose(tl_given, tl, atol=1e-6, rtol=0):
+                raise ValueError(f"{b.path}: the given model is not the model in this bundle")
+    if not np.allclose(tl, v.torch_logits, atol=1e-5, rtol=0):
+        raise ValueError(f"{b.path}: torch_logits in vectors.npz do not match the float header parameters")
+    diff = onnx_export.check_onnx(onnx_file, v.inputs, v.torch_logits)
+    done.append(f"ONNX: checker passed, onnxruntime vs torch max |diff| {diff:.2e} on {len(v)} vectors")
+    if not np.array_equal(quantize_features(v.inputs), v.q_inputs):
+        raise ValueError(f"{b.path}: q_inputs in vectors.npz are not quantize_features(inputs)")
+    ql, sat = run(b.qparams, v.q_inputs)
+    bad = np.flatnonzero((ql != v.q_logits).any(axis=1) | (sat != v.q_saturations))
+    if len(bad):
+        raise ValueError(f"{b.path}: integer reference differs from q_logits/q_saturations at {len(bad)} rows (first {bad[0]})")
+    if not (np.array_equal(argmax_lowest(ql), v.q_class) and np.array_equal(argmax_lowest(v.torch_logits), v.f_class)):
+        raise ValueError(f"{b.path}: q_class/f_class in vectors.npz are not the argmax of the logits")
+    binv = vectors.read_vectors_bin(b.path / "vectors.bin")
+    for name, arr in v.arrays().items():
+        if not np.array_equal(binv[name], arr):
+            raise ValueError(f"{b.path / 'vectors.bin'}: array {name} differs from vectors.npz")
+    done.append(f"integer reference reproduces q_logits bit for bit on {len(v)} vectors; vectors.bin == vectors.npz")
+    done.append(f"fixed-point vs float class agreement on the vectors: {np.mean(v.q_class == v.f_class):.4%}")
+    return done

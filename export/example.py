@@ -1,0 +1,104 @@
+"""Regenerate the committed example bundle `firmware_c/bundles/example` from simulator data.
+
+    python -m fleetlab.export.example [--out DIR] [--seed 1] [--scale 0.3]
+
+Runs `fleetlab simulate --seed SEED --scale SCALE` into a temporary folder, trains an SN-S on
+its `earth` and `target` windows (Adam, the expert hyper-parameters, fixed seed, one thread so
+the result is the same on every machine), and exports it with the project's own exporter:
+test vectors drawn from the simulated windows plus the edge cases, accuracy report included.
+Nothing from the real Fleet-To-Lab files goes into the bundle.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import torch
+
+REPO = Path(__file__).resolve().parents[1]
+DEFAULT_OUT = REPO / "firmware_c" / "bundles" / "example"
+TRAIN_ROLES = ("earth", "target")
+N_VECTORS = 1200
+
+
+def make_example(out: Path, seed: int = 1, scale: float = 0.3, epochs: int = 70, keep: Path | None = None) -> Path:
+    """Simulate, train, export into `out`; with `keep`, also leave the model and the simulated data there."""
+    from fleetlab.cli import main as fleetlab_main
+    from fleetlab.data.dataset import load_dataset
+    from fleetlab.models import build, save_model
+    from fleetlab.models.train import train_classifier
+
+    from .bundle import check_bundle, export_bundle
+    from .vectors import draw_inputs
+
+    with tempfile.TemporaryDirectory(prefix="fleetlab-example-") as tmp:
+        sim = Path(tmp) / "sim"
+        if fleetlab_main(["simulate", "--out", str(sim), "--seed", str(seed), "--scale", str(scale)]) != 0:
+            raise OSError("fleetlab simulate failed")
+        ds = load_dataset(sim)
+        x = np.concatenate([ds.xy(r)[0] for r in TRAIN_ROLES])
+        y = np.concatenate([ds.xy(r)[1] for r in TRAIN_ROLES])
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            model = train_classifier(build("sn-s", seed=seed), x, y, epochs=epochs, seed=seed, desc="train SN-S")
+        finally:
+            torch.set_num_threads(threads)
+        meta = {
+            "trained_on": f"fleetlab simulate --seed {seed} --scale {scale}, roles {', '.join(TRAIN_ROLES)}",
+            "windows": int(len(y)), "epochs": epochs, "seed": seed, "made_by": "python -m fleetlab.export.example",
+        }
+        model_path = save_model(Path(tmp) / "example_sns.pt", model, meta)
+        all_windows = np.concatenate([ds.xy(r)[0] for r in ds.roles])
+        inputs = draw_inputs(N_VECTORS, all_windows, seed)
+        sources = {"data": [f"fleetlab simulate --seed {seed} --scale {scale}"], "seed": seed, "kind": "dataset windows"}
+        b = export_bundle(model, out, inputs=inputs, meta=meta, model_path=model_path, data_dirs=[sim],
+                          vector_sources=sources)
+        _rewrite_manifest_paths(b.path, str(sim))  # keep the committed files free of temporary paths
+        if keep is not None:
+            import shutil
+
+            keep.mkdir(parents=True, exist_ok=True)
+            shutil.copy(model_path, keep / model_path.name)
+            shutil.copytree(sim, keep / "sim", dirs_exist_ok=True)
+    for line in check_bundle(out):
+        print(f"  ok  {line}")
+    return out
+
+
+def _rewrite_manifest_paths(out: Path, sim_dir: str) -> None:
+    """Replace temporary paths in manifest.json and the accuracy report, then re-hash the files."""
+    import json
+
+    from . import manifest
+
+    label = "fleetlab-simulate-output"
+    for name in ("accuracy.json", "accuracy.md"):
+        p = out / name
+        if p.exists():
+            p.write_text(p.read_text().replace(sim_dir, label))
+    m = json.loads((out / manifest.MANIFEST).read_text())
+    m["source_model"]["path"] = "example_sns.pt (temporary; python -m fleetlab.export.example rebuilds it)"
+    m["files"] = manifest.file_entries(out, list(m["files"]))
+    manifest.write_manifest(out, m)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m fleetlab.export.example", description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"bundle directory (default {DEFAULT_OUT})")
+    p.add_argument("--seed", type=int, default=1, help="simulator and training seed (default 1)")
+    p.add_argument("--scale", type=float, default=0.3, help="simulator scale (default 0.3)")
+    p.add_argument("--epochs", type=int, default=70, help="training epochs (default 70)")
+    p.add_argument("--keep", type=Path, help="also keep the trained model and the simulated data in this folder")
+    args = p.parse_args(argv)
+    out = make_example(args.out, args.seed, args.scale, args.epochs, args.keep)
+    print(f"example bundle written to {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,132 @@
+"""Torch integer reference of the fixed-point scheme (quant.py, docs/fixed_point.md).
+
+`IntSlipNet` runs the scheme on int64 tensors, operation by operation in the order of the C
+kernel `firmware_c/src/slipest_infer_q.c`; the C fixed-point path must reproduce its logits and
+saturation counts bit for bit. Every intermediate is proven to fit the C type it lives in
+(int32, or uint64 inside the reciprocal square root), so int64 here never wraps and the two
+agree exactly. Floor division by a power of two replaces C's arithmetic-shift helper.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .quant import C30, E_BITS, EPS_CAP, FZ, GELU_N, GELU_STEP_LOG2, H_BITS, N_HIDDEN, QParams
+
+_POW2 = torch.tensor([1 << b for b in range(63)], dtype=torch.int64)
+
+
+def bitlen(m: torch.Tensor) -> torch.Tensor:
+    """Number of bits of non-negative integers (0 -> 0, 1 -> 1, 2^k -> k+1)."""
+    return (m.unsqueeze(-1) >= _POW2).sum(-1)
+
+
+def rsr(x: torch.Tensor, k) -> torch.Tensor:
+    """floor((x + 2^(k-1)) / 2^k), and x for k = 0: the scheme's rounding right shift (half up)."""
+    k = torch.as_tensor(k, dtype=torch.int64)
+    p = torch.bitwise_left_shift(torch.ones_like(k), k)
+    return torch.div(x + p // 2, p, rounding_mode="floor")
+
+
+def _saturate(x: torch.Tensor, lo: int, hi: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Clamp to [lo, hi]; also return the number of clamped values per row."""
+    return x.clamp(lo, hi), ((x < lo) | (x > hi)).sum(-1)
+
+
+class IntSlipNet(torch.nn.Module):
+    """The SN-S fixed-point path: int16 features (N,12) -> int32-range logits (N,3), saturations (N,)."""
+
+    def __init__(self, qp: QParams):
+        super().__init__()
+        qp.check_bounds()
+        self.fg, self.fy, self.eps_m, self.eps_e = int(qp.fg), int(qp.fy), int(qp.eps_m), int(qp.eps_e)
+        for name in QParams.INT_ARRAYS:  # t_<name>: the integer arrays as int64 tensors
+            self.register_buffer("t_" + name, torch.as_tensor(np.asarray(getattr(qp, name), dtype=np.int64)))
+
+    def layer_norm(self, h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Integer LayerNorm core: h (N,30) -> z (N,30) in Q12 (before gamma/beta), saturations (N,)."""
+        k1 = (bitlen(h.abs().amax(1)) - H_BITS).clamp(min=0).unsqueeze(1)
+        hp = rsr(h, k1)
+        d = N_HIDDEN * hp - hp.sum(1, keepdim=True)  # 30 * (h' - mean(h')), exact
+        k2 = (bitlen(d.abs().amax(1)) - E_BITS).clamp(min=0).unsqueeze(1)
+        e = rsr(d, k2)
+        s = (e * e).sum(1, keepdim=True)
+
+        # eps in the units of s: EPS_M * 2^(EPS_E - 2(k1+k2)), capped at 2^30 (counted).
+        t = self.eps_e - 2 * (k1 + k2)
+        m = torch.full_like(t, self.eps_m)
+        up = torch.bitwise_left_shift(m, t.clamp(0, 15))
+        down = rsr(m, (-t).clamp(1, 15))
+        eps = torch.where(t >= 16, torch.full_like(t, EPS_CAP), torch.where(t >= 0, up, torch.where(t > -16, down, 0)))
+        if self.eps_m == 0:
+            eps = torch.zeros_like(eps)
+        sat = ((t >= 16) & (self.eps_m != 0)).long().squeeze(1)
+        v = s + eps
+
+        mult = self.rsqrt_mult(v)
+        z = rsr(e * mult, 16)  # |e M| <= sqrt(30) 2^28 (1 + 1e-5): |z| < 22500, no saturation possible
+        return z, sat
+
+    def rsqrt_mult(self, v: torch.Tensor) -> torch.Tensor:
+        """M ~ sqrt(30) 2^28 / sqrt(v) for v >= 0 (N,1), so that z = rsr(e M, 16); M = 0 when v = 0."""
+        a = torch.where(v > 0, (32 - bitlen(v)) // 2, 0)
+        w = torch.bitwise_left_shift(v, 2 * a)
+        idx = (torch.bitwise_right_shift(w, 27) - 8).clamp(0, len(self.t_rsqrt_seed) - 1)
+        y = self.t_rsqrt_seed[idx]
+        w30 = torch.bitwise_right_shift(w, 2)
+        for _ in range(2):  # Newton: y <- y (3 - w y^2) / 2, all values non-negative
+            y2 = torch.bitwise_right_shift(y * y, 30)
+            t = torch.bitwise_right_shift(w30 * y2, 30)
+            y = torch.bitwise_right_shift(y * (3 * 2**30 - t), 31)
+        m = torch.bitwise_right_shift(torch.bitwise_left_shift(y * C30, a) + 2**31, 32)
+        return torch.where(v > 0, m, 0)
+
+    def gelu(self, u: torch.Tensor) -> torch.Tensor:
+        """Table GELU in Q(fy): GELU(u) = max(u, 0) + GELU(-|u|), linear interpolation, step 1/16."""
+        sh = self.fy - GELU_STEP_LOG2
+        v = u.abs()
+        k = torch.bitwise_right_shift(v, sh)
+        f = torch.bitwise_and(v, (1 << sh) - 1)
+        kk = k.clamp(max=GELU_N - 2)
+        t0, t1 = self.t_gelu[kk], self.t_gelu[kk + 1]
+        tneg = torch.where(k >= GELU_N - 1, 0, t0 + rsr((t1 - t0) * f, sh))
+        return u.clamp(min=0) + tneg
+
+    def forward(self, xq: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        x = torch.as_tensor(xq).to(torch.int64)
+        if x.dim() != 2 or x.shape[1] != self.t_w1.shape[1]:
+            raise ValueError(f"integer features must have shape (N, {self.t_w1.shape[1]}), got {tuple(x.shape)}")
+        if x.numel() and (x.min() < -(2**15) or x.max() > 2**15 - 1):
+            raise ValueError("integer features must be int16 values")
+        h = x @ self.t_w1.T + self.t_b1
+        z, sat = self.layer_norm(h)
+        u, usat = _saturate(rsr(self.t_g * z, FZ + self.fg - self.fy) + self.t_bb, -(2**15), 2**15 - 1)
+        g = self.gelu(u)
+        logits = g @ self.t_w2.T + self.t_b2
+        return logits, sat + usat
+
+
+def run(qp: QParams, q_inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(logits int32 (N,3), saturations int32 (N,)) of the fixed-point path."""
+    with torch.no_grad():
+        logits, sat = IntSlipNet(qp)(torch.from_numpy(np.asarray(q_inputs, dtype=np.int64)))
+    return logits.numpy().astype(np.int32), sat.numpy().astype(np.int32)
+
+
+def q_logits_of(bundle_or_params: QParams | str | Path, q_inputs: np.ndarray, return_saturations: bool = False):
+    """Integer logits (N,3) int32 of a bundle directory (verified on load) or of QParams."""
+    qp = bundle_or_params
+    if not isinstance(qp, QParams):
+        from .bundle import load_bundle
+
+        qp = load_bundle(bundle_or_params).qparams
+    logits, sat = run(qp, q_inputs)
+    return (logits, sat) if return_saturations else logits
+
+
+def argmax_lowest(logits: np.ndarray) -> np.ndarray:
+    """Class of each row, ties to the lowest index (numpy's argmax already takes the first)."""
+    return np.asarray(logits).argmax(axis=1).astype(np.int32)

@@ -1,0 +1,297 @@
+"""The fixed-point scheme of the SN-S estimator (integer-only inference for a core without FPU).
+
+Full description with the overflow proofs: docs/fixed_point.md. The integer operations are
+performed identically by `intref.py` (torch) and `firmware_c/src/slipest_infer_q.c` (C).
+
+Data flow for one window (all integers; Qn = value * 2^n):
+
+1. Input: x_q int16 (12) in the raw LSB units of each channel (contracts.RAW_LSB).
+2. Layer 1: h_i = b1_i + sum_j w1_ij * x_j (int32). w1 = round(W1_ij * LSB_j * s1) (int16): the
+   per-feature LSB is folded into the weights and s1 is free because LayerNorm does not see the
+   scale of its input. s1 is the largest scale whose exact worst case over all int16 inputs,
+   max_i (2^15 sum_j |w1_ij| + |b1_i|), stays <= 2^31 - 2^8 (room for rounding shifts).
+3. LayerNorm, integer (per sample):
+   k1 = max(0, bitlen(max_i |h_i|) - 24);  h'_i = rsr(h_i, k1)          (|h'| <= 2^24)
+   d_i = 30 h'_i - sum_j h'_j                                           (= 30 (h'_i - mean), exact)
+   k2 = max(0, bitlen(max_i |d_i|) - 13);  e_i = rsr(d_i, k2)           (|e| <= 2^13)
+   S = sum_i e_i^2                                                      (< 2^31)
+   eps_S = EPS_M * 2^(EPS_E - 2(k1+k2)) rounded (0 / shift / capped at 2^30, cap counted)
+   V = S + eps_S (uint32);  M = rsqrt_mult(V) ~ sqrt(30) 2^28 / sqrt(V)  (see below)
+   z_i = rsr(e_i M, 16)                                                 (Q12, |z| < 22500)
+   u_i = rsr(G_i z_i, 12 + FG - FY) + B_i, saturated to int16 (counted) (QFY)
+   G = round(gamma 2^FG), B = round(beta 2^FY).
+4. GELU by table: T[k] = round(GELU(-k/16) 2^FY), k = 0..128 (GELU(x) = x + GELU(-x) gives the
+   positive side); v = |u|, k = v >> (FY-4), f = v & (2^(FY-4) - 1);
+   t = 0 if k >= 128 else T[k] + rsr((T[k+1] - T[k]) f, FY - 4);  g = max(u, 0) + t   (QFY)
+5. Head: logit_c = b2_c + sum_i w2_ci g_i (int32), w2 = round(W2 s2) (int16), b2 = round(b2 s2 2^FY),
+   s2 the largest scale with max_c (2^15 sum_i |w2_ci| + |b2_c|) <= 2^31 - 1 (|g| < 2^15).
+   Class = argmax, ties to the lowest index.
+
+Rounding, defined once:
+- rsr(x, k) ("right shift rounded") = floor((x + 2^(k-1)) / 2^k) for k >= 1, x for k = 0:
+  round half up (towards +infinity). Every call site's bound leaves room for the + 2^(k-1).
+  floor(x / 2^k) comes from a C helper (`asr32`: bias into uint32, shift, unbias) that is
+  defined for negative numbers (a plain >> of a negative int is implementation-defined in C).
+- Quantisation of real parameters (export time, in float64): round half away from zero.
+- rsqrt_mult(V): V = 0 gives M = 0 (then every e_i = 0). Otherwise a = (32 - bitlen(V)) // 2,
+  W = V 4^a in [2^30, 2^32); y0 = RSQRT_SEED[(W >> 27) - 8] (Q30 of 1/sqrt(w), w = W/2^32);
+  two Newton steps with truncating (floor) shifts on non-negative 64-bit values:
+  y2 = (y y) >> 30; t = ((W >> 2) y2) >> 30; y = (y (3 2^30 - t)) >> 31;
+  M = ((y C30) << a + 2^31) >> 32 with C30 = round(sqrt(30) 2^14) (<= sqrt(30) 2^28 < 2^31).
+  No division anywhere.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from fleetlab.data.contracts import FEATURE_SOURCES, N_CLASSES, N_FEATURES, RAW_LSB
+from fleetlab.models.mlp import LN_EPS, SlipNet, arch_of
+
+SCHEME = "fleetlab-slipest-q/1"
+N_HIDDEN = 30
+
+INT16_MIN, INT16_MAX = -(2**15), 2**15 - 1
+INT32_MAX = 2**31 - 1
+# Layer-1 accumulator limit: room for the rounding term 2^(k1-1) <= 2^6 of rsr(h, k1) in C.
+ACC1_LIMIT = INT32_MAX - 2**8
+
+W1_MAX = INT16_MAX  # int16 weights; the scale is limited by the exact per-row accumulator bound
+W2_MAX = INT16_MAX
+H_BITS = 24  # |h'| <= 2^24 before centring
+E_BITS = 13  # |e| <= 2^13 so that sum(e^2) over 30 units < 2^31
+FZ = 12  # normalised activations z in Q12
+GELU_STEP_LOG2 = 4  # table step 1/16
+GELU_RANGE = 8  # table covers [-8, 0]
+GELU_N = GELU_RANGE * 2**GELU_STEP_LOG2 + 1  # 129 entries
+FY_MAX = 12
+FY_MIN = GELU_STEP_LOG2
+Z_BOUND = 5.5  # |z| <= sqrt(30) = 5.477 (+ rounding), used to choose FY
+EPS_CAP = 2**30
+RSQRT_SEED_BITS = 5  # seed table indexed by the top 5 bits of W (values 8..31)
+C30 = round(math.sqrt(N_HIDDEN) * 2**14)
+
+FEATURE_LSB = np.array([RAW_LSB[c] for c, _ in FEATURE_SOURCES], dtype=np.float64)
+
+
+def rsqrt_seed_table() -> np.ndarray:
+    """Q30 of 1/sqrt(w) at the centre of each bin w in [j/32, (j+1)/32), j = 8..31 (24 entries)."""
+    j = np.arange(8, 32, dtype=np.float64)
+    return np.array([round(2**30 / math.sqrt((k + 0.5) / 32)) for k in j], dtype=np.int64)
+
+
+def _gelu(x: np.ndarray) -> np.ndarray:
+    from scipy.special import erf
+
+    return 0.5 * x * (1.0 + erf(x / math.sqrt(2.0)))
+
+
+def gelu_table(fy: int) -> np.ndarray:
+    v = np.arange(GELU_N, dtype=np.float64) / 2**GELU_STEP_LOG2
+    return round_away(_gelu(-v) * 2**fy).astype(np.int16)
+
+
+def round_away(x) -> np.ndarray:
+    """Round half away from zero (float64 in, float64 out)."""
+    x = np.asarray(x, dtype=np.float64)
+    return np.sign(x) * np.floor(np.abs(x) + 0.5)
+
+
+@dataclass
+class FloatParams:
+    """The float32 parameters of an SN-S (eval semantics: dropout gone)."""
+
+    w1: np.ndarray  # (30, 12)
+    b1: np.ndarray  # (30,)
+    gamma: np.ndarray  # (30,)
+    beta: np.ndarray  # (30,)
+    w2: np.ndarray  # (3, 30)
+    b2: np.ndarray  # (3,)
+    eps: float = LN_EPS
+
+    ARRAYS = ("w1", "b1", "gamma", "beta", "w2", "b2")
+
+    @classmethod
+    def from_model(cls, model: SlipNet) -> "FloatParams":
+        if arch_of(model) != "sn-s":
+            raise ValueError(
+                f"the fixed-point C path supports only SN-S (Linear 12->30, LayerNorm, GELU, Linear 30->3); "
+                f"this model is {arch_of(model)}"
+            )
+        lin, norm, head = model.linears[0], model.norms[0], model.head
+        f = lambda t: t.detach().cpu().numpy().astype(np.float32).copy()  # noqa: E731
+        fp = cls(f(lin.weight), f(lin.bias), f(norm.weight), f(norm.bias), f(head.weight), f(head.bias), float(np.float32(norm.eps)))
+        for name in cls.ARRAYS:
+            if not np.isfinite(getattr(fp, name)).all():
+                raise ValueError(f"model parameter {name} contains NaN/Inf: cannot export")
+        return fp
+
+    def to_model(self) -> SlipNet:
+        from fleetlab.models import build
+
+        m = build("sn-s")
+        with torch.no_grad():
+            m.linears[0].weight.copy_(torch.from_numpy(self.w1))
+            m.linears[0].bias.copy_(torch.from_numpy(self.b1))
+            m.norms[0].weight.copy_(torch.from_numpy(self.gamma))
+            m.norms[0].bias.copy_(torch.from_numpy(self.beta))
+            m.head.weight.copy_(torch.from_numpy(self.w2))
+            m.head.bias.copy_(torch.from_numpy(self.b2))
+        return m.eval()
+
+
+@dataclass
+class QParams:
+    """Every integer array and every shift/scale of the fixed-point path."""
+
+    w1: np.ndarray  # int16 (30, 12), row-major: w1[i, j] multiplies feature j for hidden unit i
+    b1: np.ndarray  # int32 (30,)
+    g: np.ndarray  # int16 (30,)  LayerNorm gamma, Q(fg)
+    bb: np.ndarray  # int32 (30,)  LayerNorm beta, Q(fy)
+    w2: np.ndarray  # int16 (3, 30)
+    b2: np.ndarray  # int32 (3,)
+    gelu: np.ndarray  # int16 (129,)  GELU(-k/16) in Q(fy)
+    fg: int
+    fy: int
+    eps_m: int
+    eps_e: int
+    s1: float  # layer-1 scale (information: the scheme never undoes it)
+    s2: float  # head weight scale; logits_real = logits_q / (s2 * 2^fy)
+    rsqrt_seed: np.ndarray = field(default_factory=rsqrt_seed_table)  # int64 (24,), Q30
+
+    INT_ARRAYS = ("w1", "b1", "g", "bb", "w2", "b2", "gelu", "rsqrt_seed")
+
+    @property
+    def logit_scale(self) -> float:
+        return self.s2 * 2.0**self.fy
+
+    def scalars(self) -> dict:
+        """The scheme parameters that are not arrays (all go into manifest.json and the q header)."""
+        return {
+            "scheme": SCHEME,
+            "n_in": N_FEATURES,
+            "n_hidden": N_HIDDEN,
+            "n_out": N_CLASSES,
+            "w1_max": int(np.abs(self.w1).max(initial=0)),
+            "w2_max": int(np.abs(self.w2).max(initial=0)),
+            "acc1_bound": int(row_bounds(self.w1, self.b1).max(initial=0)),
+            "acc2_bound": int(row_bounds(self.w2, self.b2).max(initial=0)),
+            "h_bits": H_BITS,
+            "e_bits": E_BITS,
+            "fz": FZ,
+            "fg": int(self.fg),
+            "fy": int(self.fy),
+            "eps_m": int(self.eps_m),
+            "eps_e": int(self.eps_e),
+            "eps_cap": EPS_CAP,
+            "gelu_step_log2": GELU_STEP_LOG2,
+            "gelu_n": GELU_N,
+            "rsqrt_seed_bits": RSQRT_SEED_BITS,
+            "c30": C30,
+            "s1": float(self.s1),
+            "s2": float(self.s2),
+            "logit_scale": float(self.logit_scale),
+            "feature_lsb": [float(v) for v in FEATURE_LSB],
+        }
+
+    def check_bounds(self) -> None:
+        """The preconditions of the overflow proof (docs/fixed_point.md); raise ValueError if broken."""
+        problems = []
+        if self.w1.shape != (N_HIDDEN, N_FEATURES) or self.w2.shape != (N_CLASSES, N_HIDDEN):
+            problems.append(f"shapes w1 {self.w1.shape}, w2 {self.w2.shape}")
+        acc1 = int(row_bounds(self.w1, self.b1).max(initial=0))
+        if acc1 > ACC1_LIMIT:
+            problems.append(f"layer-1 accumulator bound {acc1} exceeds {ACC1_LIMIT}")
+        acc2 = int(row_bounds(self.w2, self.b2).max(initial=0))
+        if acc2 > INT32_MAX:
+            problems.append(f"head accumulator bound {acc2} exceeds int32")
+        if not FY_MIN <= self.fy <= FY_MAX:
+            problems.append(f"fy={self.fy} outside [{FY_MIN}, {FY_MAX}]")
+        if not 0 <= self.fg <= 15:
+            problems.append(f"fg={self.fg} outside [0, 15]")
+        if np.abs(self.bb).max(initial=0) > INT16_MAX:
+            problems.append("LayerNorm beta does not fit int16 in Q(fy)")
+        if not (2**14 <= self.eps_m < 2**15 or self.eps_m == 0) or abs(self.eps_e) > 200:
+            problems.append(f"eps mantissa/exponent {self.eps_m}, {self.eps_e} out of range")
+        if len(self.gelu) != GELU_N:
+            problems.append(f"GELU table has {len(self.gelu)} entries, expected {GELU_N}")
+        if problems:
+            raise ValueError("fixed-point parameters break the scheme's bounds: " + "; ".join(problems))
+
+
+def _scale_for(max_abs: float, limit: float) -> float:
+    return limit / max_abs if max_abs > 0 else 1.0
+
+
+def row_bounds(w: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Exact worst case |accumulator| per output row over all int16 inputs: 2^15 sum_j |w_ij| + |b_i|.
+
+    Every left-to-right (or pairwise) partial sum is bounded by the same number."""
+    return 2**15 * np.abs(w.astype(np.int64)).sum(axis=1) + np.abs(b.astype(np.int64))
+
+
+def _fit_scale(wf: np.ndarray, bf: np.ndarray, w_max: int, limit: int, b_mult: float = 1.0) -> tuple[float, np.ndarray, np.ndarray]:
+    """Largest scale s with max|round(wf s)| <= w_max and every row bound <= limit; returns (s, wq, bq).
+
+    bq = round(bf * s * b_mult). Starts from the real-valued optimum and shrinks it until the
+    rounded integers satisfy the bound (rounding can add up to 1/2 per element)."""
+    per_row = 2**15 * np.abs(wf).sum(axis=1) + np.abs(bf) * b_mult
+    s = min(_scale_for(np.abs(wf).max(), w_max), _scale_for(per_row.max(), limit))
+    for _ in range(64):
+        wq, bq = round_away(wf * s), round_away(bf * s * b_mult)
+        if np.abs(wq).max(initial=0) <= w_max and row_bounds(wq, bq).max(initial=0) <= limit:
+            return s, wq, bq
+        s *= 0.999
+    raise ValueError("cannot fit the parameters into the accumulator bound")
+
+
+def _mantissa_exponent(v: float) -> tuple[int, int]:
+    """v ~= m * 2^e with m in [2^14, 2^15) (round half away from zero), or (0, 0) for v = 0."""
+    if v <= 0:
+        return 0, 0
+    e = math.floor(math.log2(v)) - 14
+    m = int(round_away(v / 2.0**e))
+    if m >= 2**15:  # rounding carried into the next binade
+        m, e = m // 2, e + 1
+    return m, e
+
+
+def quantize(fp: FloatParams, w1_max: int = W1_MAX, w2_max: int = W2_MAX) -> QParams:
+    """Float SN-S parameters -> integer parameters of the fixed-point scheme."""
+    # Layer 1: fold the feature LSB into the weights; any positive s1 is exact for LayerNorm.
+    # s1 is as large as the exact per-row worst case over int16 inputs allows.
+    w1p = fp.w1.astype(np.float64) * FEATURE_LSB[None, :]
+    s1, w1q, b1q = _fit_scale(w1p, fp.b1.astype(np.float64), w1_max, ACC1_LIMIT)
+
+    # LayerNorm affine: gamma in Q(fg), output in Q(fy) chosen so that |u| < 2^15 always.
+    gamma, beta = fp.gamma.astype(np.float64), fp.beta.astype(np.float64)
+    gmax = float(np.abs(gamma).max())
+    if gmax >= 2**15:
+        raise ValueError(f"LayerNorm weight {gmax:g} too large for the fixed-point scheme")
+    fg = 15 if gmax == 0 else min(15, math.floor(math.log2(INT16_MAX / gmax)))
+    u_bound = float((np.abs(gamma) * Z_BOUND + np.abs(beta)).max())
+    fy = FY_MAX
+    while fy > FY_MIN and u_bound * 2**fy + 2 >= 2**15:
+        fy -= 1
+    if u_bound * 2**fy + 2 >= 2**15:
+        raise ValueError(f"LayerNorm output bound {u_bound:g} too large for the fixed-point scheme (needs < {2**15 / 2**FY_MIN:g})")
+    gq = round_away(gamma * 2**fg)
+    bq = round_away(beta * 2**fy)
+
+    # Head: logits in Q(s2 * 2^fy); |g| <= 2^15 - 1 like an int16 input.
+    s2, w2q, b2q = _fit_scale(fp.w2.astype(np.float64), fp.b2.astype(np.float64), w2_max, INT32_MAX, b_mult=2.0**fy)
+
+    # eps in the units of S = sum(e^2) before the per-sample shifts: eps * 30 * (30 s1)^2.
+    eps_m, eps_e = _mantissa_exponent(fp.eps * N_HIDDEN * (N_HIDDEN * s1) ** 2)
+
+    qp = QParams(
+        w1=w1q.astype(np.int16), b1=b1q.astype(np.int32), g=gq.astype(np.int16), bb=bq.astype(np.int32),
+        w2=w2q.astype(np.int16), b2=b2q.astype(np.int32), gelu=gelu_table(fy),
+        fg=fg, fy=fy, eps_m=eps_m, eps_e=eps_e, s1=float(s1), s2=float(s2),
+    )
+    qp.check_bounds()
+    return qp

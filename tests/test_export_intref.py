@@ -1,0 +1,209 @@
+"""The torch integer reference against an independent plain-Python-int implementation of the scheme.
+
+`spec_infer` below is written from docs/fixed_point.md with Python integers (which never wrap) and
+asserts at every step that the value fits the C type the kernel keeps it in; so the property tests
+check both bit-exactness of export/intref.py and the overflow bounds of the scheme.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from fleetlab.export import intref
+from fleetlab.export.quant import FloatParams, QParams, quantize, rsqrt_seed_table
+from fleetlab.models import build
+
+I32 = (-(2**31), 2**31 - 1)
+U32 = (0, 2**32 - 1)
+U64 = (0, 2**64 - 1)
+
+
+def fits(v: int, rng: tuple[int, int], what: str) -> int:
+    assert rng[0] <= v <= rng[1], f"{what} = {v} overflows [{rng[0]}, {rng[1]}]"
+    return v
+
+
+def rsr(x: int, k: int) -> int:
+    return x if k == 0 else (x + (1 << (k - 1))) >> k
+
+
+def spec_infer(qp: QParams, x: list[int]) -> tuple[list[int], int]:
+    """One window, straight from the written scheme. Returns (logits, saturations)."""
+    sat = 0
+    w1, b1 = qp.w1.tolist(), qp.b1.tolist()
+    h = []
+    for i in range(30):
+        acc = b1[i]
+        for j in range(12):
+            acc = fits(acc + w1[i][j] * x[j], (-(2**31) + 2**8, 2**31 - 1 - 2**8), "layer-1 accumulator")
+        h.append(acc)
+    k1 = max(0, max(abs(v) for v in h).bit_length() - 24)
+    hp = [rsr(v, k1) for v in h]
+    total = fits(sum(hp), I32, "sum h'")
+    d = [fits(30 * v - total, I32, "d") for v in hp]
+    k2 = max(0, max(abs(v) for v in d).bit_length() - 13)
+    e = [rsr(v, k2) for v in d]
+    s = fits(sum(v * v for v in e), (0, 2**31 - 1), "sum e^2")
+    t = qp.eps_e - 2 * (k1 + k2)
+    if qp.eps_m == 0 or t <= -16:
+        eps = 0
+    elif t >= 16:
+        eps, sat = 2**30, sat + 1
+    elif t >= 0:
+        eps = qp.eps_m << t
+    else:
+        eps = rsr(qp.eps_m, -t)
+    v = fits(s + eps, U32, "variance + eps")
+    if v == 0:
+        mult = 0
+    else:
+        a = (32 - v.bit_length()) // 2
+        w = fits(v << (2 * a), U32, "normalised variance")
+        assert 2**30 <= w
+        y = int(qp.rsqrt_seed[(w >> 27) - 8])
+        for _ in range(2):
+            y2 = fits(y * y, U64, "y^2") >> 30
+            tt = fits((w >> 2) * y2, U64, "w y^2") >> 30
+            y = fits(y * (3 * 2**30 - tt), U64, "newton") >> 31
+        mult = fits(((y * qp.scalars()["c30"]) << a) + 2**31, (0, 2**63 - 1), "M (64-bit)") >> 32
+        fits(mult, I32, "M")
+    logits = qp.b2.astype(int).tolist()
+    T = qp.gelu.astype(int).tolist()
+    sh = qp.fy - 4
+    for i in range(30):
+        z = rsr(fits(e[i] * mult, (-(2**31) + 2**15, 2**31 - 1 - 2**15), "e M"), 16)
+        fits(z, (-22500, 22500), "z")  # the proven bound that lets C skip a clamp here
+        u = fits(rsr(fits(int(qp.g[i]) * z, I32, "gamma z"), 12 + qp.fg - qp.fy) + int(qp.bb[i]), I32, "u")
+        if not -32768 <= u <= 32767:
+            u, sat = max(-32768, min(32767, u)), sat + 1
+        vv = abs(u)
+        k, f = vv >> sh, vv & ((1 << sh) - 1)
+        tneg = 0 if k >= 128 else T[k] + rsr((T[k + 1] - T[k]) * f, sh)
+        g = max(u, 0) + tneg
+        for c in range(3):
+            logits[c] = fits(logits[c] + int(qp.w2[c, i]) * g, I32, "head accumulator")
+    return logits, sat
+
+
+def random_params(rng: np.random.Generator, scale: float) -> FloatParams:
+    f = lambda *s: (rng.normal(size=s) * scale).astype(np.float32)  # noqa: E731
+    return FloatParams(w1=f(30, 12), b1=f(30), gamma=(1 + f(30)).astype(np.float32), beta=f(30) * 0.3,
+                       w2=f(3, 30), b2=f(3))
+
+
+def random_inputs(rng: np.random.Generator, n: int) -> np.ndarray:
+    """int16 features: a mix of small, typical and extreme values."""
+    kind = rng.integers(0, 3, size=(n, 12))
+    small = rng.integers(-50, 50, size=(n, 12))
+    typical = rng.integers(-6000, 6000, size=(n, 12))
+    extreme = rng.choice([-32768, 32767], size=(n, 12))
+    return np.select([kind == 0, kind == 1], [small, typical], extreme).astype(np.int16)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**31), scale=st.sampled_from([1e-3, 0.05, 0.5, 3.0, 40.0]))
+def test_intref_equals_independent_spec(seed: int, scale: float) -> None:
+    rng = np.random.default_rng(seed)
+    qp = quantize(random_params(rng, scale))
+    x = random_inputs(rng, 6)
+    x[0] = 0
+    logits, sat = intref.run(qp, x)
+    for row in range(len(x)):
+        want, want_sat = spec_infer(qp, x[row].astype(int).tolist())
+        assert logits[row].tolist() == want
+        assert sat[row] == want_sat
+
+
+def test_worst_case_inputs_cannot_overflow() -> None:
+    """Inputs at the int16 extremes that maximise every layer-1 accumulator, on models with large
+    weights and biases: every intermediate stays inside its C type (checked by spec_infer)."""
+    rng = np.random.default_rng(7)
+    for scale in (0.01, 1.0, 100.0):
+        fp = random_params(rng, scale)
+        fp.b1 = (np.sign(fp.b1) * 1e4).astype(np.float32)  # biases that force the bias limit
+        qp = quantize(fp)
+        sc = qp.scalars()
+        assert sc["acc1_bound"] <= 2**31 - 1 - 2**8 and sc["acc2_bound"] <= 2**31 - 1
+        rows = []
+        for i in range(30):
+            s = np.where(qp.w1[i] >= 0, 1, -1)
+            rows += [np.where(s > 0, 32767, -32768), np.where(s > 0, -32768, 32767)]
+        x = np.array(rows, dtype=np.int16)
+        logits, _ = intref.run(qp, x)
+        for row in range(0, len(x), 7):
+            assert spec_infer(qp, x[row].astype(int).tolist())[0] == logits[row].tolist()
+        h = x.astype(np.int64) @ qp.w1.T.astype(np.int64) + qp.b1
+        assert np.abs(h).max() <= 2**31 - 1
+
+
+def _model_params(seed: int = 3) -> FloatParams:
+    return FloatParams.from_model(build("sn-s", seed=seed).eval())
+
+
+def test_saturation_is_counted() -> None:
+    """A Q(FY) chosen too fine makes u leave int16: the reference and the spec count the same events."""
+    qp = quantize(_model_params())
+    qp.fy = 12
+    qp.bb = np.full(30, 30000, np.int32)  # beta ~ 7.3 in Q12 ...
+    qp.g = np.full(30, 32767, np.int16)  # ... + gamma ~ 2 at FG = 14: any z > 0.34 leaves int16
+    qp.fg = 14
+    x = random_inputs(np.random.default_rng(1), 50)
+    logits, sat = intref.run(qp, x)
+    assert sat.sum() > 0
+    for row in range(0, 50, 5):
+        want, want_sat = spec_infer(qp, x[row].astype(int).tolist())
+        assert (logits[row].tolist(), int(sat[row])) == (want, want_sat)
+
+
+def test_eps_cap_counts_a_saturation() -> None:
+    """When eps dominates (near-constant hidden layer), eps is capped at 2^30 and counted once."""
+    qp = quantize(_model_params())
+    qp.w1 = np.zeros_like(qp.w1)
+    qp.b1 = np.full(30, 5, np.int32)  # constant layer: variance 0, k1 = k2 = 0
+    qp.eps_m, qp.eps_e = 2**14, 20
+    logits, sat = intref.run(qp, np.zeros((1, 12), np.int16))
+    assert sat.tolist() == [1]
+    assert spec_infer(qp, [0] * 12) == (logits[0].tolist(), 1)
+
+
+def test_rsqrt_matches_float_and_stays_bounded() -> None:
+    """M = sqrt(30) 2^28 / sqrt(v) to 1e-5 relative + 1/2 over the whole uint32 range (sampled + edges)."""
+    qp = quantize(_model_params())
+    net = intref.IntSlipNet(qp)
+    v = np.unique(np.concatenate([
+        np.random.default_rng(0).integers(1, 2**32 - 1, 200_000, dtype=np.int64),
+        2 ** np.arange(32, dtype=np.int64), 2 ** np.arange(1, 33, dtype=np.int64) - 1,
+        [3 * 2**30, 2**31 + 2**30 - 1],
+    ]))
+    m = net.rsqrt_mult(torch.from_numpy(v).unsqueeze(1)).squeeze(1).numpy().astype(np.float64)
+    exact = math.sqrt(30) * 2**28 / np.sqrt(v.astype(np.float64))
+    assert (np.abs(m - exact) <= 1e-5 * exact + 0.5).all()  # Newton error + one rounding
+    assert m.max() <= 2**31 - 1
+    assert int(net.rsqrt_mult(torch.zeros(1, 1, dtype=torch.int64))) == 0
+    assert np.array_equal(rsqrt_seed_table(), qp.rsqrt_seed)
+
+
+def test_fixed_point_follows_float_on_random_model() -> None:
+    """On an untrained SN-S and typical inputs the integer logits track the float ones."""
+    model = build("sn-s", seed=11).eval()
+    qp = quantize(FloatParams.from_model(model))
+    rng = np.random.default_rng(2)
+    xq = rng.integers(-3000, 3000, size=(500, 12)).astype(np.int16)
+    from fleetlab.data.features_int import FEATURE_LSB
+
+    with torch.no_grad():
+        fl = model(torch.from_numpy((xq * FEATURE_LSB).astype(np.float32))).numpy()
+    ql = intref.run(qp, xq)[0] / qp.logit_scale
+    assert np.abs(ql - fl).max() < 0.02
+
+
+def test_refuses_non_int16_inputs() -> None:
+    qp = quantize(_model_params())
+    with pytest.raises(ValueError, match="int16"):
+        intref.IntSlipNet(qp)(torch.full((1, 12), 40000, dtype=torch.int64))

@@ -71,10 +71,6 @@ class Counters:
         return dict(self.__dict__)
 
 
-_TELEM_IDS = {frame_id(n): i for i, n in enumerate(TELEM_NAMES)}
-_FEAT_IDS = {frame_id(n): i for i, n in enumerate(FEATURE_FRAME_NAMES)}
-_CONTROL_ID = frame_id("CONTROL")
-_INPUT_IDS = set(_TELEM_IDS) | set(_FEAT_IDS) | {_CONTROL_ID}
 
 
 def _delta16(a: int, b: int) -> int:
@@ -92,6 +88,10 @@ class EstimatorModel:
     """
 
     def __init__(self) -> None:
+        # input IDs of the DBC in use (read here, not at import: `--dbc` may select another DBC)
+        self._telem_ids = {frame_id(n): i for i, n in enumerate(TELEM_NAMES)}
+        self._feat_ids = {frame_id(n): i for i, n in enumerate(FEATURE_FRAME_NAMES)}
+        self._input_ids = set(self._telem_ids) | set(self._feat_ids) | {frame_id("CONTROL")}
         self.counters = Counters()
         self.rejected_by_reason: dict[str, int] = {}
         self._cur_counter: int | None = None
@@ -117,16 +117,16 @@ class EstimatorModel:
             self._reject(item.corrupt)
             return
         f = item.frame
-        if f.can_id not in _INPUT_IDS:
+        if f.can_id not in self._input_ids:
             self._reject("unknown_id")
             return
         if len(f.data) != dbc_length(f.can_id):
             self._reject("wrong_length")
             return
-        if f.can_id in _TELEM_IDS:
-            self._telemetry(_TELEM_IDS[f.can_id], f, index)
-        elif f.can_id in _FEAT_IDS:
-            self._features(_FEAT_IDS[f.can_id], f, index)
+        if f.can_id in self._telem_ids:
+            self._telemetry(self._telem_ids[f.can_id], f, index)
+        elif f.can_id in self._feat_ids:
+            self._features(self._feat_ids[f.can_id], f, index)
         else:
             command, _arg = codec("CONTROL").decode(f.data)
             if command == CONTROL_RESET:

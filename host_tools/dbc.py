@@ -4,11 +4,20 @@ The DBC is the single source of truth. cantools parses it; because every signal
 in it is byte-aligned little-endian, each message maps onto a `struct` layout,
 which we derive from the cantools signal list at load time (and check against
 cantools in the tests). That keeps 100k+ frames/s encodable in pure Python.
+
+A rover may use its own CAN IDs: point `$FLEETLAB_DBC` (or `--dbc FILE` of
+`fleetlab emulate|stream|monitor`) at a copy of the DBC with other frame IDs. Such a
+DBC must keep every message name, length and signal layout of the repo's DBC
+(`check_layout`); the C build takes the same file as `-DSLIPEST_DBC=...` and runs
+this module as a script to refuse an incompatible one (docs/can_interface.md).
 """
 
 from __future__ import annotations
 
+import argparse
+import os
 import struct
+import sys
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -16,7 +25,8 @@ from pathlib import Path
 import cantools
 import numpy as np
 
-DBC_PATH = Path(__file__).with_name("slipest.dbc")
+DBC_PATH = Path(__file__).with_name("slipest.dbc")  # the repo's DBC: reference layout and default
+DBC_ENV = "FLEETLAB_DBC"  # environment variable naming another DBC (other CAN IDs, same layout)
 
 # Frame names used by the host tools (IDs come from the DBC).
 TELEM_NAMES = ("TELEM_WHEEL", "TELEM_IMU", "TELEM_ATTITUDE")
@@ -67,13 +77,13 @@ class MessageCodec:
 _STRUCT_CODES = {(8, False): "B", (8, True): "b", (16, False): "H", (16, True): "h", (32, False): "I", (32, True): "i"}
 
 
-def _codec_of(msg: cantools.database.can.Message) -> MessageCodec:
+def _codec_of(msg: cantools.database.can.Message, source: str) -> MessageCodec:
     fmt, pos, names = "<", 0, []
     for sig in sorted(msg.signals, key=lambda s: s.start):
         if sig.byte_order != "little_endian" or sig.start % 8 or (sig.length, sig.is_signed) not in _STRUCT_CODES:
-            raise ValueError(f"{DBC_PATH.name}: {msg.name}.{sig.name} is not a byte-aligned little-endian integer")
+            raise ValueError(f"{source}: {msg.name}.{sig.name} is not a byte-aligned little-endian integer")
         if sig.start < pos:
-            raise ValueError(f"{DBC_PATH.name}: {msg.name}.{sig.name} overlaps another signal")
+            raise ValueError(f"{source}: {msg.name}.{sig.name} overlaps another signal")
         fmt += "x" * ((sig.start - pos) // 8) + _STRUCT_CODES[(sig.length, sig.is_signed)]
         pos = sig.start + sig.length
         names.append(sig.name)
@@ -81,24 +91,117 @@ def _codec_of(msg: cantools.database.can.Message) -> MessageCodec:
     return MessageCodec(msg.name, msg.frame_id, msg.length, tuple(names), struct.Struct(fmt))
 
 
-@lru_cache(maxsize=1)
+# --- which DBC: the repo's, $FLEETLAB_DBC, or one chosen with use_dbc() --------------------
+
+_active: Path | None = None  # resolved on first use (hot paths must not re-read the environment)
+
+
+def dbc_path() -> Path:
+    """The DBC in use: the one given to `use_dbc`, else `$FLEETLAB_DBC`, else the repo's."""
+    global _active
+    if _active is None:
+        env = os.environ.get(DBC_ENV, "").strip()
+        _active = _checked(Path(env)) if env else DBC_PATH
+    return _active
+
+
+def use_dbc(path: Path | str | None) -> Path:
+    """Use `path` in this process and in the processes it starts (`$FLEETLAB_DBC` is set too);
+    None: back to the repo's DBC (`$FLEETLAB_DBC` is cleared)."""
+    global _active
+    if path is None:
+        os.environ.pop(DBC_ENV, None)
+        _active = None
+        return dbc_path()
+    _active = _checked(Path(path))
+    os.environ[DBC_ENV] = str(_active)
+    return _active
+
+
+def add_dbc_option(parser: argparse.ArgumentParser) -> None:
+    """`--dbc FILE` for the commands that talk CAN (emulate, stream, monitor)."""
+    parser.add_argument("--dbc", type=Path, default=None, metavar="FILE",
+                        help=f"CAN database with the rover's own frame IDs (default: ${DBC_ENV} or "
+                             "host_tools/slipest.dbc); must keep the layout of host_tools/slipest.dbc. "
+                             "A started emulator is built against it")
+
+
+def apply_dbc_option(args: argparse.Namespace) -> Path:
+    """Select the DBC named by `--dbc` (if given); returns the DBC in use."""
+    return use_dbc(args.dbc) if getattr(args, "dbc", None) is not None else dbc_path()
+
+
+def _checked(path: Path) -> Path:
+    path = path.expanduser().resolve()
+    if not path.is_file():
+        raise OSError(f"{path}: no such DBC file (--dbc / ${DBC_ENV})")
+    if path != DBC_PATH.resolve():
+        check_layout(_load(path), path.name)
+    return path
+
+
+@lru_cache(maxsize=4)
+def _load(path: Path) -> cantools.database.can.Database:
+    try:
+        return cantools.database.load_file(str(path))
+    except Exception as e:  # cantools raises several parser-specific types
+        raise ValueError(f"{path}: not a readable DBC file: {e}") from None
+
+
+def _layout(db: cantools.database.can.Database) -> dict[str, tuple]:
+    """Everything the estimator relies on, per message: length, senders, and each signal's
+    name, position, size, byte order, sign, scale and offset. Frame IDs are left out."""
+    return {
+        m.name: (m.length, tuple(sorted(m.senders)), tuple(
+            (s.name, s.start, s.length, s.byte_order, s.is_signed, s.scale, s.offset)
+            for s in sorted(m.signals, key=lambda s: s.start)))
+        for m in db.messages
+    }
+
+
+def check_layout(db: cantools.database.can.Database, source: str) -> None:
+    """Refuse a DBC that differs from the repo's in anything but frame IDs (and comments).
+
+    The C node and the host tools hard-wire message names and signal layouts; only the IDs
+    are free. IDs must be 11-bit and distinct."""
+    ref, got = _layout(_load(DBC_PATH.resolve())), _layout(db)
+    problems = [f"message {n} missing" for n in ref if n not in got]
+    problems += [f"message {n} is not in host_tools/slipest.dbc" for n in got if n not in ref]
+    problems += [f"{n}: layout differs from host_tools/slipest.dbc (length, senders or signals)"
+                 for n in ref if n in got and got[n] != ref[n]]
+    ids = [m.frame_id for m in db.messages]
+    problems += [f"{m.name}: ID 0x{m.frame_id:X} is not an 11-bit standard ID"
+                 for m in db.messages if m.is_extended_frame or not 0 <= m.frame_id <= 0x7FF]
+    problems += [f"ID 0x{i:03X} used by more than one message" for i in sorted(set(ids)) if ids.count(i) > 1]
+    if problems:
+        raise ValueError(f"{source}: incompatible with the estimator: " + "; ".join(problems))
+
+
 def database() -> cantools.database.can.Database:
-    return cantools.database.load_file(str(DBC_PATH))
+    return _load(dbc_path())
 
 
-@lru_cache(maxsize=1)
+@lru_cache(maxsize=4)
+def _codecs_for(path: Path) -> dict[str, MessageCodec]:
+    return {m.name: _codec_of(m, path.name) for m in _load(path).messages}
+
+
+@lru_cache(maxsize=4)
+def _by_id_for(path: Path) -> dict[int, MessageCodec]:
+    return {c.frame_id: c for c in _codecs_for(path).values()}
+
+
 def codecs() -> dict[str, MessageCodec]:
     """Codec of every DBC message, by name."""
-    return {m.name: _codec_of(m) for m in database().messages}
+    return _codecs_for(dbc_path())
 
 
 def codec(name: str) -> MessageCodec:
     return codecs()[name]
 
 
-@lru_cache(maxsize=1)
 def by_id() -> dict[int, MessageCodec]:
-    return {c.frame_id: c for c in codecs().values()}
+    return _by_id_for(dbc_path())
 
 
 def frame_id(name: str) -> int:
@@ -230,3 +333,23 @@ class OutputAssembler:
             self._status = {}
             return report
         return None
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python host_tools/dbc.py check FILE`: the CMake build's gate for `-DSLIPEST_DBC`."""
+    p = argparse.ArgumentParser(description="check that a DBC keeps the layout of host_tools/slipest.dbc "
+                                            "(only frame IDs may differ)")
+    p.add_argument("command", choices=["check"])
+    p.add_argument("dbc", type=Path)
+    args = p.parse_args(argv)
+    try:
+        _checked(args.dbc)
+    except (ValueError, OSError) as e:
+        print(f"slipest DBC check: {e}", file=sys.stderr)
+        return 1
+    print(f"{args.dbc}: layout matches host_tools/slipest.dbc")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

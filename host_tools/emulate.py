@@ -24,7 +24,15 @@ from fleetlab.data.features_int import FLAG_GAP, FLAG_INVALID, SAMPLES_PER_WINDO
 
 from . import faults as fault_mod
 from .compare import EstimatorModel, WindowVerdict, compare_status, compare_windows
-from .dbc import OutputAssembler, StatusReport, WindowEstimate
+from .dbc import (
+    TELEM_NAMES,
+    OutputAssembler,
+    StatusReport,
+    WindowEstimate,
+    add_dbc_option,
+    apply_dbc_option,
+    frame_id,
+)
 from .emulator import EmulatorProcess, build, default_bundle, find_artifact
 from .links import InprocLink, Link, SerialLink, SlcanLink
 from .reference import Reference
@@ -85,6 +93,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--timeout", type=float, default=20.0,
                    help="seconds to wait for the estimator's answers at the end of a lifetime (default 20)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_dbc_option(p)
 
 
 @dataclass
@@ -287,7 +296,8 @@ def _run_segment(link: Link, seg: fault_mod.Segment, ref: Reference, timeout: fl
     # real time: after the leading CONTROL reset, one chunk = one sample's three frames
     # (or one feature set) per period; otherwise chunks of CHUNK items at full speed
     if realtime:
-        telemetry = any(it.frame.can_id < 0x110 for it in items[1:4])
+        telem_ids = {frame_id(n) for n in TELEM_NAMES}
+        telemetry = any(it.frame.can_id in telem_ids for it in items[1:4])
         step, period = (3, 1 / SAMPLE_RATE_HZ) if telemetry else (4, 2.0)
         starts = [0] + list(range(1, len(items), step))
     else:
@@ -397,6 +407,7 @@ def print_summary(s: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    apply_dbc_option(args)
     bundle = args.bundle or default_bundle()
     if args.soak:
         if args.source != "sim":

@@ -1,7 +1,8 @@
 """Build the C estimator (CMake) and run the host emulator `slipest_emu` on a pseudo-terminal.
 
-`fleetlab emulate` builds on demand: one build directory per bundle under `build/emulate*`,
-configured with `-DSLIPEST_BUNDLE=<bundle>`, guarded by a file lock so concurrent
+`fleetlab emulate` builds on demand: one build directory per bundle and DBC under
+`build/emulate*` (`$FLEETLAB_BUILD_ROOT` instead of `build/` if set), configured with
+`-DSLIPEST_BUNDLE=<bundle> -DSLIPEST_DBC=<dbc in use>`, guarded by a file lock so concurrent
 runs do not race. The emulator opens a pty itself and prints its path; we read it from
 the emulator's stdout.
 """
@@ -22,6 +23,8 @@ from pathlib import Path
 
 import fleetlab.host_tools as _pkg
 
+from .dbc import DBC_PATH, dbc_path
+
 EMULATOR_TARGET = "slipest_emu"
 HOST_LIBRARY_TARGET = "slipest_host"
 PTY_RE = re.compile(rb"(/dev/pts/\d+|/dev/tty\w+)")
@@ -39,21 +42,30 @@ def default_bundle() -> Path:
     return repo_root() / "firmware_c" / "bundles" / "example"
 
 
-def build_dir_for(bundle: Path) -> Path:
-    bundle = bundle.resolve()
+def build_root() -> Path:
+    """Where our build dirs go: `$FLEETLAB_BUILD_ROOT`, else `build/` in the source tree."""
+    env = os.environ.get("FLEETLAB_BUILD_ROOT", "").strip()
+    return Path(env).resolve() if env else repo_root() / "build"
+
+
+def build_dir_for(bundle: Path, dbc: Path | None = None) -> Path:
+    bundle, dbc = bundle.resolve(), (dbc or dbc_path()).resolve()
+    default_dbc = dbc == DBC_PATH.resolve()
     # our own build dirs (not build/host, which people configure by hand, e.g. with sanitizers
     # that a ctypes load cannot take)
-    if bundle == default_bundle().resolve():
-        return repo_root() / "build" / "emulate"
-    tag = hashlib.sha256(str(bundle).encode()).hexdigest()[:10]
-    return repo_root() / "build" / f"emulate-{tag}"
+    if bundle == default_bundle().resolve() and default_dbc:
+        return build_root() / "emulate"
+    key = str(bundle) if default_dbc else f"{bundle}|{dbc}"
+    tag = hashlib.sha256(key.encode()).hexdigest()[:10]
+    return build_root() / f"emulate-{tag}"
 
 
-def _bundle_stamp(bundle: Path) -> str:
-    """Content hash of the bundle's headers: a changed bundle forces a rebuild."""
+def _bundle_stamp(bundle: Path, dbc: Path) -> str:
+    """Content hash of the bundle's headers and of the DBC: a change forces a reconfigure."""
     h = hashlib.sha256()
     for name in sorted(p.name for p in bundle.glob("*.h")):
         h.update(name.encode() + (bundle / name).read_bytes())
+    h.update(str(dbc).encode() + dbc.read_bytes())
     return h.hexdigest()
 
 
@@ -62,7 +74,8 @@ _BUILT: set[tuple[Path, tuple[str, ...], str]] = set()  # up to date in this pro
 
 def build(bundle: Path | str | None = None, targets: tuple[str, ...] = (EMULATOR_TARGET, HOST_LIBRARY_TARGET),
           quiet: bool = True) -> Path:
-    """Configure (if needed) and build the host targets for `bundle`; returns the build dir.
+    """Configure (if needed) and build the host targets for `bundle` and the DBC in use
+    (`dbc.dbc_path()`); returns the build dir.
 
     CMake's own up-to-date check takes about a second, so a process asks it once per
     bundle and target set.
@@ -73,9 +86,10 @@ def build(bundle: Path | str | None = None, targets: tuple[str, ...] = (EMULATOR
     for tool in ("cmake",):
         if shutil.which(tool) is None:
             raise OSError(f"{tool} not found on PATH (scripts/setup.sh installs it)")
-    bdir = build_dir_for(bundle)
+    dbc = dbc_path()
+    bdir = build_dir_for(bundle, dbc)
     bdir.mkdir(parents=True, exist_ok=True)
-    stamp = _bundle_stamp(bundle)
+    stamp = _bundle_stamp(bundle, dbc)
     key = (bdir, tuple(targets), stamp)
     if key in _BUILT:
         return bdir
@@ -85,7 +99,7 @@ def build(bundle: Path | str | None = None, targets: tuple[str, ...] = (EMULATOR
         stamp_file = bdir / ".fleetlab-bundle-stamp"
         if not (bdir / "CMakeCache.txt").is_file() or not stamp_file.is_file() or stamp_file.read_text() != stamp:
             cmd = ["cmake", "-S", str(repo_root()), "-B", str(bdir), f"-DSLIPEST_BUNDLE={bundle.resolve()}",
-                   "-DCMAKE_BUILD_TYPE=Release", "-DSLIPEST_SANITIZE=OFF", "-DSLIPEST_FUZZ=OFF",
+                   f"-DSLIPEST_DBC={dbc}", "-DCMAKE_BUILD_TYPE=Release", "-DSLIPEST_SANITIZE=OFF", "-DSLIPEST_FUZZ=OFF",
                    f"-DPython3_EXECUTABLE={sys.executable}"]
             r = subprocess.run(cmd, stdout=out, stderr=subprocess.PIPE, text=True)
             if r.returncode:

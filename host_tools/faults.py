@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .compare import WireItem
-from .dbc import CONTROL_RESET, CONTROL_STATUS, Frame, control_frame, feature_frames, telemetry_frames
+from .dbc import CONTROL_RESET, CONTROL_STATUS, Frame, by_id, control_frame, feature_frames, telemetry_frames
 
 KINDS = (
     "bad_crc",
@@ -41,7 +41,14 @@ EFFECTS: dict[str, tuple[int, int, bool]] = {
     "restart": (0, 0, False),
 }
 FEATURE_KINDS = ("bad_crc", "wrong_length", "unknown_id", "duplicated_frame", "restart")
-UNKNOWN_ID = 0x7E5  # not in the DBC
+UNKNOWN_ID = 0x7E5  # preferred ID for unknown_id faults (not in the repo's DBC)
+
+
+def unknown_id() -> int:
+    """An 11-bit ID the DBC in use does not define (a rover DBC may have moved a frame to 0x7E5)."""
+    known = set(by_id())
+    return next(i for i in [UNKNOWN_ID, *range(0x7FF, -1, -1)] if i not in known)
+
 SAMPLES_PER_WINDOW = 100
 
 
@@ -168,7 +175,7 @@ def plan_telemetry(
                         seg.items.append(WireItem(Frame(f.can_id, f.data[:-1]), fault=fidx))
             elif kind == "unknown_id":
                 seg.items.extend(WireItem(f) for f in fs[:part])
-                seg.items.append(WireItem(Frame(UNKNOWN_ID, fs[part].data), fault=fidx))
+                seg.items.append(WireItem(Frame(unknown_id(), fs[part].data), fault=fidx))
                 seg.items.extend(WireItem(f) for f in fs[part:])
             elif kind == "dropped_sample":
                 pass
@@ -238,7 +245,7 @@ def plan_features(
         elif kind == "unknown_id":
             faults.append(Fault(kind, len(segments) - 1, w - wc0, 1, 0, False))
             seg.items.extend(WireItem(f) for f in fs[:part])
-            seg.items.append(WireItem(Frame(UNKNOWN_ID, fs[part].data), fault=fidx))
+            seg.items.append(WireItem(Frame(unknown_id(), fs[part].data), fault=fidx))
             seg.items.extend(WireItem(f) for f in fs[part:])
         elif kind == "duplicated_frame":
             faults.append(Fault(kind, len(segments) - 1, w - wc0, 1, 0, False))

@@ -15,7 +15,7 @@ from typing import Callable
 
 import can
 
-from .dbc import Frame, OutputAssembler, StatusReport, WindowEstimate, by_id
+from .dbc import Frame, OutputAssembler, StatusReport, WindowEstimate, add_dbc_option, apply_dbc_option, by_id
 from .links import from_message, open_can_bus
 from .serial_framing import Rejected
 
@@ -23,7 +23,7 @@ from .serial_framing import Rejected
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="transport", metavar="TRANSPORT", required=True)
     c = sub.add_parser("can", help="listen on a python-can bus", description="Listen on a python-can bus and "
-                       "decode every frame with host_tools/slipest.dbc, or replay a python-can log (--replay).")
+                       "decode every frame with the DBC (host_tools/slipest.dbc, or --dbc), or replay a python-can log (--replay).")
     c.add_argument("--interface", default="virtual", help="python-can interface (default virtual)")
     c.add_argument("--channel", default=None, help="bus channel (vcan0, /dev/ttyACM0, ...)")
     c.add_argument("--bitrate", type=int, default=None, help="bitrate for slcan/socketcan")
@@ -33,6 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     c.add_argument("--count", type=int, default=0, help="stop after this many estimates (0: no limit)")
     c.add_argument("--log", type=Path, default=None, metavar="FILE", help="also log every frame (python-can format)")
     c.add_argument("--all", action="store_true", help="print every decoded frame, not only estimates and status")
+    add_dbc_option(c)
 
 
 @dataclass
@@ -114,6 +115,7 @@ def monitor_log(path: Path, show: Callable[[str], None] | None = print, show_all
 
 
 def run(args: argparse.Namespace) -> int:
+    apply_dbc_option(args)
     if args.replay:
         stats = monitor_log(args.replay, show_all=args.all)
     else:

@@ -28,6 +28,8 @@ from .dbc import (
     OutputAssembler,
     StatusReport,
     WindowEstimate,
+    add_dbc_option,
+    apply_dbc_option,
     control_frame,
     database,
     feature_frames,
@@ -72,6 +74,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         q.add_argument("--scale", type=float, default=0.08, help="simulator scenario scale (default 0.08)")
         q.add_argument("--wait", type=float, default=5.0, help="seconds to wait for the last answers (default 5)")
         q.add_argument("--quiet", action="store_true", help="do not print every estimate")
+        add_dbc_option(q)
 
 
 @dataclass
@@ -201,6 +204,7 @@ def _print_estimate(e: WindowEstimate) -> None:
 def run(args: argparse.Namespace) -> int:
     from .emulator import EmulatorProcess, build, find_artifact
 
+    apply_dbc_option(args)
     source = _source_of(args)
     emu = None
     if args.transport == "can":

@@ -74,6 +74,17 @@ def test_cortex_m_images_check_every_vector(builds, cpu):
     assert len(re.findall(rf"vectors={n} q_fail=0 f32_fail=0 extractor_fail=0 model=\w+ PASS", out)) == 2
 
 
+@pytest.mark.parametrize("build", ["asan", "cortex-m4", "cortex-m3"])
+def test_example_main_loops_estimate_every_window(builds, build):
+    """firmware_c/examples (docs/integrating_slipest.md): CAN-frame loop and direct-sample loop,
+    host with sanitizers and Cortex-M under QEMU (fixed-point library)."""
+    out = ctest(builds[build], "example_")
+    assert re.search(r"Test +#\d+: example_minimal_can_loop\S* \.+ +Passed", out)
+    assert re.search(r"Test +#\d+: example_minimal_sample_loop\S* \.+ +Passed", out)
+    assert out.count("PASS: 10 windows estimated") == 2
+    assert "estimate window 2 class" in out and "flags 1 n_samples 99" in out
+
+
 def test_m3_fixed_point_image_has_no_soft_float(builds):
     out = ctest(builds["cortex-m3"], "softfloat")
     assert "slipest_test_q.elf: 0 soft-float helper symbols (expected absent)" in out

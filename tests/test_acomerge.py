@@ -1,0 +1,253 @@
+"""AcoMerge: search behaviour on known optima, MMAS invariants, IWOA moves, batched fitness."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import torch
+from torch.nn import functional as F
+
+from fleetlab.fusion.acomerge import (
+    AcoMergeConfig,
+    acomerge,
+    construct_ants,
+    mmas_bounds,
+    search,
+    whale_update,
+)
+from fleetlab.fusion.bench import synthetic_calibration
+from fleetlab.fusion.buffer import make_buffer
+from fleetlab.fusion.finetune import finetune
+from fleetlab.fusion.fitness import CalibrationFitness
+from fleetlab.models import build, flatten, load_flat, n_params
+from fleetlab.models.train import class_weights
+
+SMALL = AcoMergeConfig(n_ants=60, generations=24, iwoa_every=6)
+
+
+@pytest.fixture(scope="module")
+def cal():
+    return synthetic_calibration(120, seed=3)
+
+
+@pytest.fixture(scope="module")
+def experts(cal):
+    x, y = cal
+    return torch.stack([flatten(finetune(build("sn-s", seed=k), x, y, steps=25, seed=k)) for k in range(3)])
+
+
+def module_ce(arch: str, flat: torch.Tensor, x: np.ndarray, y: np.ndarray) -> float:
+    """Weighted CE of one model through the ordinary nn.Module in eval mode."""
+    model = load_flat(build(arch), flat).eval()
+    with torch.no_grad():
+        logits = model(torch.from_numpy(x))
+    return float(F.cross_entropy(logits, torch.from_numpy(y), weight=class_weights(y)))
+
+
+# --- batched fitness ------------------------------------------------------------------
+
+@pytest.mark.parametrize("arch", ["sn-s", "sn-d"])
+def test_batched_fitness_equals_module_loss(arch, cal):
+    x, y = cal
+    gen = torch.Generator().manual_seed(0)
+    flats = torch.stack([flatten(build(arch, seed=s)) for s in range(5)])
+    flats = flats + 0.3 * torch.randn(flats.shape, generator=gen)  # non-trivial LayerNorm affine too
+    batched = CalibrationFitness(arch, x, y, chunk=2)(flats)
+    expected = torch.tensor([module_ce(arch, f, x, y) for f in flats])
+    torch.testing.assert_close(batched, expected, rtol=1e-5, atol=1e-5)
+
+
+def test_fitness_rejects_bad_calibration():
+    with pytest.raises(ValueError, match="NaN"):
+        CalibrationFitness("sn-s", np.full((4, 12), np.nan, dtype=np.float32), np.zeros(4, dtype=np.int64))
+    with pytest.raises(ValueError, match="labels"):
+        CalibrationFitness("sn-s", np.zeros((4, 12), dtype=np.float32), np.zeros(3, dtype=np.int64))
+    with pytest.raises(ValueError, match="classes 0..2"):
+        CalibrationFitness("sn-s", np.zeros((2, 12), dtype=np.float32), np.array([0, 3]))
+
+
+# --- buffer -----------------------------------------------------------------------------
+
+def test_expert_buffer_layout(experts):
+    buf = make_buffer(experts, copies=15, sigma=0.05, seed=1)
+    assert buf.shape == (48, n_params("sn-s"))
+    torch.testing.assert_close(buf[:3], experts)  # rows 0..K-1 are the unperturbed experts
+    noise = buf[3:].view(3, 15, -1) - experts.unsqueeze(1)  # copies are expert-major
+    assert abs(float(noise.std()) - 0.05) < 0.002 and abs(float(noise.mean())) < 0.002
+    assert torch.equal(buf, make_buffer(experts, 15, 0.05, seed=1))
+    assert not torch.equal(buf, make_buffer(experts, 15, 0.05, seed=2))
+
+
+def test_ablation_buffers(experts):
+    cr = make_buffer(experts, 15, 0.05, seed=0, kind="centroid_random")
+    rnd = make_buffer(experts, 15, 0.05, seed=0, kind="random")
+    assert cr.shape == rnd.shape == (48, experts.shape[1])
+    torch.testing.assert_close(cr[:3], experts)
+    # centroid-random rows are centred on the experts' centroid, not on any expert
+    assert float((cr[3:].mean(0) - experts.mean(0)).abs().mean()) < float((cr[3:].mean(0) - experts[0]).abs().mean())
+    assert not any(torch.equal(r, e) for r in rnd for e in experts)
+    with pytest.raises(ValueError, match="kind"):
+        make_buffer(experts, 15, 0.05, 0, kind="nope")
+
+
+# --- MMAS pieces ------------------------------------------------------------------------
+
+def test_mmas_bounds_formula():
+    tmin, tmax = mmas_bounds(best_j=0.5, deposit=1.0, n_choices=48, n_decisions=543, p_best=0.05)
+    assert tmax == pytest.approx(2.0)
+    p_dec = 0.05 ** (1 / 543)
+    assert tmin == pytest.approx(2.0 * (1 - p_dec) / (47 * p_dec))
+    assert 0 < tmin < tmax
+
+
+def test_construct_greedy_and_roulette():
+    gen = torch.Generator().manual_seed(0)
+    tau = torch.tensor([[1.0, 3.0, 6.0], [5.0, 1.0, 4.0]])
+    greedy = construct_ants(tau, None, q0=1.0, n_ants=50, gen=gen)
+    assert torch.equal(greedy, torch.tensor([[2], [0]]).expand(2, 50))
+    roulette = construct_ants(tau, None, q0=0.0, n_ants=40000, gen=gen)
+    freq = torch.stack([torch.bincount(r, minlength=3) for r in roulette]).float() / 40000
+    torch.testing.assert_close(freq, tau / tau.sum(1, keepdim=True), atol=0.01, rtol=0)
+
+
+def _toy(n_idx=20, m=8, seed=0):
+    """Separable objective with a known optimum: candidate `best[z]` of index z is the target."""
+    gen = torch.Generator().manual_seed(seed)
+    # well-separated candidates (a wrong pick costs at least 0.25), in random order per index
+    cand = torch.stack([torch.randperm(m, generator=gen) for _ in range(n_idx)], dim=1) * 0.5
+    best = torch.randint(0, m, (n_idx,), generator=gen)
+    target = cand[best, torch.arange(n_idx)]
+
+    def fitness(flats: torch.Tensor) -> torch.Tensor:
+        return 1.0 + ((flats - target) ** 2).sum(dim=1)
+
+    return cand.float(), target.float(), fitness
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_mmas_finds_known_optimum(seed):
+    cand, target, fitness = _toy(seed=seed)
+    cfg = AcoMergeConfig(n_ants=100, generations=130, phases=("mmas",))
+    res = search(cand[:3], cand, fitness, cfg, seed=seed)
+    assert torch.equal(res.best_flat, target)
+    assert res.best_fitness == pytest.approx(1.0)
+    assert res.history["best_so_far"][-1] < res.history["best_so_far"][0]
+
+
+def test_iwoa_reaches_an_optimum_between_the_candidates():
+    cand, target, _ = _toy(seed=4)
+    off_buffer = target + 0.2  # no candidate holds it: MMAS alone is stuck at 1 + 20 * 0.2^2
+
+    def fitness(flats: torch.Tensor) -> torch.Tensor:
+        return 1.0 + ((flats - off_buffer) ** 2).sum(dim=1)
+
+    cfg = AcoMergeConfig(n_ants=100, generations=130)
+    hybrid = search(cand[:3], cand, fitness, cfg, seed=0)
+    mmas = search(cand[:3], cand, fitness, dataclasses.replace(cfg, phases=("mmas",)), seed=0)
+    assert mmas.best_fitness == pytest.approx(1.8, abs=1e-4)
+    assert hybrid.best_fitness < 1.01
+
+
+def test_pheromone_stays_within_bounds_after_every_update(cal, experts):
+    x, y = cal
+    res = acomerge(experts, "sn-s", x, y, SMALL, seed=0)
+    h = res.history
+    assert len(h["tau_min"]) == SMALL.generations
+    for lo, hi, tmin, tmax in zip(h["tau_lowest"], h["tau_highest"], h["tau_min"], h["tau_max"]):
+        assert tmin * (1 - 1e-6) <= lo <= hi <= tmax * (1 + 1e-6)
+    # τ_max tracks the best fitness so far: Q / J_gb
+    for tmax, best in zip(h["tau_max"], h["best_so_far"]):
+        assert tmax == pytest.approx(SMALL.deposit / best)
+
+
+# --- IWOA -------------------------------------------------------------------------------
+
+def test_whale_update_moves_all_but_leader():
+    gen = torch.Generator().manual_seed(0)
+    pos = torch.randn(50, 12, 1, generator=gen)
+    leader = torch.randint(0, 12, (50,), generator=gen)
+    new = whale_update(pos, leader, a=1.5, inertia=0.9, b=1.0, gen=gen)
+    rows = torch.arange(50)
+    assert torch.equal(new[rows, leader], pos[rows, leader])
+    moved = (new != pos).squeeze(-1)
+    moved[rows, leader] = True
+    assert moved.float().mean() > 0.99  # every other whale moves (ties have probability ~0)
+
+
+def test_whale_update_converges_on_leader_when_a_is_zero():
+    gen = torch.Generator().manual_seed(1)
+    pos = torch.randn(400, 10, 1, generator=gen)
+    leader = torch.zeros(400, dtype=torch.long)
+    new = whale_update(pos, leader, a=0.0, inertia=1.0, b=1.0, gen=gen)
+    at_leader = (new == pos[:, :1]).squeeze(-1)[:, 1:].float().mean()
+    assert 0.4 < at_leader < 0.6  # encircling with A = 0 lands on the leader; the spiral (p ≥ 0.5) does not
+
+
+def test_iwoa_changes_the_search(cal, experts):
+    x, y = cal
+    both = acomerge(experts, "sn-s", x, y, SMALL, seed=0)
+    mmas = acomerge(experts, "sn-s", x, y, dataclasses.replace(SMALL, phases=("mmas",)), seed=0)
+    assert sum(both.history["iwoa"]) == SMALL.generations // SMALL.iwoa_every
+    assert not any(mmas.history["iwoa"])
+    # identical until the first IWOA update, different afterwards
+    first = SMALL.iwoa_every
+    assert both.history["iteration_best"][:first] == mmas.history["iteration_best"][:first]
+    assert both.history["iteration_best"][first:] != mmas.history["iteration_best"][first:]
+
+
+# --- whole run --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("phases", [("mmas", "iwoa"), ("mmas",), ("iwoa",)])
+def test_never_worse_than_the_experts(cal, experts, phases):
+    x, y = cal
+    res = acomerge(experts, "sn-s", x, y, dataclasses.replace(SMALL, phases=phases), seed=2)
+    expert_j = [module_ce("sn-s", e, x, y) for e in experts]
+    np.testing.assert_allclose(res.expert_fitness, expert_j, rtol=1e-5)
+    assert res.best_fitness <= min(res.expert_fitness)
+    assert module_ce("sn-s", res.best_flat, x, y) == pytest.approx(res.best_fitness, rel=1e-5)
+    best = res.history["best_so_far"]
+    assert all(b2 <= b1 for b1, b2 in zip(best, best[1:]))
+    per_gen = SMALL.n_ants if "mmas" in phases else 48
+    assert res.evaluations == 3 + SMALL.generations * per_gen
+
+
+def test_fusion_improves_on_the_experts(cal, experts):
+    x, y = cal
+    res = acomerge(experts, "sn-s", x, y, SMALL, seed=0)
+    assert res.best_fitness < 0.98 * min(res.expert_fitness)
+    assert res.best_origin.startswith("generation")
+
+
+def test_deterministic_for_a_seed(cal, experts):
+    x, y = cal
+    a = acomerge(experts, "sn-s", x, y, SMALL, seed=5)
+    b = acomerge(experts, "sn-s", x, y, SMALL, seed=5)
+    c = acomerge(experts, "sn-s", x, y, SMALL, seed=6)
+    assert torch.equal(a.best_flat, b.best_flat) and a.history == b.history
+    assert not torch.equal(a.best_flat, c.best_flat)
+
+
+def test_global_rng_untouched(cal, experts):
+    x, y = cal
+    torch.manual_seed(123)
+    expected = torch.rand(3)
+    torch.manual_seed(123)
+    acomerge(experts, "sn-s", x, y, dataclasses.replace(SMALL, generations=3), seed=0)
+    assert torch.equal(torch.rand(3), expected)
+
+
+def test_refuses_bad_input(cal, experts):
+    x, y = cal
+    with pytest.raises(ValueError, match="identical"):
+        acomerge(torch.stack([experts[0], experts[0]]), "sn-s", x, y, SMALL)
+    with pytest.raises(ValueError, match="543"):
+        acomerge(experts[:, :100], "sn-s", x, y, SMALL)
+    with pytest.raises(ValueError, match="phases"):
+        acomerge(experts, "sn-s", x, y, dataclasses.replace(SMALL, phases=("pso",)))
+    bad = experts.clone()
+    bad[1, 7] = math.nan
+    with pytest.raises(ValueError, match="NaN"):
+        acomerge(bad, "sn-s", x, y, SMALL)

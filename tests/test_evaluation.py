@@ -1,0 +1,175 @@
+"""MCCV evaluation: metrics, the JSON layout, determinism across backends (local processes,
+Dask), the paper-style table, and `fleetlab evaluate` end to end on the real data with
+tiny budgets."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from fleetlab.cli import main
+from fleetlab.data.dataset import load_dataset
+from fleetlab.evaluation.mccv import EvalSettings, run_mccv
+from fleetlab.evaluation.methods import METHODS, Budget, parse_methods
+from fleetlab.evaluation.metrics import classification_metrics
+from fleetlab.evaluation.tables import markdown_table
+
+TINY = Budget(steps=3, ants=6)
+
+
+def comparable(result: dict) -> dict:
+    """Everything but wall-clock timing, which legitimately differs between runs."""
+    return {k: v for k, v in result.items() if k != "timing"}
+
+
+@pytest.fixture(scope="module")
+def dataset(real_data_dir):
+    return load_dataset(real_data_dir)
+
+
+@pytest.fixture(scope="module")
+def small_settings():
+    return EvalSettings(protocol="paper", cal_sizes=(150,), runs=2, seed=3, epochs=1, budget=TINY,
+                        methods=("earth-ft", "evomerge", "modelswarm", "acomerge", "distill"))
+
+
+@pytest.fixture(scope="module")
+def loky_result(dataset, small_settings):
+    return run_mccv(dataset, small_settings, n_jobs=2, backend="loky", progress=False)
+
+
+def test_metrics_by_hand():
+    y_true = np.array([0, 0, 0, 0, 1, 1, 2, 2])
+    y_pred = np.array([0, 0, 0, 1, 1, 2, 2, 2])
+    m = classification_metrics(y_true, y_pred)
+    # recalls: 3/4, 1/2, 2/2 -> balanced accuracy 0.75
+    assert m["balanced_accuracy"] == pytest.approx(0.75)
+    assert m["recall"] == pytest.approx([0.75, 0.5, 1.0])
+    # precisions: 3/3, 1/2, 2/3; F1 = 2PR/(P+R): 6/7, 1/2, 4/5
+    assert m["precision"] == pytest.approx([1.0, 0.5, 2 / 3])
+    assert m["macro_f1"] == pytest.approx((6 / 7 + 0.5 + 0.8) / 3)
+    assert m["confusion_matrix"] == [[3, 1, 0], [0, 1, 1], [0, 0, 2]]
+    with pytest.raises(ValueError):
+        classification_metrics(y_true, y_pred[:-1])
+
+
+def test_method_parsing():
+    assert parse_methods(None) == list(METHODS) == parse_methods("all")
+    assert parse_methods("distill, acomerge") == ["acomerge", "distill"]  # table order
+    with pytest.raises(ValueError, match="unknown method"):
+        parse_methods("acomerge,telepathy")
+
+
+def test_json_layout(loky_result, small_settings):
+    res = loky_result["results"]
+    assert set(res) == set(small_settings.methods)
+    for method, by_size in res.items():
+        assert set(by_size) == {"150"}
+        entry = by_size["150"]
+        for metric in ("balanced_accuracy", "macro_f1"):
+            assert set(entry[metric]) >= {"mean", "std"}
+            runs = entry[metric]["runs"]
+            assert len(runs) == 2 and all(0.0 <= v <= 1.0 for v in runs)
+            assert entry[metric]["mean"] == pytest.approx(np.mean(runs))
+            assert entry[metric]["std"] == pytest.approx(np.std(runs, ddof=1))
+        assert len(entry["precision"]["mean"]) == 3 and len(entry["recall"]["std"]) == 3
+        cm = np.array(entry["confusion_matrix"])
+        # summed over 2 runs, each testing on every target row outside its 150 calibration rows
+        assert cm.shape == (3, 3) and cm.sum() == 2 * entry["n_test_mean"] == 2 * (1367 - 150)
+    # the AcoMerge convergence curve: one best-so-far value per generation, never rising
+    curve = loky_result["convergence"]["acomerge"]["150"]["mean"]
+    assert len(curve) == TINY.steps and all(b <= a for a, b in zip(curve, curve[1:]))
+    test = loky_result["ttest"]["150"]["macro_f1"]
+    assert test["best"] == test["ranking"][0] and test["second"] == test["ranking"][1]
+    assert {"nadeau-bengio", "reference"} == set(test["tests"]) and test["n_train"] == 150
+    json.dumps(loky_result)  # JSON-serialisable as is
+
+
+def test_same_seed_same_numbers_sequential_vs_processes(dataset, small_settings, loky_result):
+    sequential = run_mccv(dataset, small_settings, n_jobs=1, progress=False)
+    assert comparable(sequential) == comparable(loky_result)
+
+
+def test_dask_backend_gives_identical_results(dataset, small_settings, loky_result):
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        on_dask = run_mccv(dataset, small_settings, backend="dask", scheduler=cluster.scheduler_address,
+                           progress=False)
+    assert on_dask["timing"]["backend"] == "dask"
+    assert comparable(on_dask) == comparable(loky_result)
+
+
+def test_another_seed_changes_the_search(dataset, small_settings, loky_result):
+    other = run_mccv(dataset, EvalSettings(**{**small_settings.__dict__, "seed": 4}), n_jobs=2, progress=False)
+    a = loky_result["results"]["acomerge"]["150"]["macro_f1"]["runs"]
+    b = other["results"]["acomerge"]["150"]["macro_f1"]["runs"]
+    assert a != b
+
+
+def test_table_marks_best_second_and_significance():
+    def entry(mean, runs):
+        per_class = {"mean": [mean, 0.5, 0.25], "std": [0.01, 0.02, 0.03]}
+        return {"balanced_accuracy": {"mean": mean, "std": 0.01, "runs": runs},
+                "macro_f1": {"mean": mean, "std": 0.01, "runs": runs}, "precision": per_class, "recall": per_class}
+
+    result = {
+        "results": {"acomerge": {"150": entry(0.7, [])}, "earth-ft": {"150": entry(0.6, [])},
+                    "model-base": {"150": entry(0.5, [])}},
+        "ttest": {"150": {m: {"ranking": ["acomerge", "earth-ft", "model-base"], "significant": True}
+                          for m in ("balanced_accuracy", "macro_f1")}},
+        "config": {"arch": "sn-s", "protocol": "paper", "runs": 30},
+    }
+    table = markdown_table(result)
+    main_table = table.split("Per-class")[0]
+    rows = {line.split("|")[2].strip(): line for line in main_table.splitlines() if line.startswith("|")}
+    assert "**0.7000 ± 0.0100**†" in rows["AcoMerge"]
+    assert "<u>0.6000 ± 0.0100</u>" in rows["Earth + FullFinetune"]
+    assert "**" not in rows["Model Base"] and "<u>" not in rows["Model Base"]
+    assert table.index("Fine-tuned") < table.index("Merging")
+    assert "| AcoMerge | 0.70 ± 0.01 | 0.70 ± 0.01 | 0.50 ± 0.02 | 0.50 ± 0.02 | 0.25 ± 0.03 |" in table
+
+
+def test_evaluate_cli_end_to_end(real_data_dir, tmp_path, capsys):
+    out, js = tmp_path / "out", tmp_path / "r.json"
+    rc = main(["evaluate", "--data", str(real_data_dir), "--protocol", "traverse", "--runs", "2", "--cal-size", "150",
+               "--epochs", "1", "--generations", "3", "--ants", "6", "--buffer-ablation", "--jobs", "2",
+               "--json", str(js), "--out", str(out), "--no-progress"])
+    assert rc == 0
+    result = json.loads(js.read_text())
+    assert set(result["results"]) == set(METHODS) | {"buffer-centroid-random", "buffer-random"}
+    for by_size in result["results"].values():
+        assert set(by_size["150"]["balanced_accuracy"]) >= {"mean", "std"}
+        assert set(by_size["150"]["macro_f1"]) >= {"mean", "std"}
+    assert result["config"]["protocol"] == "traverse"
+    assert json.loads((out / "results.json").read_text())["results"] == result["results"]
+    table = (out / "table.md").read_text()
+    assert table in capsys.readouterr().out
+    for label in ("Joint + FullFinetune", "Evolutionary Merge", "Ensemble distillation", "MMAS only", "random×48"):
+        assert label in table
+    for name in ("metrics.png", "confusion_150.png", "convergence.png", "buffer_ablation.png"):
+        assert (out / name).stat().st_size > 1000
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--methods", "acomerge,telepathy"], "unknown method"),
+        (["--backend", "dask"], "--scheduler"),
+        (["--cal-size", "5000"], "leave no test rows"),
+        (["--protocol", "traverse", "--cal-size", "1200"], "traverse split needs"),
+        (["--runs", "0"], "at least 1"),
+    ],
+)
+def test_evaluate_cli_bad_input(real_data_dir, capsys, extra, message):
+    rc = main(["evaluate", "--data", str(real_data_dir), "--no-progress", "--epochs", "1", *extra])
+    assert rc == 1
+    err = capsys.readouterr().err
+    assert "fleetlab evaluate: error:" in err and message in err
+
+
+def test_evaluate_cli_missing_data_dir(tmp_path, capsys):
+    assert main(["evaluate", "--data", str(tmp_path / "nowhere")]) == 1
+    assert "nowhere" in capsys.readouterr().err

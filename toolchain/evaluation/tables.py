@@ -1,0 +1,82 @@
+"""The paper-style results table in Markdown, from an evaluation's JSON result.
+
+Rows grouped Fine-tuned / Merging / Distillation (then the ablations, which are not
+ranked); for every calibration size two columns, balanced accuracy and macro-F1 as
+mean ± std over the runs. Per column the best method is bold and the second
+underlined; † marks the best when the corrected resampled t-test against the second
+is significant (p < 0.05, Nadeau-Bengio form, see `stats`).
+"""
+
+from __future__ import annotations
+
+from .methods import GROUPS_WITH_BUFFER, LABELS
+from .metrics import SCALAR_METRICS
+
+COLUMN_NAMES = {"balanced_accuracy": "Bal. Acc.", "macro_f1": "Macro F1"}
+CLASS_NAMES = ("low", "moderate", "high")
+
+
+def _cell(stats: dict, rank: int | None, dagger: bool) -> str:
+    text = f"{stats['mean']:.4f} ± {stats['std']:.4f}"
+    if rank == 0:
+        return f"**{text}**" + ("†" if dagger else "")
+    if rank == 1:
+        return f"<u>{text}</u>"
+    return text
+
+
+def markdown_table(result: dict) -> str:
+    results, ttest, cfg = result["results"], result.get("ttest", {}), result.get("config", {})
+    sizes = list(next(iter(results.values())).keys())
+    header = ["Group", "Method"] + [f"{COLUMN_NAMES[m]} (D_Cal={c})" for c in sizes for m in SCALAR_METRICS]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for group, methods in GROUPS_WITH_BUFFER.items():
+        present = [m for m in methods if m in results]
+        for i, m in enumerate(present):
+            cells = [group if i == 0 else "", LABELS.get(m, m)]
+            for c in sizes:
+                for metric in SCALAR_METRICS:
+                    test = ttest.get(c, {}).get(metric, {})
+                    ranking = test.get("ranking", [])
+                    rank = ranking.index(m) if m in ranking[:2] else None
+                    cells.append(_cell(results[m][c][metric], rank, bool(test.get("significant"))))
+            lines.append("| " + " | ".join(cells) + " |")
+    notes = [
+        "",
+        f"{cfg.get('arch', '?').upper()}, protocol `{cfg.get('protocol', '?')}`, mean ± std (ddof=1) over "
+        f"{cfg.get('runs', '?')} MCCV runs; best **bold**, second <u>underlined</u>; † best significantly better "
+        "than second (corrected resampled t-test, p < 0.05).",
+        "",
+        "Best vs second (t-test, df = runs − 1; p with the Nadeau-Bengio factor 1/n + n_test/n_train, and with "
+        "the reference notes' factor 1/n + n_train/n_test):",
+        "",
+    ]
+    for c in sizes:
+        for metric in SCALAR_METRICS:
+            test = ttest.get(c, {}).get(metric, {})
+            if "tests" not in test:
+                continue
+            nb, ref = test["tests"]["nadeau-bengio"], test["tests"]["reference"]
+            notes.append(
+                f"- D_Cal={c}, {COLUMN_NAMES[metric]}: {LABELS.get(test['best'], test['best'])} vs "
+                f"{LABELS.get(test['second'], test['second'])}: mean diff {nb['mean_diff']:+.4f}, "
+                f"t = {nb['t']:.3f}, p = {nb['p']:.4f} (reference form: t = {ref['t']:.3f}, p = {ref['p']:.4f}); "
+                f"n_train = {test['n_train']}, n_test = {test['n_test']:.0f}"
+            )
+    return "\n".join(lines + notes + [""] + per_class_table(result)) + "\n"
+
+
+def per_class_table(result: dict) -> list[str]:
+    """Per-class precision and recall (mean ± std over runs) at every calibration size."""
+    results = result["results"]
+    lines = ["Per-class precision / recall (mean ± std over runs):", ""]
+    for c in next(iter(results.values())):
+        header = ["Method"] + [f"{k} {cls} (D_Cal={c})" for cls in CLASS_NAMES for k in ("P", "R")]
+        lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        for m in results:
+            e = results[m][c]
+            cells = [f"{e[k]['mean'][i]:.2f} ± {e[k]['std'][i]:.2f}" for i in range(len(CLASS_NAMES))
+                     for k in ("precision", "recall")]
+            lines.append("| " + " | ".join([LABELS.get(m, m), *cells]) + " |")
+        lines.append("")
+    return lines

@@ -1,0 +1,421 @@
+"""AcoMerge: fuse K aligned experts into one model by per-parameter search on D_Cal.
+
+The algorithm of the paper (Method, "AcoMerge"), on flat parameter vectors:
+
+Graph and buffer. Parameter index z (T of them) has M candidate values, the
+columns of an (M, T) buffer (`buffer.py`: K experts + `copies` Gaussian-perturbed
+copies of each, 48 by default). An ant picks one candidate per index; the chosen
+values form one candidate model.
+
+Phase 1, MMAS (every generation, `n_ants` ants):
+- Transition (paper eq. aco_transition): for each ant and index draw ρ ~ U(0, 1);
+  if ρ ≤ ρ0 take the candidate with the largest pheromone, otherwise sample with
+  probability ∝ τ^α · η^β. The paper sets η ≡ 1 (`heuristic='constant'`, default).
+  ρ0 follows a linear schedule from `q0_start` to `q0_end` (exploration first); the
+  paper gives no values, 0.5 → 0.95 gave the lowest D_Cal loss in a small sweep
+  (0 → 0.9, 0.3 → 0.98, 0.7 → 0.99, constant 0.9), judged on D_Cal only, never on test data.
+  Vectorised: one uniform tensor (T, P) for ρ; the roulette is inverse-CDF sampling —
+  the rescaled excess (ρ − ρ0)/(1 − ρ0), uniform given ρ > ρ0, times the row total is
+  located with `torch.searchsorted` in the cumulative sums of τ^α·η^β. Ties in the
+  argmax go to the lowest candidate index.
+- Fitness J(θ) = class-weighted cross-entropy on D_Cal (`fitness.py`), lower is
+  better; `AcoMergeResult.best_fitness` is this J. All ants of a generation are
+  evaluated in one batched computation; ants that rebuilt the same path (common once
+  the pheromone has concentrated) share one evaluation.
+- Pheromone update (paper eq. pheromone_update): τ ← ρ_evap·τ + (1 − ρ_evap)·Δτ with
+  Δτ = Q / J(best) on the nodes of the iteration-best ant and 0 elsewhere. Every
+  `gb_every`-th generation the global-best solution deposits instead of the
+  iteration best (the MMAS schedule the paper's "periodic global-best update"
+  refers to).
+- Bounds (standard MMAS, Stützle & Hoos 2000): τ_max = Q / J_gb (the fixed point of
+  the update for a node the best solution always visits, J_gb = best J so far) and
+  τ_min = τ_max · (1 − p_dec) / ((avg − 1) · p_dec), p_dec = p_best^(1/T), with the
+  branching factor avg = M (every index offers all M candidates). τ is clamped to
+  [τ_min, τ_max] after initialisation and after every update (so `tau_init` above
+  τ_max starts every node at τ_max, the usual MMAS start).
+
+Phase 2, IWOA (one update of all T swarms after every `iwoa_every` generations):
+index z is a swarm of its M candidate values, fitness = pheromone, leader = the
+candidate with the largest τ (not moved). Call c = 0..N_outer−1 of N_outer =
+generations // iwoa_every uses a = 2·(1 − c/N_outer) and inertia w = 1 − 2·(c/N_outer)³.
+For every other whale draw p, r1, r2 ~ U(0, 1), A = a(2r1 − 1), C = 2r2:
+  p < 0.5, |A| < 1  encircle:  x ← x* − w·A·|C·x* − x|
+  p < 0.5, |A| ≥ 1  explore:   x ← x_r − w·A·|C·x_r − x|   (x_r a random member)
+  p ≥ 0.5           spiral:    x ← w·|x* − x|·e^{bλ}·cos(2πλ) + x*,  λ ~ U(−1, 1)
+The moved values become the candidates of the next MMAS generations (their pheromone stays).
+
+Ablations (config.phases): ('mmas',) — no IWOA, the buffer never changes;
+('iwoa',) — no pheromone: the M buffer rows are whole-model whales evaluated by J
+every generation, leader = best whale (the paper's "IWOA via ModelSwarm's search
+with PSO replaced"), same update rules with a, w scheduled over the generations.
+
+Returned model: the best EVER evaluated, the unperturbed experts included (they are
+evaluated before the first generation). Budget: `generations` pheromone updates
+(130, one "optimisation step" each, as for the gradient baselines).
+Determinism: every draw comes from one seeded torch.Generator; no global RNG.
+
+Where this follows the paper rather than the reference code (REFERENCE_NOTES.md):
+- fitness is the weighted CE J itself and deposits are Q/J (the reference uses
+  20 − CE and deposits 0.5·(20 − CE));
+- η ≡ 1 as the paper states (the reference uses exp(−|w − w_best|); available as
+  `heuristic='best_distance'`);
+- τ_min from the MMAS formula above (the reference uses τ_max·0.05/((K−1)(0.95 − q)));
+- σ = 0.05 for the buffer copies (the reference code uses 0.005);
+- no ±5 clipping of IWOA positions unless `clip` is set (the paper does not clip).
+Reference bugs avoided:
+- bug 1 (one model in all expert slots): the caller passes K different experts and
+  `acomerge` refuses duplicate expert rows;
+- bug 2 (returns the last generation's best): the best ever, experts included;
+- bug 3 (normal draw compared with q0, i.e. probability Φ(q0)): ρ is uniform;
+- bug 4 (one forward pass per ant): one batched computation per generation.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from ..models import n_params
+from .buffer import BUFFER_KINDS, make_buffer
+from .fitness import CalibrationFitness
+
+PHASES = ("mmas", "iwoa")
+HEURISTICS = ("constant", "best_distance")
+
+
+@dataclass
+class AcoMergeConfig:
+    """Every knob of AcoMerge; defaults are the paper's values where it gives one."""
+
+    n_ants: int = 300  # ants per generation (paper: 300)
+    generations: int = 130  # pheromone updates = optimisation steps (paper: 130)
+    phases: tuple[str, ...] = PHASES  # ('mmas',) / ('iwoa',) are the ablations
+    # buffer
+    copies: int = 15  # perturbed copies per expert -> M = K·(1 + copies) = 48 for K = 3
+    sigma: float = 0.05  # std of the absolute Gaussian perturbation (paper: 0.05)
+    buffer_kind: str = "experts"  # see buffer.py: experts | centroid_random | random
+    # MMAS
+    alpha: float = 1.0  # pheromone exponent
+    beta: float = 1.0  # heuristic exponent (no effect with heuristic='constant')
+    heuristic: str = "constant"  # paper: η ≡ 1; 'best_distance': η = exp(−|w − w_best|)
+    q0_start: float = 0.5  # ρ0 at the first generation (probability of the greedy choice)
+    q0_end: float = 0.95  # ρ0 at the last generation, linear in between
+    evaporation: float = 0.5  # ρ_evap in τ ← ρ_evap·τ + (1 − ρ_evap)·Δτ (paper: 0.5)
+    deposit: float = 1.0  # Q in Δτ = Q / J
+    tau_init: float = 15.0  # initial pheromone, clamped to [τ_min, τ_max] at once
+    p_best: float = 0.05  # MMAS probability of rebuilding the best solution at convergence
+    gb_every: int = 8  # every n_gb-th update uses the global best (0 = never)
+    # IWOA
+    iwoa_every: int = 12  # N_mmas: one IWOA update after this many generations
+    spiral_b: float = 1.0  # b, the logarithmic-spiral shape constant
+    clip: float | None = None  # optional |value| bound on IWOA positions (paper: none)
+    # execution
+    chunk: int = 100  # ants per batched forward chunk (keeps activations in cache)
+    # torch intra-op threads during the run (None: leave as is). One thread is the default:
+    # the kernels are small, and OpenMP thread teams slow down badly on a busy machine.
+    threads: int | None = 1
+
+    def validate(self) -> None:
+        bad = [p for p in self.phases if p not in PHASES]
+        if bad or not self.phases:
+            raise ValueError(f"phases must be a non-empty subset of {PHASES}, got {self.phases}")
+        if self.n_ants < 1 or self.generations < 1:
+            raise ValueError("n_ants and generations must be at least 1")
+        if not (0.0 <= self.q0_start <= 1.0 and 0.0 <= self.q0_end <= 1.0):
+            raise ValueError("q0_start and q0_end must lie in [0, 1]")
+        if not 0.0 <= self.evaporation < 1.0:
+            raise ValueError("evaporation must lie in [0, 1)")
+        if not 0.0 < self.p_best < 1.0:
+            raise ValueError("p_best must lie in (0, 1)")
+        if self.heuristic not in HEURISTICS:
+            raise ValueError(f"heuristic must be one of {HEURISTICS}")
+        if self.buffer_kind not in BUFFER_KINDS:
+            raise ValueError(f"buffer_kind must be one of {BUFFER_KINDS}")
+        if self.iwoa_every < 1 or self.gb_every < 0 or self.deposit <= 0 or self.tau_init <= 0:
+            raise ValueError("iwoa_every ≥ 1, gb_every ≥ 0, deposit > 0 and tau_init > 0 are required")
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass
+class AcoMergeResult:
+    best_flat: torch.Tensor  # (T,) the best model ever evaluated
+    best_fitness: float  # its J: class-weighted CE on D_Cal (lower is better)
+    history: dict[str, list] = field(default_factory=dict)  # per generation, see `acomerge`
+    evaluations: int = 0  # candidate models evaluated, experts included
+    best_origin: str = ""  # "expert k" or "generation g" (1-based)
+    expert_fitness: list[float] = field(default_factory=list)  # J of each unperturbed expert
+
+
+def mmas_bounds(best_j: float, deposit: float, n_choices: int, n_decisions: int, p_best: float) -> tuple[float, float]:
+    """(τ_min, τ_max) of MMAS, see the module docstring."""
+    tau_max = deposit / max(best_j, 1e-12)  # J = 0 would mean an infinitely confident perfect fit
+    if n_choices < 2:
+        return tau_max, tau_max
+    p_dec = p_best ** (1.0 / n_decisions)
+    return tau_max * (1.0 - p_dec) / ((n_choices - 1) * p_dec), tau_max
+
+
+def construct_ants(
+    tau: torch.Tensor, eta: torch.Tensor | None, q0: float, n_ants: int, gen: torch.Generator,
+    alpha: float = 1.0, beta: float = 1.0,
+) -> torch.Tensor:
+    """Pseudo-random-proportional choices of `n_ants` ants: (T, M) pheromone -> (T, n_ants) candidate indices.
+
+    One uniform ρ per (index, ant) decides exploit (ρ ≤ q0: argmax τ) or explore; given
+    ρ > q0, (ρ − q0)/(1 − q0) is again uniform on (0, 1], so the same draw is reused as
+    the roulette's inverse-CDF variate (saves a second random tensor, same distribution).
+    """
+    n_idx, m = tau.shape
+    rho = torch.rand(n_idx, n_ants, generator=gen)
+    greedy = tau.argmax(dim=1, keepdim=True)
+    if q0 >= 1.0:
+        return greedy.expand(n_idx, n_ants).clone()
+    weight = tau if alpha == 1.0 else tau.pow(alpha)
+    if eta is not None:
+        weight = weight * (eta if beta == 1.0 else eta.pow(beta))
+    cum = weight.cumsum(dim=1)
+    u = (rho - q0).mul_(cum[:, -1:] / (1.0 - q0))  # only used where ρ > q0, i.e. u in (0, total]
+    roulette = torch.searchsorted(cum, u, right=True).clamp_(max=m - 1)
+    return torch.where(rho <= q0, greedy, roulette)
+
+
+def whale_update(
+    pos: torch.Tensor, leader: torch.Tensor, a: float, inertia: float, b: float, gen: torch.Generator,
+    clip: float | None = None,
+) -> torch.Tensor:
+    """One IWOA move of S independent swarms: pos (S, M, D), leader (S,) whale index -> new (S, M, D).
+
+    p and λ are drawn per whale, r1 and r2 per coordinate; the leader keeps its position.
+    """
+    s, m, d = pos.shape
+    rows = torch.arange(s)
+    best = pos[rows, leader].unsqueeze(1)  # (S, 1, D)
+    p = torch.rand(s, m, 1, generator=gen)
+    lam = torch.rand(s, m, 1, generator=gen).mul_(2).sub_(1)
+    big_a = a * (2 * torch.rand(s, m, d, generator=gen) - 1)
+    big_c = 2 * torch.rand(s, m, d, generator=gen)
+    partner = torch.randint(0, m, (s, m), generator=gen)
+    other = pos[rows.unsqueeze(1), partner]  # (S, M, D) random swarm members
+    encircle = best - inertia * big_a * (big_c * best - pos).abs()
+    explore = other - inertia * big_a * (big_c * other - pos).abs()
+    spiral = inertia * (best - pos).abs() * torch.exp(b * lam) * torch.cos(2 * math.pi * lam) + best
+    new = torch.where(p < 0.5, torch.where(big_a.abs() < 1, encircle, explore), spiral)
+    if clip is not None:
+        new.clamp_(-clip, clip)
+    new[rows, leader] = pos[rows, leader]
+    return new
+
+
+@contextlib.contextmanager
+def _torch_threads(n: int | None):
+    old = torch.get_num_threads()
+    if n:
+        torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old)
+
+
+def _schedule(c: int, n: int) -> tuple[float, float]:
+    """IWOA coefficients (a, inertia) at step c of n."""
+    frac = c / n
+    return 2.0 * (1.0 - frac), 1.0 - 2.0 * frac**3
+
+
+def acomerge(
+    experts_flat: torch.Tensor,
+    arch: str,
+    x_cal: np.ndarray,
+    y_cal: np.ndarray,
+    config: AcoMergeConfig | None = None,
+    seed: int = 0,
+    progress: bool = False,
+    buffer: torch.Tensor | None = None,
+) -> AcoMergeResult:
+    """Fuse (K, T) aligned expert vectors into one (T,) vector by AcoMerge on D_Cal = (x_cal, y_cal).
+
+    `buffer` (M, T) replaces the default expert buffer (for the buffer ablation).
+    History (one entry per generation): best_so_far, iteration_best, iteration_mean,
+    q0, tau_min, tau_max (the MMAS bounds after the update), tau_lowest, tau_highest (the
+    pheromone actually held after the update), iwoa (whether an IWOA update followed).
+    The whole-model IWOA ablation records only the first three.
+    """
+    cfg = config or AcoMergeConfig()
+    cfg.validate()
+    experts = torch.as_tensor(experts_flat).detach().to(torch.float32)
+    n_t = n_params(arch)
+    if experts.dim() != 2 or experts.shape[1] != n_t:
+        raise ValueError(f"experts must be (K, {n_t}) flat {arch} vectors, got shape {tuple(experts.shape)}")
+    if not torch.isfinite(experts).all():
+        raise ValueError("expert parameters contain NaN or infinity")
+    k = experts.shape[0]
+    for i in range(k):
+        for j in range(i):
+            if torch.equal(experts[i], experts[j]):
+                raise ValueError(f"experts {j} and {i} are identical: fusion needs different models")
+    cand = make_buffer(experts, cfg.copies, cfg.sigma, seed, cfg.buffer_kind) if buffer is None else buffer
+    cand = torch.as_tensor(cand).detach().to(torch.float32).clone()
+    if cand.dim() != 2 or cand.shape[1] != n_t or not torch.isfinite(cand).all():
+        raise ValueError(f"buffer must be a finite (M, {n_t}) tensor, got shape {tuple(cand.shape)}")
+    fitness = CalibrationFitness(arch, x_cal, y_cal, chunk=cfg.chunk)
+    return search(experts, cand, fitness, cfg, seed=seed, progress=progress)
+
+
+def search(
+    experts: torch.Tensor,
+    cand: torch.Tensor,
+    fitness: Callable[[torch.Tensor], torch.Tensor],
+    config: AcoMergeConfig,
+    seed: int = 0,
+    progress: bool = False,
+) -> AcoMergeResult:
+    """The search itself, for any batched fitness (P, T) -> (P,) to minimise.
+
+    `acomerge` calls it with the D_Cal cross-entropy; tests call it with toy objectives
+    whose optimum is known. The experts are evaluated first; `cand` (M, T) is the buffer.
+    """
+    config.validate()
+    cand = cand.detach().to(torch.float32).clone()
+    gen = torch.Generator().manual_seed(seed + 1_000_003)  # independent of the buffer's stream
+    with _torch_threads(config.threads):
+        j_experts = torch.nan_to_num(fitness(experts), nan=math.inf)
+        best = int(torch.argmin(j_experts))
+        result = AcoMergeResult(
+            best_flat=experts[best].clone(),
+            best_fitness=float(j_experts[best]),
+            evaluations=experts.shape[0],
+            best_origin=f"expert {best}",
+            expert_fitness=[float(v) for v in j_experts],
+        )
+        run = _run_mmas if "mmas" in config.phases else _run_whole_model_iwoa
+        run(config, cand, fitness, gen, result, progress)
+    return result
+
+
+def _keep_if_better(result: AcoMergeResult, j: torch.Tensor, flats: torch.Tensor, g: int) -> int | None:
+    """Record the best of this generation if it beats the best ever; return its index if so."""
+    i = int(torch.argmin(j))
+    if float(j[i]) < result.best_fitness:
+        result.best_fitness = float(j[i])
+        result.best_flat = flats[i].clone()
+        result.best_origin = f"generation {g + 1}"
+        return i
+    return None
+
+
+def _run_mmas(
+    cfg: AcoMergeConfig, cand: torch.Tensor, fitness: Callable[[torch.Tensor], torch.Tensor], gen: torch.Generator,
+    result: AcoMergeResult, progress: bool,
+) -> None:
+    m, n_t = cand.shape
+    cand_t = cand.T.contiguous()  # (T, M): row z holds the candidates of parameter z
+    idx_rows = torch.arange(n_t)
+    # The best expert's path exists when it is in the buffer (default layouts: row k = expert k).
+    best_path: torch.Tensor | None = None
+    for row in range(m):
+        if torch.equal(cand[row], result.best_flat):
+            best_path = torch.full((n_t,), row, dtype=torch.long)
+            break
+    tau_min, tau_max = mmas_bounds(result.best_fitness, cfg.deposit, m, n_t, cfg.p_best)
+    tau = torch.full((n_t, m), cfg.tau_init).clamp_(tau_min, tau_max)
+    eta = _heuristic(cfg, cand_t, result.best_flat)
+    with_iwoa = "iwoa" in cfg.phases
+    n_outer = max(1, cfg.generations // cfg.iwoa_every)
+    n_calls = 0
+    hash_w = torch.rand(n_t, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    keys = ("best_so_far", "iteration_best", "iteration_mean", "q0", "tau_min", "tau_max", "tau_lowest", "tau_highest", "iwoa")
+    hist: dict[str, list] = {k: [] for k in keys}
+    bar = tqdm(range(cfg.generations), desc="AcoMerge", disable=not progress, leave=False)
+    for g in bar:
+        q0 = cfg.q0_start + (cfg.q0_end - cfg.q0_start) * (g / max(1, cfg.generations - 1))
+        choice = construct_ants(tau, eta, q0, cfg.n_ants, gen, cfg.alpha, cfg.beta)  # (T, P)
+        j, ants = _evaluate_distinct(choice, cand_t, fitness, hash_w)
+        result.evaluations += cfg.n_ants
+        ib = int(torch.argmin(j))
+        if _keep_if_better(result, j, ants, g) is not None:
+            best_path = choice[:, ib].clone()
+            eta = _heuristic(cfg, cand_t, result.best_flat)
+        # The global-best deposit reinforces the best path's nodes (after an IWOA update those
+        # nodes hold moved values; the pheromone belongs to the node, as in the paper's graph).
+        use_gb = cfg.gb_every > 0 and (g + 1) % cfg.gb_every == 0 and best_path is not None
+        path, j_dep = (best_path, result.best_fitness) if use_gb else (choice[:, ib], float(j[ib]))
+        tau.mul_(cfg.evaporation)
+        if math.isfinite(j_dep):
+            tau[idx_rows, path] += (1.0 - cfg.evaporation) * cfg.deposit / j_dep
+        tau_min, tau_max = mmas_bounds(result.best_fitness, cfg.deposit, m, n_t, cfg.p_best)
+        tau.clamp_(tau_min, tau_max)
+        did_iwoa = with_iwoa and (g + 1) % cfg.iwoa_every == 0 and n_calls < n_outer
+        if did_iwoa:
+            a, inertia = _schedule(n_calls, n_outer)
+            leader = tau.argmax(dim=1)
+            cand_t = whale_update(cand_t.unsqueeze(-1), leader, a, inertia, cfg.spiral_b, gen, cfg.clip).squeeze(-1)
+            n_calls += 1
+            eta = _heuristic(cfg, cand_t, result.best_flat)
+        finite = j[torch.isfinite(j)]
+        for key, value in (
+            ("best_so_far", result.best_fitness), ("iteration_best", float(j[ib])),
+            ("iteration_mean", float(finite.mean()) if finite.numel() else math.inf),
+            ("q0", q0), ("tau_min", tau_min), ("tau_max", tau_max),
+            ("tau_lowest", float(tau.min())), ("tau_highest", float(tau.max())), ("iwoa", did_iwoa),
+        ):
+            hist[key].append(value)
+        bar.set_postfix(best=f"{result.best_fitness:.4f}")
+    result.history = hist
+
+
+def _evaluate_distinct(
+    choice: torch.Tensor, cand_t: torch.Tensor, fitness: Callable[[torch.Tensor], torch.Tensor], hash_w: torch.Tensor,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Fitness (P,) and models (P, T) of the ants in `choice` (T, P), each distinct path evaluated once.
+
+    Late in a run most ants rebuild the same few paths (pheromone concentrates), so
+    evaluating distinct paths only saves a large share of the forward passes. Paths are
+    grouped by a random projection of their indices, then checked exactly.
+    """
+    n_ants = choice.shape[1]
+    ants = cand_t.gather(1, choice).T.contiguous()
+    _, inverse = torch.unique(hash_w @ choice.to(torch.float64), return_inverse=True)
+    first = torch.full((int(inverse.max()) + 1,), n_ants).scatter_reduce_(0, inverse, torch.arange(n_ants), "amin")
+    rep = first[inverse]  # representative ant of each ant's group
+    if first.numel() == n_ants or not torch.equal(choice[:, rep], choice):
+        return torch.nan_to_num(fitness(ants), nan=math.inf), ants
+    return torch.nan_to_num(fitness(ants[first]), nan=math.inf)[inverse], ants
+
+
+def _heuristic(cfg: AcoMergeConfig, cand_t: torch.Tensor, best_flat: torch.Tensor) -> torch.Tensor | None:
+    if cfg.heuristic == "constant":
+        return None  # η ≡ 1
+    return torch.exp(-(cand_t - best_flat.unsqueeze(1)).abs())
+
+
+def _run_whole_model_iwoa(
+    cfg: AcoMergeConfig, cand: torch.Tensor, fitness: Callable[[torch.Tensor], torch.Tensor], gen: torch.Generator,
+    result: AcoMergeResult, progress: bool,
+) -> None:
+    """IWOA-only ablation: the buffer rows are whales (whole models), fitness J, leader = lowest J."""
+    whales = cand.unsqueeze(0)  # one swarm of M whales in T dimensions
+    hist: dict[str, list] = {k: [] for k in ("best_so_far", "iteration_best", "iteration_mean")}
+    bar = tqdm(range(cfg.generations), desc="IWOA", disable=not progress, leave=False)
+    for g in bar:
+        j = torch.nan_to_num(fitness(whales[0]), nan=math.inf)
+        result.evaluations += whales.shape[1]
+        _keep_if_better(result, j, whales[0], g)
+        leader = torch.argmin(j).view(1)
+        a, inertia = _schedule(g, cfg.generations)
+        whales = whale_update(whales, leader, a, inertia, cfg.spiral_b, gen, cfg.clip)
+        finite = j[torch.isfinite(j)]
+        hist["best_so_far"].append(result.best_fitness)
+        hist["iteration_best"].append(float(j.min()))
+        hist["iteration_mean"].append(float(finite.mean()) if finite.numel() else math.inf)
+        bar.set_postfix(best=f"{result.best_fitness:.4f}")
+    result.history = hist

@@ -1,0 +1,217 @@
+"""`fleetlab bench fusion`: how fast AcoMerge evaluates a generation, and a full run.
+
+Figures (one JSON object with --json):
+- batched_ms_per_generation: one full AcoMerge generation as `acomerge` runs it — ant
+  construction, one batched evaluation of all ants, pheromone update (IWOA amortised) —
+  measured as the full run's time divided by its generations;
+- batched_eval_ms: only the batched fitness of one generation's ants;
+- sequential_ms_per_generation: the same ants evaluated one at a time the way the
+  reference code does it: copy the flat vector into an nn.Module, run D_Cal through a
+  torch DataLoader (batches of 200, its setting), softmax, predictions and probabilities
+  collected row by row into numpy, weighted CE in numpy (ant construction not included);
+- sequential_fullbatch_ms_per_generation: one at a time through the nn.Module but with
+  all of D_Cal in one batch and torch's weighted cross-entropy (a stronger baseline);
+- speedup = sequential / batched (full generation), speedup_vs_fullbatch likewise;
+- full_run_s: one complete run (SN-S, 300 ants, 130 generations, |D_Cal| = 200 by default);
+- every timing is the best of its repeats (the one least disturbed by other processes);
+- max_abs_fitness_diff: batched vs sequential fitness of the same ants (must be ~1e-6);
+- cpu: the same figures in process CPU time, and load_average_1min: wall-clock figures
+  are only meaningful on an otherwise idle machine; with one thread the CPU-time
+  figures approximate them when other jobs share the cores.
+
+Calibration data: a paper-protocol draw from `--data` (the target rover's rows) or,
+without --data, a synthetic three-class set whose feature means and spreads are of
+the same order as the real Fleet-To-Lab windows. Experts: three SN-S/SN-D models
+from different seeds, briefly trained on it, so the fitness landscape is not flat.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, TensorDataset
+
+from ..data.contracts import N_CLASSES
+from ..models import build, flatten, load_flat
+from ..models.mlp import ARCHS
+from .acomerge import AcoMergeConfig, acomerge, construct_ants
+from .buffer import make_buffer
+from .finetune import finetune
+from .fitness import CalibrationFitness
+
+TARGET_SPEEDUP = 50.0
+TARGET_FULL_RUN_S = 2.0
+REFERENCE_BATCH = 200  # the reference's D_Cal loader batch size (BATCH_SIZE_ADAPT)
+
+# Per-feature location and spread, same order of magnitude as the real windows (raw units).
+_LOC = np.array([3.0, 0.07, 67.0, 14.0, 0.0, 0.7, 0.02, 0.4, 0.0, 1.4, -0.13, -0.03], dtype=np.float32)
+_SCALE = np.array([0.4, 0.08, 11.0, 10.0, 0.05, 0.45, 0.05, 0.25, 0.07, 1.2, 0.22, 0.22], dtype=np.float32)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.epilog = (
+        "Prints batched_ms_per_generation (a full AcoMerge generation), sequential_ms_per_generation "
+        "(the same ants one at a time through an nn.Module, the reference code's way), their speedup, "
+        f"and full_run_s (one complete run). Targets: speedup >= {TARGET_SPEEDUP:g}, full run <= {TARGET_FULL_RUN_S:g} s."
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    p.add_argument("--data", type=Path, help="dataset folder: draw D_Cal from its target rows (default: synthetic)")
+    p.add_argument("--arch", default="sn-s", choices=sorted(ARCHS), help="architecture (default: sn-s)")
+    p.add_argument("--ants", type=int, default=300, help="ants per generation (default: 300)")
+    p.add_argument("--generations", type=int, default=130, help="generations of the full run (default: 130)")
+    p.add_argument("--cal-size", type=int, default=200, help="|D_Cal| (default: 200)")
+    p.add_argument("--repeats", type=int, default=5, help="repeats of the per-generation timings, best kept (default: 5)")
+    p.add_argument("--full-runs", type=int, default=3, help="complete runs timed, best kept (default: 3)")
+    p.add_argument("--threads", type=int, default=1, help="torch threads (default: 1)")
+    p.add_argument("--seed", type=int, default=0, help="seed (default: 0)")
+
+
+def synthetic_calibration(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Three classes (65/22/13 %, the paper's D_Cal mix) whose means shift with the class."""
+    rng = np.random.default_rng(seed)
+    y = rng.choice(N_CLASSES, size=n, p=[0.65, 0.22, 0.13])
+    shift = np.linspace(-1.0, 1.0, N_CLASSES)[y, None] * _SCALE
+    x = _LOC + shift + rng.standard_normal((n, _LOC.size)).astype(np.float32) * _SCALE
+    return x.astype(np.float32), y.astype(np.int64)
+
+
+def _calibration(args) -> tuple[np.ndarray, np.ndarray, str]:
+    if args.data is None:
+        x, y = synthetic_calibration(args.cal_size, args.seed)
+        return x, y, "synthetic"
+    from ..data.dataset import TARGET, load_dataset
+    from ..data.splits import make_split
+
+    ds = load_dataset(args.data)
+    x, y = ds.xy(TARGET)
+    cal = make_split("paper", y, ds.groups(TARGET), args.cal_size, args.seed).cal
+    return x[cal], y[cal], f"{args.data} (target rows, paper split)"
+
+
+def reference_style_fitness(model, flat: torch.Tensor, loader: DataLoader, y: np.ndarray) -> float:
+    """One ant evaluated as the reference does: load weights, mini-batch predictions, numpy CE."""
+    load_flat(model, flat)
+    model.eval()
+    preds, probs = [], []
+    with torch.no_grad():
+        for (xb,) in loader:
+            prob = torch.softmax(model(xb), dim=1)
+            preds.extend(prob.argmax(dim=1).numpy())
+            probs.extend(prob.numpy())
+    p = np.clip(np.array(probs), 1e-8, 1.0)
+    counts = np.bincount(y, minlength=N_CLASSES)
+    w = (len(y) / (N_CLASSES * np.maximum(counts, 1)))[y]
+    return float(-np.sum(w * np.log(p[np.arange(len(y)), y])) / np.sum(w))
+
+
+def _timed(fn, repeats: int, warmup=None) -> tuple[float, float]:
+    """Best (smallest) wall-clock and process-CPU milliseconds of `fn` over `repeats` calls:
+    on a shared machine the minimum is the run least disturbed by other processes."""
+    (warmup or fn)()
+    wall, cpu = [], []
+    for _ in range(repeats):
+        w0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        wall.append(time.perf_counter() - w0)
+        cpu.append(time.process_time() - c0)
+    return 1e3 * min(wall), 1e3 * min(cpu)
+
+
+def measure(args) -> dict:
+    torch.set_num_threads(args.threads)
+    x, y, source = _calibration(args)
+    experts = torch.stack([flatten(finetune(build(args.arch, seed=args.seed + k), x, y, steps=30, seed=k)) for k in range(3)])
+    buffer = make_buffer(experts, 15, 0.05, args.seed)
+    gen = torch.Generator().manual_seed(args.seed)
+    tau = torch.rand(buffer.shape[1], buffer.shape[0], generator=gen) + 0.5
+    choice = construct_ants(tau, None, 0.5, args.ants, gen)
+    ants = buffer.T.gather(1, choice).T.contiguous()
+
+    fitness = CalibrationFitness(args.arch, x, y)
+    eval_ms, eval_cpu = _timed(lambda: fitness(ants), args.repeats)
+    batched_j = fitness(ants)
+
+    model = build(args.arch)
+    xt = torch.from_numpy(x)
+    loader = DataLoader(TensorDataset(xt), batch_size=REFERENCE_BATCH, shuffle=False)
+    seq_j: list[float] = []
+
+    def sequential():
+        seq_j.clear()
+        seq_j.extend(reference_style_fitness(model, a, loader, y) for a in ants)
+
+    def warmup():
+        for a in ants[:5]:
+            reference_style_fitness(model, a, loader, y)
+
+    # the slow baselines: fewer repeats, warm-up on a few ants only
+    seq_ms, seq_cpu = _timed(sequential, max(1, args.repeats // 2), warmup)
+    yt, wt = torch.from_numpy(y), torch.as_tensor(
+        len(y) / (N_CLASSES * np.maximum(np.bincount(y, minlength=N_CLASSES), 1)), dtype=torch.float32)
+
+    def sequential_fullbatch():
+        with torch.no_grad():
+            for a in ants:
+                torch.nn.functional.cross_entropy(load_flat(model, a)(xt), yt, weight=wt)
+
+    full_ms, full_cpu = _timed(sequential_fullbatch, max(1, args.repeats // 2), warmup)
+
+    config = AcoMergeConfig(n_ants=args.ants, generations=args.generations, threads=args.threads)
+    run_ms, run_cpu = _timed(lambda: acomerge(experts, args.arch, x, y, config, seed=args.seed), args.full_runs,
+                             warmup=lambda: acomerge(experts, args.arch, x, y, replace(config, generations=2), seed=args.seed))
+    gen_ms, gen_cpu = run_ms / args.generations, run_cpu / args.generations
+    return {
+        "arch": args.arch, "ants": args.ants, "generations": args.generations, "cal_size": int(len(y)),
+        "calibration": source, "threads": args.threads,
+        "batched_ms_per_generation": round(gen_ms, 3),
+        "batched_eval_ms": round(eval_ms, 3),
+        "sequential_ms_per_generation": round(seq_ms, 3),
+        "sequential_fullbatch_ms_per_generation": round(full_ms, 3),
+        "speedup": round(seq_ms / gen_ms, 2),
+        "speedup_vs_fullbatch": round(full_ms / gen_ms, 2),
+        "full_run_s": round(run_ms / 1e3, 3),
+        # process CPU time: what the figures would be on an otherwise idle machine (with 1 thread)
+        "cpu": {"batched_ms_per_generation": round(gen_cpu, 3), "batched_eval_ms": round(eval_cpu, 3),
+                "sequential_ms_per_generation": round(seq_cpu, 3),
+                "sequential_fullbatch_ms_per_generation": round(full_cpu, 3),
+                "speedup": round(seq_cpu / gen_cpu, 2), "full_run_s": round(run_cpu / 1e3, 3)},
+        "load_average_1min": round(os.getloadavg()[0], 2),
+        "max_abs_fitness_diff": float(np.max(np.abs(np.array(seq_j) - batched_j.numpy()))),
+        "targets": {"speedup": TARGET_SPEEDUP, "full_run_s": TARGET_FULL_RUN_S},
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    for name in ("ants", "generations", "cal_size", "repeats", "full_runs", "threads"):
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name.replace('_', '-')} must be at least 1")
+    previous_threads = torch.get_num_threads()
+    try:
+        result = measure(args)
+    finally:
+        torch.set_num_threads(previous_threads)
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    print(f"AcoMerge benchmark: {result['arch']}, {result['ants']} ants, |D_Cal| = {result['cal_size']} "
+          f"({result['calibration']}), {result['threads']} thread(s)")
+    for key in ("batched_ms_per_generation", "batched_eval_ms", "sequential_ms_per_generation",
+                "sequential_fullbatch_ms_per_generation"):
+        print(f"  {key:40s} {result[key]:10.3f} ms")
+    print(f"  {'speedup (reference-style sequential)':40s} {result['speedup']:10.1f} x   (target >= {TARGET_SPEEDUP:g})")
+    print(f"  {'speedup (full-batch sequential)':40s} {result['speedup_vs_fullbatch']:10.1f} x")
+    print(f"  {'full run, ' + str(result['generations']) + ' generations':40s} {result['full_run_s']:10.3f} s    "
+          f"(target <= {TARGET_FULL_RUN_S:g})")
+    print(f"  {'max |batched - sequential| fitness':40s} {result['max_abs_fitness_diff']:10.2e}")
+    cpu = result["cpu"]
+    print(f"  process CPU time (machine load {result['load_average_1min']}): {cpu['batched_ms_per_generation']:.2f} ms vs "
+          f"{cpu['sequential_ms_per_generation']:.1f} ms per generation = {cpu['speedup']:.1f} x; "
+          f"full run {cpu['full_run_s']:.3f} s")
+    return 0

@@ -1,0 +1,37 @@
+"""Full fine-tuning of a model on D_Cal: the Earth+FullFinetune reference point.
+
+The budget is counted in optimiser steps (default 130, the same number of
+optimisation steps AcoMerge gets as generations).
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from ..models import SlipNet
+from ..models.train import EXPERT_BATCH, EXPERT_LR, train_classifier
+
+FINETUNE_STEPS = 130
+
+
+def finetune(
+    model: SlipNet,
+    x: np.ndarray,
+    y: np.ndarray,
+    steps: int = FINETUNE_STEPS,
+    lr: float = EXPERT_LR,
+    batch_size: int = EXPERT_BATCH,
+    seed: int = 0,
+) -> SlipNet:
+    """A fine-tuned COPY of `model`: `steps` Adam updates on class-weighted CE over (x, y).
+
+    The input model is left untouched. Seeded (batch order and dropout masks).
+    """
+    if steps < 1:
+        raise ValueError(f"fine-tune steps must be at least 1, got {steps}")
+    if len(y) == 0:
+        raise ValueError("cannot fine-tune on an empty calibration set")
+    tuned = copy.deepcopy(model)
+    return train_classifier(tuned, x, y, epochs=None, steps=steps, lr=lr, batch_size=batch_size, seed=seed)

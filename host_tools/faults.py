@@ -121,6 +121,26 @@ def _window_faults(n_windows: int, kinds: list[str], rate: float, rng: np.random
     return out
 
 
+FRAME_LEVEL = ("bad_crc", "wrong_length", "unknown_id", "duplicated_frame")
+
+
+def _with_frame_fault(kind: str, fs, part: int, fidx: int) -> list[WireItem]:
+    """The frames `fs` of one sample or feature set as sent with a frame-level fault on frame `part`."""
+    items: list[WireItem] = []
+    for j, f in enumerate(fs):
+        if j != part:
+            items.append(WireItem(f))
+        elif kind == "bad_crc":
+            items.append(WireItem(f, corrupt="bad_crc", fault=fidx))
+        elif kind == "wrong_length":
+            items.append(WireItem(Frame(f.can_id, f.data[:-1]), fault=fidx))
+        elif kind == "unknown_id":  # sent before the genuine frame
+            items += [WireItem(Frame(unknown_id(), f.data), fault=fidx), WireItem(f)]
+        else:  # duplicated_frame
+            items += [WireItem(f), WireItem(f, fault=fidx)]
+    return items
+
+
 def plan_telemetry(
     samples_q: np.ndarray,
     kinds: list[str],
@@ -165,29 +185,14 @@ def plan_telemetry(
             fs = frames[i]
             if i != k:
                 seg.items.extend(WireItem(f) for f in fs)
-            elif kind in ("bad_crc", "wrong_length"):
-                for j, f in enumerate(fs):
-                    if j != part:
-                        seg.items.append(WireItem(f))
-                    elif kind == "bad_crc":
-                        seg.items.append(WireItem(f, corrupt="bad_crc", fault=fidx))
-                    else:
-                        seg.items.append(WireItem(Frame(f.can_id, f.data[:-1]), fault=fidx))
-            elif kind == "unknown_id":
-                seg.items.extend(WireItem(f) for f in fs[:part])
-                seg.items.append(WireItem(Frame(unknown_id(), fs[part].data), fault=fidx))
-                seg.items.extend(WireItem(f) for f in fs[part:])
+            elif kind in FRAME_LEVEL:
+                seg.items.extend(_with_frame_fault(kind, fs, part, fidx))
             elif kind == "dropped_sample":
                 pass
             elif kind == "reordered_samples":
                 seg.items.extend(WireItem(f) for f in frames[i + 1])
                 seg.items.extend(WireItem(f, fault=fidx) for f in fs)
                 i += 1
-            elif kind == "duplicated_frame":
-                for j, f in enumerate(fs):
-                    seg.items.append(WireItem(f))
-                    if j == part:
-                        seg.items.append(WireItem(f, fault=fidx))
             i += 1
         seg.n_source_units += stop - base
         if kind == "restart":
@@ -232,27 +237,11 @@ def plan_features(
             seg.items.extend(WireItem(f) for f in fs)
             seg.n_source_units += 1
             continue
-        if kind in ("bad_crc", "wrong_length"):
-            # the set cannot complete: its other parts are discarded when the next set starts
-            faults.append(Fault(kind, len(segments) - 1, w - wc0, 4, 0, False))
-            for j, f in enumerate(fs):
-                if j != part:
-                    seg.items.append(WireItem(f))
-                elif kind == "bad_crc":
-                    seg.items.append(WireItem(f, corrupt="bad_crc", fault=fidx))
-                else:
-                    seg.items.append(WireItem(Frame(f.can_id, f.data[:-1]), fault=fidx))
-        elif kind == "unknown_id":
-            faults.append(Fault(kind, len(segments) - 1, w - wc0, 1, 0, False))
-            seg.items.extend(WireItem(f) for f in fs[:part])
-            seg.items.append(WireItem(Frame(unknown_id(), fs[part].data), fault=fidx))
-            seg.items.extend(WireItem(f) for f in fs[part:])
-        elif kind == "duplicated_frame":
-            faults.append(Fault(kind, len(segments) - 1, w - wc0, 1, 0, False))
-            for j, f in enumerate(fs):
-                seg.items.append(WireItem(f))
-                if j == part:
-                    seg.items.append(WireItem(f, fault=fidx))
+        if kind in FRAME_LEVEL:
+            # a corrupted part cannot complete its set: the other three are discarded when the next set starts
+            rejected = 4 if kind in ("bad_crc", "wrong_length") else 1
+            faults.append(Fault(kind, len(segments) - 1, w - wc0, rejected, 0, False))
+            seg.items.extend(_with_frame_fault(kind, fs, part, fidx))
         elif kind == "restart":
             faults.append(Fault(kind, len(segments) - 1, w - wc0, 0, 0, False))
             seg.items.extend(WireItem(f) for f in fs[:2])  # half a set, then the estimator dies

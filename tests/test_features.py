@@ -61,7 +61,7 @@ def test_rate_sets_window_length():
 def test_nonfinite_and_bad_shape_are_refused():
     x = np.zeros((200, N_CHANNELS))
     x[150, 3] = np.nan
-    with pytest.raises(ValueError, match="sample 150"):
+    with pytest.raises(ValueError, match="row 150"):
         featurise(x)
     with pytest.raises(ValueError, match="shape"):
         featurise(np.zeros((200, 6)))

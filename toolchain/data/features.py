@@ -63,17 +63,23 @@ _STD_COLS = np.array([CH[c] for c, stat in FEATURE_SOURCES if stat == "std"])
 _IS_MEAN = np.array([stat == "mean" for _, stat in FEATURE_SOURCES])
 
 
+def finite_matrix(x: np.ndarray, width: int, what: str) -> np.ndarray:
+    """x as float64 (n, width); a clear error for another shape or any NaN/Inf (names the first row)."""
+    x = np.asarray(x, dtype=np.float64)
+    if x.ndim != 2 or x.shape[1] != width:
+        raise ValueError(f"{what} must have shape (n, {width}), got {x.shape}")
+    if not np.isfinite(x).all():
+        row = int(np.argwhere(~np.isfinite(x))[0, 0])
+        raise ValueError(f"{what} contain NaN/Inf (first at row {row})")
+    return x
+
+
 def featurise(samples: np.ndarray, spec: WindowSpec | None = None) -> np.ndarray:
     """Raw samples (n, 7) in RAW_CHANNELS order -> features (n_windows, 12) float64.
 
     Mean and population std (ddof=0) per window, in FEATURE_NAMES order.
     """
-    samples = np.asarray(samples, dtype=np.float64)
-    if samples.ndim != 2 or samples.shape[1] != N_CHANNELS:
-        raise ValueError(f"samples must have shape (n, {N_CHANNELS}), got {samples.shape}")
-    if not np.isfinite(samples).all():
-        bad = int(np.argwhere(~np.isfinite(samples))[0, 0])
-        raise ValueError(f"samples contain NaN/Inf (first at sample {bad})")
+    samples = finite_matrix(samples, N_CHANNELS, "samples")
     spec = spec or WindowSpec.for_rate()
     win = _windows(samples, spec)
     mean = win.mean(axis=1)

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .contracts import FEATURE_SOURCES, MIN_SAMPLES_PER_WINDOW, N_CHANNELS, N_FEATURES, RAW_CHANNELS, RAW_LSB
+from .features import finite_matrix
 
 INT16_MIN, INT16_MAX = -32768, 32767
 SAMPLES_PER_WINDOW = 100
@@ -57,12 +58,7 @@ def _round_half_away(x: np.ndarray) -> np.ndarray:
 
 
 def _quantize(x: np.ndarray, lsb: np.ndarray, what: str, width: int) -> tuple[np.ndarray, int]:
-    x = np.asarray(x, dtype=np.float64)
-    if x.ndim != 2 or x.shape[1] != width:
-        raise ValueError(f"{what} must have shape (n, {width}), got {x.shape}")
-    if not np.isfinite(x).all():
-        row = int(np.argwhere(~np.isfinite(x))[0, 0])
-        raise ValueError(f"{what} contain NaN/Inf (first at row {row})")
+    x = finite_matrix(x, width, what)
     q = _round_half_away(x / lsb)
     saturated = int(np.count_nonzero((q < INT16_MIN) | (q > INT16_MAX)))
     return np.clip(q, INT16_MIN, INT16_MAX).astype(np.int16), saturated

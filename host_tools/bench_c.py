@@ -141,7 +141,6 @@ def python_baselines(bundle: Path, n: int) -> dict[str, Callable[[], object]]:
     import torch
 
     from fleetlab.export.bundle import load_bundle
-    from fleetlab.models import build
 
     b = load_bundle(bundle)
     with np.load(Path(bundle) / "vectors.npz") as z:
@@ -153,15 +152,7 @@ def python_baselines(bundle: Path, n: int) -> dict[str, Callable[[], object]]:
     name = sess.get_inputs()[0].name
 
     torch.set_num_threads(1)
-    model = build("sn-s", seed=0).eval()
-    fp = b.fparams
-    with torch.no_grad():
-        model.linears[0].weight.copy_(torch.from_numpy(fp.w1))
-        model.linears[0].bias.copy_(torch.from_numpy(fp.b1))
-        model.norms[0].weight.copy_(torch.from_numpy(fp.gamma))
-        model.norms[0].bias.copy_(torch.from_numpy(fp.beta))
-        model.head.weight.copy_(torch.from_numpy(fp.w2))
-        model.head.bias.copy_(torch.from_numpy(fp.b2))
+    model = b.fparams.to_model()
     xt = torch.from_numpy(x)
 
     def torch_call():

@@ -230,7 +230,7 @@ def node_run(lib, frames: list[tuple[int, bytes]]):
     node = ctypes.create_string_buffer(lib.slipest_node_size())
     lib.slipest_node_init(node)
     out = (Frame * 9)()
-    outputs, statuses = [], []
+    outputs = []
     for fid, data in frames:
         f = Frame(fid, len(data), (ctypes.c_uint8 * 8)(*data))
         n = lib.slipest_node_handle(node, ctypes.byref(f), out, 9)

@@ -9,7 +9,6 @@ the files the stages wrote (nothing in it is typed by hand).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shlex
 import shutil

@@ -173,3 +173,16 @@ def test_evaluate_cli_bad_input(real_data_dir, capsys, extra, message):
 def test_evaluate_cli_missing_data_dir(tmp_path, capsys):
     assert main(["evaluate", "--data", str(tmp_path / "nowhere")]) == 1
     assert "nowhere" in capsys.readouterr().err
+
+
+def test_buffer_sigma_reaches_the_run_buffer():
+    import torch
+
+    from fleetlab.evaluation.methods import make_run_buffer
+
+    experts = torch.stack([torch.zeros(543), torch.ones(543), torch.full((543,), 2.0)])
+    for sigma in (0.05, 0.005):
+        buf = make_run_buffer(experts, "experts", seed=0, sigma=sigma)
+        assert buf.shape == (48, 543)
+        noise = torch.cat([buf[(buf - c).abs().amax(dim=1) < 0.5] - c for c in (0.0, 1.0, 2.0)])
+        assert abs(float(noise[noise != 0].std()) - sigma) < 0.1 * sigma

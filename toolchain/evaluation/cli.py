@@ -39,6 +39,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="AcoMerge generations = optimisation steps of EVERY method (Adam steps, CMA-ES "
                    "generations, PSO iterations) (default: 130)")
     p.add_argument("--ants", type=int, default=300, help="AcoMerge ants per generation (default: 300)")
+    p.add_argument("--sigma", type=float, default=0.05,
+                   help="std of the Gaussian-perturbed expert copies in the AcoMerge/ModelSwarm buffer "
+                   "(default: 0.05, the paper's value; the reference code used 0.005)")
     p.add_argument("--methods", default="all", metavar="LIST",
                    help=f"comma-separated methods out of: {', '.join(METHODS)} (default: all)")
     p.add_argument("--buffer-ablation", action="store_true",
@@ -59,7 +62,8 @@ def settings_from_args(args: argparse.Namespace) -> EvalSettings:
         raise ValueError("--backend dask needs --scheduler ADDRESS")
     return EvalSettings(
         protocol=args.protocol, arch=args.arch, cal_sizes=tuple(args.cal_sizes or DEFAULT_CAL_SIZES),
-        runs=args.runs, seed=args.seed, epochs=args.epochs, budget=Budget(steps=args.generations, ants=args.ants),
+        runs=args.runs, seed=args.seed, epochs=args.epochs,
+        budget=Budget(steps=args.generations, ants=args.ants, sigma=args.sigma),
         methods=tuple(parse_methods(args.methods)), buffer_ablation=args.buffer_ablation,
     )
 

@@ -58,8 +58,8 @@ class EvalSettings:
             raise ValueError(f"unknown protocol {self.protocol!r}; choose one of {', '.join(PROTOCOLS)}")
         if self.arch not in ARCHS:
             raise ValueError(f"unknown architecture {self.arch!r}; choose one of {', '.join(ARCHS)}")
-        if self.runs < 1 or self.epochs < 1 or self.budget.steps < 1 or self.budget.ants < 1:
-            raise ValueError("runs, epochs, generations and ants must all be at least 1")
+        if self.runs < 1 or self.epochs < 1 or self.budget.steps < 1 or self.budget.ants < 1 or self.budget.sigma < 0:
+            raise ValueError("runs, epochs, generations and ants must all be at least 1, sigma not negative")
         if not self.cal_sizes or min(self.cal_sizes) < 3:
             raise ValueError(f"calibration sizes must be at least 3 rows, got {list(self.cal_sizes)}")
         unknown = set(self.methods) - set(METHODS)

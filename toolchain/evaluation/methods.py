@@ -65,6 +65,7 @@ class Sources:
 class Budget:
     steps: int = bl.BUDGET_STEPS  # AcoMerge generations = optimisation steps of every baseline
     ants: int = 300
+    sigma: float = BUFFER_SIGMA  # std of the perturbed copies in the 48-model buffer (paper 0.05)
 
 
 def _aco_config(variant: str, budget: Budget):
@@ -78,10 +79,10 @@ def _aco_config(variant: str, budget: Budget):
     return cfg
 
 
-def make_run_buffer(aligned: torch.Tensor, kind: str, seed: int) -> torch.Tensor:
+def make_run_buffer(aligned: torch.Tensor, kind: str, seed: int, sigma: float = BUFFER_SIGMA) -> torch.Tensor:
     from ..fusion.buffer import make_buffer
 
-    return make_buffer(aligned, copies=BUFFER_COPIES, sigma=BUFFER_SIGMA, seed=seed, kind=kind)
+    return make_buffer(aligned, copies=BUFFER_COPIES, sigma=sigma, seed=seed, kind=kind)
 
 
 def fit_method(
@@ -104,7 +105,7 @@ def fit_method(
     if method == "evomerge":
         return bl.evomerge(aligned, arch, x_cal, y_cal, seed, steps=steps), None
     if method == "modelswarm":
-        buffer = make_run_buffer(aligned, "experts", buffer_seed)
+        buffer = make_run_buffer(aligned, "experts", buffer_seed, budget.sigma)
         return bl.modelswarm(aligned, arch, x_cal, y_cal, seed, steps=steps, buffer=buffer), None
     if method == "distill":
         return flatten(bl.distill(torch.as_tensor(src.experts), arch, x_cal, y_cal, seed, steps=steps)), None
@@ -112,7 +113,7 @@ def fit_method(
         from ..fusion.acomerge import acomerge
 
         kind = BUFFER_METHODS.get(method, "experts")
-        buffer = make_run_buffer(aligned, kind, buffer_seed)
+        buffer = make_run_buffer(aligned, kind, buffer_seed, budget.sigma)
         variant = method if method in ("mmas-only", "iwoa-only") else "acomerge"
         res = acomerge(aligned, arch, x_cal, y_cal, config=_aco_config(variant, budget), seed=seed, buffer=buffer)
         curve = [float(v) for v in res.history.get("best_so_far", [])]  # best J on D_Cal per generation

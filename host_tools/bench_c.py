@@ -11,8 +11,10 @@ firmware_c for the given bundle, then measures in one run:
   (Debian's QEMU ships no TCG plugins, so no instruction-counting plugin is used);
 * flash/RAM of library + model: sections of the library's objects that survive
   --gc-sections in the linked fixed-point image (from the linker map; startup, libc and
-  the test harness excluded), plus the node context and the painted peak stack of
-  the frame that closes a window (extraction + fixed-point inference + output frames).
+  the test harness excluded), plus the node context and the painted peak stack of the
+  frame that closes a window (extraction + fixed-point inference + output frames). The
+  cost image links both serial codecs (SLCAN and COBS); `m4_flash_bytes_can_firmware` is
+  the same measure on the CAN-native example firmware of docs/integrating_slipest.md.
 """
 
 from __future__ import annotations
@@ -203,6 +205,8 @@ def run(args: argparse.Namespace) -> int:
     steps.update(2)
     cost = target_costs("cortex-m4", m4)
     lib = library_footprint(m4 / "slipest_bench_target_q.elf.map", "libslipest_q.a")
+    # a CAN-attached flight firmware: the integration guide's main loop, no serial codec linked
+    can_fw = library_footprint(m4 / "example_minimal_can_loop.elf.map", "libslipest_q.a")
     steps.update()
     steps.close()
     flash = sum(o["flash"] for o in lib.values())
@@ -224,6 +228,8 @@ def run(args: argparse.Namespace) -> int:
         "m4_flash_bytes_kernel_and_model": kernel,
         # a firmware uses one link: library + model without the SLCAN codec (COBS link only)
         "m4_flash_bytes_cobs_link_only": flash - lib.get("slipest_slcan.c.obj", {"flash": 0})["flash"],
+        # library + model as linked into docs/integrating_slipest.md's CAN main loop (CAN peripheral, no serial link)
+        "m4_flash_bytes_can_firmware": sum(o["flash"] for o in can_fw.values()),
         "m4_flash_bytes_by_object": {k: v["flash"] for k, v in sorted(lib.items())},
         "m4_static_ram_bytes": static_ram,
         "m4_node_context_bytes": cost["node_bytes"],

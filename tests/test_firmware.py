@@ -104,6 +104,10 @@ def test_m4_cost_and_size_are_measured(builds):
     assert all(o["ram"] == 0 for o in lib.values())  # no static mutable state in the library
     # flash budget (6 KB) for library + model with the one link a firmware uses (COBS)
     assert sum(o["flash"] for name, o in lib.items() if name != "slipest_slcan.c.obj") <= 6144
+    # ... and as linked into the CAN-native example firmware of docs/integrating_slipest.md
+    can_fw = library_footprint(builds["cortex-m4"] / "example_minimal_can_loop.elf.map", "libslipest_q.a")
+    assert "slipest_slcan.c.obj" not in can_fw and "slipest_infer_q.c.obj" in can_fw
+    assert sum(o["flash"] for o in can_fw.values()) <= 6144
 
 
 def test_bench_c_prints_one_json_object(builds, capsys):

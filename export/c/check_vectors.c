@@ -1,5 +1,5 @@
 /* Standalone host check of the slipest inference kernels against a bundle's vectors.bin:
- * fixed-point logits and saturation counts bit for bit, float logits within a tolerance.
+ * fixed-point logits and saturation counts bit for bit, float logits within tol * max(1, |torch logit|).
  * Usage: check_vectors VECTORS.BIN [FLOAT_TOLERANCE]   (exit 0 = all rows agree)
  * Built and run by tests/test_export_c.py (gcc/clang, -std=c99 -pedantic, UBSan). */
 #include <math.h>
@@ -138,11 +138,13 @@ int main(int argc, char **argv)
             ++fc_bad;
         }
         for (k = 0; k < 3; ++k) {
-            double e = fabs((double)fl[k] - (double)rdf32(buf + off_tl + ((size_t)r * 3u + (size_t)k) * 4u));
+            double ref = (double)rdf32(buf + off_tl + ((size_t)r * 3u + (size_t)k) * 4u);
+            double e = fabs((double)fl[k] - ref);
             if (e > max_err) {
                 max_err = e;
             }
-            if (!(e <= tol)) {
+            /* tolerance rule of the bundle: |d| <= tol * max(1, |reference|) */
+            if (!(e <= tol * (fabs(ref) > 1.0 ? fabs(ref) : 1.0))) {
                 ++f_bad;
             }
         }

@@ -255,7 +255,7 @@ static void usage(FILE *to)
             "  --stdio        serve stdin/stdout\n"
             "  --pty          create a pseudo-terminal and print 'PTY <slave path>' on stdout\n"
             "  --link KIND    slcan (ASCII tIIILDD..\\r, default) or cobs (COBS + CRC-16 packets)\n"
-            "  --vectors F    check every test vector (fixed-point logits exact, float within 1e-5)\n"
+            "  --vectors F    check every test vector (fixed-point logits exact, float within 1e-5*max(1,|logit|))\n"
             "  --version      print library version and model hash\n");
 }
 

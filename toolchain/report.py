@@ -123,7 +123,11 @@ def _section_emulate(out: Path) -> list[str]:
             "| windows | bit-exact | mismatches | flagged | rejected frames | dropped | latency p50 / p99 (µs) |",
             "|---:|---:|---:|---:|---:|---:|---|",
             f"| {e['windows']} | {e['bit_exact']} | {e['mismatches']} | {e['flagged_windows']} | "
-            f"{e['rejected_frames']} | {e['dropped_frames']} | {lat.get('p50', 0):.0f} / {lat.get('p99', 0):.0f} |", ""]
+            f"{e['rejected_frames']} | {e['dropped_frames']} | {lat.get('p50', 0):.0f} / {lat.get('p99', 0):.0f} |", "",
+            *([f"Streamed as fast as possible: {e['frames_per_s']:,.0f} frames/s, {e['windows_per_s']:,.0f} windows/s "
+               f"(a rover at 50 Hz needs {e['realtime_need']['frames_per_s']:.0f} frames/s); the latency is mostly time "
+               "queued in the pseudo-terminal. Add `--realtime` to `fleetlab emulate` for the paced figure.", ""]
+              if not e.get("realtime", True) and "frames_per_s" in e else [])]
 
 
 def _section_bench(stage) -> list[str]:

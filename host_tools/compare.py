@@ -15,6 +15,7 @@ from typing import Callable
 import numpy as np
 
 from fleetlab.data import features_int as fi
+from fleetlab.export.intref import argmax_lowest
 
 from .dbc import (
     CONTROL_RESET,
@@ -258,8 +259,8 @@ class WindowVerdict:
 
 
 def argmax_low(x: np.ndarray) -> int:
-    """Index of the largest value, ties to the lowest index (np.argmax does that)."""
-    return int(np.argmax(x))
+    """Class of one logit vector by the bundle's tie rule (ties to the lowest class)."""
+    return int(argmax_lowest(np.atleast_2d(x))[0])
 
 
 def compare_windows(

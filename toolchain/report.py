@@ -149,7 +149,7 @@ def write_report(out: Path, stages: list, total_s: float, args, prof, cortex_not
     ]
     for s in stages:
         status = {True: "green", False: "**FAILED**", None: "not run"}[s.ok]
-        cmd = "<br>".join(f"`{shlex.join(c).replace(sys_prefix(c), 'fleetlab')}`" for c in s.commands)
+        cmd = "<br>".join(f"`{_display(c)}`" for c in s.commands)
         lines.append(f"| {s.title} | {status}{(' — ' + s.note) if s.note else ''} | {s.seconds:.1f} | {cmd} |")
     lines.append("")
     sections = [
@@ -174,9 +174,9 @@ def write_report(out: Path, stages: list, total_s: float, args, prof, cortex_not
     return out / "report.md"
 
 
-def sys_prefix(cmd: list[str]) -> str:
-    """The interpreter + module prefix of an in-tree `fleetlab` call, shown as plain `fleetlab`."""
-    return shlex.join(cmd[:3]) if cmd[1:3] == ["-m", "fleetlab.cli"] else "\0"
+def _display(cmd: list[str]) -> str:
+    """A stage command as a user types it: `python -m fleetlab.cli ...` shown as `fleetlab ...`."""
+    return shlex.join(["fleetlab", *cmd[3:]] if cmd[1:3] == ["-m", "fleetlab.cli"] else cmd)
 
 
 def _write_html(md: str, path: Path) -> None:

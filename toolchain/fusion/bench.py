@@ -41,6 +41,7 @@ from torch.utils.data import DataLoader, TensorDataset
 from ..data.contracts import N_CLASSES
 from ..models import build, flatten, load_flat
 from ..models.mlp import ARCHS
+from ..models.train import class_weights
 from .acomerge import AcoMergeConfig, acomerge, construct_ants
 from .buffer import make_buffer
 from .finetune import finetune
@@ -153,8 +154,7 @@ def measure(args) -> dict:
 
     # the slow baselines: fewer repeats, warm-up on a few ants only
     seq_ms, seq_cpu = _timed(sequential, max(1, args.repeats // 2), warmup)
-    yt, wt = torch.from_numpy(y), torch.as_tensor(
-        len(y) / (N_CLASSES * np.maximum(np.bincount(y, minlength=N_CLASSES), 1)), dtype=torch.float32)
+    yt, wt = torch.from_numpy(y), class_weights(y)
 
     def sequential_fullbatch():
         with torch.no_grad():

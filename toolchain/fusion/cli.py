@@ -19,12 +19,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from sklearn.metrics import balanced_accuracy_score, f1_score
 
 from ..data.contracts import CLASS_NAMES, N_CLASSES
 from ..data.csvio import read_windows_csv
 from ..data.dataset import EARTH, TARGET, load_dataset
 from ..data.splits import PROTOCOLS, make_split
+from ..evaluation.metrics import SCALAR_METRICS, classification_metrics
 from ..models import SlipNet, build, flatten, load_flat, save_model
 from ..models.mlp import ARCHS
 from ..models.train import EXPERT_EPOCHS, predict
@@ -83,9 +83,8 @@ def _calibration(args, dataset) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.
 
 
 def _scores(model: SlipNet, x: np.ndarray, y: np.ndarray) -> dict[str, float]:
-    pred = predict(model, x)
-    return {"balanced_accuracy": float(balanced_accuracy_score(y, pred)),
-            "macro_f1": float(f1_score(y, pred, average="macro", labels=list(range(N_CLASSES)), zero_division=0))}
+    m = classification_metrics(y, predict(model, x))
+    return {k: m[k] for k in SCALAR_METRICS}
 
 
 def _plot(history: dict, path: Path) -> None:

@@ -14,6 +14,7 @@ from fleetlab.fusion.acomerge import (
     AcoMergeConfig,
     acomerge,
     construct_ants,
+    evaluate_ants,
     mmas_bounds,
     search,
     whale_update,
@@ -106,11 +107,44 @@ def test_mmas_bounds_formula():
 def test_construct_greedy_and_roulette():
     gen = torch.Generator().manual_seed(0)
     tau = torch.tensor([[1.0, 3.0, 6.0], [5.0, 1.0, 4.0]])
-    greedy = construct_ants(tau, None, q0=1.0, n_ants=50, gen=gen)
-    assert torch.equal(greedy, torch.tensor([[2], [0]]).expand(2, 50))
-    roulette = construct_ants(tau, None, q0=0.0, n_ants=40000, gen=gen)
-    freq = torch.stack([torch.bincount(r, minlength=3) for r in roulette]).float() / 40000
+    paths, explorer = construct_ants(tau, None, q0=1.0, n_ants=50, gen=gen)
+    assert torch.equal(paths, torch.tensor([2, 0]).expand(50, 2)) and not explorer.any()
+    paths, explorer = construct_ants(tau, None, q0=0.0, n_ants=40000, gen=gen)
+    freq = torch.stack([torch.bincount(r, minlength=3) for r in paths.T]).float() / 40000
     torch.testing.assert_close(freq, tau / tau.sum(1, keepdim=True), atol=0.01, rtol=0)
+    assert torch.equal(explorer, (paths != torch.tensor([2, 0])).any(dim=1))
+
+
+def test_construct_follows_the_pseudo_random_proportional_rule():
+    """P(j) = q0·[j = argmax τ] + (1 − q0)·τ_j/Στ for every index, here with a heuristic and α, β ≠ 1."""
+    gen = torch.Generator().manual_seed(1)
+    tau = torch.tensor([[1.0, 3.0, 6.0, 0.5], [5.0, 1.0, 4.0, 2.0], [0.2, 0.2, 0.2, 9.0]])
+    eta = torch.tensor([[1.0, 2.0, 0.5, 1.0], [1.0, 1.0, 1.0, 3.0], [1.0, 1.0, 1.0, 1.0]])
+    q0, alpha, beta, n = 0.6, 2.0, 0.5, 60000
+    paths, _ = construct_ants(tau, eta, q0, n, gen, alpha, beta)
+    w = tau**alpha * eta**beta
+    expected = (1 - q0) * w / w.sum(1, keepdim=True)
+    expected[torch.arange(3), tau.argmax(1)] += q0
+    freq = torch.stack([torch.bincount(r, minlength=4) for r in paths.T]).float() / n
+    torch.testing.assert_close(freq, expected, atol=0.008, rtol=0)
+
+
+def test_greedy_ants_share_one_evaluation():
+    """Ants that never left the greedy path get the greedy model's J; every other ant its own."""
+    gen = torch.Generator().manual_seed(3)
+    cand = torch.randn(6, 10, generator=gen)
+    tau = torch.rand(10, 6, generator=gen) + 1.0
+    paths, explorer = construct_ants(tau, None, 0.97, 40, gen)
+    assert explorer.any() and not explorer.all()
+    calls = []
+
+    def fitness(flats):
+        calls.append(flats.shape[0])
+        return flats.sum(dim=1) ** 2
+
+    j = evaluate_ants(paths, explorer, cand, fitness)
+    torch.testing.assert_close(j, cand.gather(0, paths).sum(dim=1) ** 2)
+    assert calls == [int(explorer.sum()) + 1]  # one batch: the explorers and one greedy representative
 
 
 def _toy(n_idx=20, m=8, seed=0):

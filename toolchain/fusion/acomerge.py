@@ -14,14 +14,15 @@ Phase 1, MMAS (every generation, `n_ants` ants):
   ρ0 follows a linear schedule from `q0_start` to `q0_end` (exploration first); the
   paper gives no values, 0.5 → 0.95 gave the lowest D_Cal loss in a small sweep
   (0 → 0.9, 0.3 → 0.98, 0.7 → 0.99, constant 0.9), judged on D_Cal only, never on test data.
-  Vectorised: one uniform tensor (T, P) for ρ; the roulette is inverse-CDF sampling —
-  the rescaled excess (ρ − ρ0)/(1 − ρ0), uniform given ρ > ρ0, times the row total is
-  located with `torch.searchsorted` in the cumulative sums of τ^α·η^β. Ties in the
-  argmax go to the lowest candidate index.
+  Vectorised (`construct_ants`): one uniform per (index, ant) decides whether the ant
+  leaves the greedy candidate there, which has probability (1 − ρ0)·(1 − w_greedy/Σw);
+  only those departures are located in the cumulative weights (one `searchsorted`).
+  Same distribution as the two-step rule; once the pheromone has concentrated only a
+  few decisions per thousand depart. Ties in the argmax go to the lowest candidate index.
 - Fitness J(θ) = class-weighted cross-entropy on D_Cal (`fitness.py`), lower is
   better; `AcoMergeResult.best_fitness` is this J. All ants of a generation are
-  evaluated in one batched computation; ants that rebuilt the same path (common once
-  the pheromone has concentrated) share one evaluation.
+  evaluated in one batched computation; the ants that never left the greedy path
+  (more of them as ρ0 grows) share one evaluation.
 - Pheromone update (paper eq. pheromone_update): τ ← ρ_evap·τ + (1 − ρ_evap)·Δτ with
   Δτ = Q / J(best) on the nodes of the iteration-best ant and 0 elsewhere. Every
   `gb_every`-th generation the global-best solution deposits instead of the
@@ -52,7 +53,8 @@ with PSO replaced"), same update rules with a, w scheduled over the generations.
 Returned model: the best EVER evaluated, the unperturbed experts included (they are
 evaluated before the first generation). Budget: `generations` pheromone updates
 (130, one "optimisation step" each, as for the gradient baselines).
-Determinism: every draw comes from one seeded torch.Generator; no global RNG.
+Determinism: every draw comes from one seeded torch.Generator; no global RNG. The result
+is reproducible for a seed and a thread count (`threads`: torch's intra-op threads).
 
 Where this follows the paper rather than the reference code (REFERENCE_NOTES.md):
 - fitness is the weighted CE J itself and deposits are Q/J (the reference uses
@@ -74,7 +76,9 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import gc
 import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -117,10 +121,9 @@ class AcoMergeConfig:
     spiral_b: float = 1.0  # b, the logarithmic-spiral shape constant
     clip: float | None = None  # optional |value| bound on IWOA positions (paper: none)
     # execution
-    chunk: int = 100  # ants per batched forward chunk (keeps activations in cache)
-    # torch intra-op threads during the run (None: leave as is). One thread is the default:
-    # the kernels are small, and OpenMP thread teams slow down badly on a busy machine.
-    threads: int | None = 1
+    chunk: int = 150  # ants per batched forward chunk (bounds the activations' memory)
+    # torch intra-op threads during the run; the result is deterministic for a seed and a thread count
+    threads: int = 1
 
     def validate(self) -> None:
         bad = [p for p in self.phases if p not in PHASES]
@@ -140,6 +143,8 @@ class AcoMergeConfig:
             raise ValueError(f"buffer_kind must be one of {BUFFER_KINDS}")
         if self.iwoa_every < 1 or self.gb_every < 0 or self.deposit <= 0 or self.tau_init <= 0:
             raise ValueError("iwoa_every ≥ 1, gb_every ≥ 0, deposit > 0 and tau_init > 0 are required")
+        if self.chunk < 1 or self.threads < 1:
+            raise ValueError("chunk and threads must be at least 1")
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -167,25 +172,46 @@ def mmas_bounds(best_j: float, deposit: float, n_choices: int, n_decisions: int,
 def construct_ants(
     tau: torch.Tensor, eta: torch.Tensor | None, q0: float, n_ants: int, gen: torch.Generator,
     alpha: float = 1.0, beta: float = 1.0,
-) -> torch.Tensor:
-    """Pseudo-random-proportional choices of `n_ants` ants: (T, M) pheromone -> (T, n_ants) candidate indices.
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Pseudo-random-proportional paths of `n_ants` ants over a (T, M) pheromone.
 
-    One uniform ρ per (index, ant) decides exploit (ρ ≤ q0: argmax τ) or explore; given
-    ρ > q0, (ρ − q0)/(1 − q0) is again uniform on (0, 1], so the same draw is reused as
-    the roulette's inverse-CDF variate (saves a second random tensor, same distribution).
+    Returns the paths (n_ants, T), int32 candidate indices, and which ants left the greedy
+    path somewhere (n_ants,), bool.
+
+    The rule "draw ρ ~ U(0, 1); ρ ≤ q0: argmax τ (ties: lowest index); else roulette on
+    w = τ^α·η^β" leaves the greedy candidate g of index t with probability
+    π_t = (1 − q0)·(1 − w_g/Σw), and then picks j ≠ g with probability ∝ w_j. One uniform
+    u per decision is drawn; u < π_t marks a departure, and u/π_t, uniform on [0, 1) given
+    that, is inverted in the cumulative weights of the non-greedy candidates. This is the
+    rule's distribution exactly, and once the pheromone has concentrated only a few
+    decisions in a thousand leave the greedy path, so only those need a search.
     """
     n_idx, m = tau.shape
-    rho = torch.rand(n_idx, n_ants, generator=gen)
-    greedy = tau.argmax(dim=1, keepdim=True)
-    if q0 >= 1.0:
-        return greedy.expand(n_idx, n_ants).clone()
+    rows = torch.arange(n_idx)
+    greedy = tau.argmax(dim=1)
     weight = tau if alpha == 1.0 else tau.pow(alpha)
     if eta is not None:
         weight = weight * (eta if beta == 1.0 else eta.pow(beta))
-    cum = weight.cumsum(dim=1)
-    u = (rho - q0).mul_(cum[:, -1:] / (1.0 - q0))  # only used where ρ > q0, i.e. u in (0, total]
-    roulette = torch.searchsorted(cum, u, right=True).clamp_(max=m - 1)
-    return torch.where(rho <= q0, greedy, roulette)
+    weight = weight.to(torch.float64)
+    w_greedy = weight[rows, greedy]
+    w_others = weight.sum(dim=1) - w_greedy
+    leave = ((1.0 - q0) * w_others / (w_others + w_greedy)).to(torch.float32).unsqueeze(1)  # π_t
+    others = weight.clone()
+    others[rows, greedy] = 0.0  # zero width: a search never lands on the greedy candidate
+    cdf = others.cumsum_(dim=1).div_(w_others.unsqueeze(1))
+    cdf[:, -1] = 1.0
+    u = torch.rand(n_idx, n_ants, generator=gen)
+    t, ant = (u < leave).nonzero(as_tuple=True)  # the departures
+    paths = greedy.to(torch.int32).expand(n_ants, n_idx).clone()  # int32: half the memory traffic of int64
+    explorer = torch.zeros(n_ants, dtype=torch.bool)
+    if t.numel():
+        # one sorted sequence for all rows (row t spans [2t, 2t + 1]): one search serves every departure
+        flat = cdf.add_(2.0 * rows.unsqueeze(1)).reshape(-1)
+        v = u[t, ant].to(torch.float64) / leave[t, 0]
+        pick = (torch.searchsorted(flat, 2.0 * t + v, right=True) - t * m).clamp_(max=m - 1)
+        paths[ant, t] = pick.to(torch.int32)
+        explorer[ant] = True
+    return paths, explorer
 
 
 def whale_update(
@@ -215,15 +241,48 @@ def whale_update(
     return new
 
 
+def default_threads() -> int:
+    """Threads for one AcoMerge run: the cores this process may use, at most 4."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return max(1, min(4, cores))
+
+
 @contextlib.contextmanager
-def _torch_threads(n: int | None):
-    old = torch.get_num_threads()
-    if n:
-        torch.set_num_threads(n)
+def search_threads(threads: int):
+    """Torch intra-op threads for a run, and the garbage collector paused: a generation makes
+    a few hundred short-lived tensors and no reference cycles, and the collections they would
+    trigger walk every object of torch & co. (~8 % of a run)."""
+    saved, gc_on = torch.get_num_threads(), gc.isenabled()
+    torch.set_num_threads(threads)
+    gc.disable()
     try:
         yield
     finally:
-        torch.set_num_threads(old)
+        torch.set_num_threads(saved)
+        if gc_on:
+            gc.enable()
+
+
+def _evaluate(fitness: Callable[[torch.Tensor], torch.Tensor], flats: torch.Tensor) -> torch.Tensor:
+    """Fitness (P,) of flats (P, T); NaN counts as +inf."""
+    return torch.nan_to_num(fitness(flats), nan=math.inf)
+
+
+def evaluate_ants(
+    paths: torch.Tensor, explorer: torch.Tensor, cand: torch.Tensor, fitness: Callable[[torch.Tensor], torch.Tensor],
+) -> torch.Tensor:
+    """Fitness (P,) of the ants' `paths` (P, T), their models drawn from `cand` (M, T), in one batch.
+
+    As q0 grows, more and more ants take the greedy candidate (argmax τ) at every index,
+    i.e. rebuild one and the same model: those (`~explorer`) share one evaluation.
+    """
+    explorers = explorer.nonzero().squeeze(1)
+    lazy = (~explorer).nonzero().squeeze(1)[:1]  # one representative of the greedy ants, if any
+    j_picked = _evaluate(fitness, cand.gather(0, paths.index_select(0, torch.cat([explorers, lazy]))))
+    j = torch.empty(paths.shape[0])
+    j[explorer] = j_picked[: explorers.numel()]
+    j[~explorer] = j_picked[explorers.numel():]  # empty, or the greedy model's J for all of them
+    return j
 
 
 def _schedule(c: int, n: int) -> tuple[float, float]:
@@ -287,8 +346,8 @@ def search(
     config.validate()
     cand = cand.detach().to(torch.float32).clone()
     gen = torch.Generator().manual_seed(seed + 1_000_003)  # independent of the buffer's stream
-    with _torch_threads(config.threads):
-        j_experts = torch.nan_to_num(fitness(experts), nan=math.inf)
+    with search_threads(config.threads):
+        j_experts = _evaluate(fitness, experts)
         best = int(torch.argmin(j_experts))
         result = AcoMergeResult(
             best_flat=experts[best].clone(),
@@ -302,15 +361,15 @@ def search(
     return result
 
 
-def _keep_if_better(result: AcoMergeResult, j: torch.Tensor, flats: torch.Tensor, g: int) -> int | None:
-    """Record the best of this generation if it beats the best ever; return its index if so."""
+def _keep_if_better(result: AcoMergeResult, j: torch.Tensor, flat_of: Callable[[int], torch.Tensor], g: int) -> bool:
+    """Record the best of this generation (its model is flat_of(index)) if it beats the best ever."""
     i = int(torch.argmin(j))
     if float(j[i]) < result.best_fitness:
         result.best_fitness = float(j[i])
-        result.best_flat = flats[i].clone()
+        result.best_flat = flat_of(i).clone()
         result.best_origin = f"generation {g + 1}"
-        return i
-    return None
+        return True
+    return False
 
 
 def _run_mmas(
@@ -318,7 +377,7 @@ def _run_mmas(
     result: AcoMergeResult, progress: bool,
 ) -> None:
     m, n_t = cand.shape
-    cand_t = cand.T.contiguous()  # (T, M): row z holds the candidates of parameter z
+    cand_t = cand.T.contiguous()  # (T, M): row z holds the candidates of parameter z (IWOA's swarms)
     idx_rows = torch.arange(n_t)
     # The best expert's path exists when it is in the buffer (default layouts: row k = expert k).
     best_path: torch.Tensor | None = None
@@ -332,23 +391,22 @@ def _run_mmas(
     with_iwoa = "iwoa" in cfg.phases
     n_outer = max(1, cfg.generations // cfg.iwoa_every)
     n_calls = 0
-    hash_w = torch.rand(n_t, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
     keys = ("best_so_far", "iteration_best", "iteration_mean", "q0", "tau_min", "tau_max", "tau_lowest", "tau_highest", "iwoa")
     hist: dict[str, list] = {k: [] for k in keys}
     bar = tqdm(range(cfg.generations), desc="AcoMerge", disable=not progress, leave=False)
     for g in bar:
         q0 = cfg.q0_start + (cfg.q0_end - cfg.q0_start) * (g / max(1, cfg.generations - 1))
-        choice = construct_ants(tau, eta, q0, cfg.n_ants, gen, cfg.alpha, cfg.beta)  # (T, P)
-        j, ants = _evaluate_distinct(choice, cand_t, fitness, hash_w)
+        paths, explorer = construct_ants(tau, eta, q0, cfg.n_ants, gen, cfg.alpha, cfg.beta)  # (P, T), (P,)
+        j = evaluate_ants(paths, explorer, cand, fitness)
         result.evaluations += cfg.n_ants
         ib = int(torch.argmin(j))
-        if _keep_if_better(result, j, ants, g) is not None:
-            best_path = choice[:, ib].clone()
+        if _keep_if_better(result, j, lambda i: cand.gather(0, paths[i : i + 1]).squeeze(0), g):
+            best_path = paths[ib].clone()
             eta = _heuristic(cfg, cand_t, result.best_flat)
         # The global-best deposit reinforces the best path's nodes (after an IWOA update those
         # nodes hold moved values; the pheromone belongs to the node, as in the paper's graph).
         use_gb = cfg.gb_every > 0 and (g + 1) % cfg.gb_every == 0 and best_path is not None
-        path, j_dep = (best_path, result.best_fitness) if use_gb else (choice[:, ib], float(j[ib]))
+        path, j_dep = (best_path, result.best_fitness) if use_gb else (paths[ib], float(j[ib]))
         tau.mul_(cfg.evaporation)
         if math.isfinite(j_dep):
             tau[idx_rows, path] += (1.0 - cfg.evaporation) * cfg.deposit / j_dep
@@ -359,6 +417,7 @@ def _run_mmas(
             a, inertia = _schedule(n_calls, n_outer)
             leader = tau.argmax(dim=1)
             cand_t = whale_update(cand_t.unsqueeze(-1), leader, a, inertia, cfg.spiral_b, gen, cfg.clip).squeeze(-1)
+            cand = cand_t.T.contiguous()
             n_calls += 1
             eta = _heuristic(cfg, cand_t, result.best_flat)
         finite = j[torch.isfinite(j)]
@@ -371,25 +430,6 @@ def _run_mmas(
             hist[key].append(value)
         bar.set_postfix(best=f"{result.best_fitness:.4f}")
     result.history = hist
-
-
-def _evaluate_distinct(
-    choice: torch.Tensor, cand_t: torch.Tensor, fitness: Callable[[torch.Tensor], torch.Tensor], hash_w: torch.Tensor,
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Fitness (P,) and models (P, T) of the ants in `choice` (T, P), each distinct path evaluated once.
-
-    Late in a run most ants rebuild the same few paths (pheromone concentrates), so
-    evaluating distinct paths only saves a large share of the forward passes. Paths are
-    grouped by a random projection of their indices, then checked exactly.
-    """
-    n_ants = choice.shape[1]
-    ants = cand_t.gather(1, choice).T.contiguous()
-    _, inverse = torch.unique(hash_w @ choice.to(torch.float64), return_inverse=True)
-    first = torch.full((int(inverse.max()) + 1,), n_ants).scatter_reduce_(0, inverse, torch.arange(n_ants), "amin")
-    rep = first[inverse]  # representative ant of each ant's group
-    if first.numel() == n_ants or not torch.equal(choice[:, rep], choice):
-        return torch.nan_to_num(fitness(ants), nan=math.inf), ants
-    return torch.nan_to_num(fitness(ants[first]), nan=math.inf)[inverse], ants
 
 
 def _heuristic(cfg: AcoMergeConfig, cand_t: torch.Tensor, best_flat: torch.Tensor) -> torch.Tensor | None:
@@ -407,9 +447,9 @@ def _run_whole_model_iwoa(
     hist: dict[str, list] = {k: [] for k in ("best_so_far", "iteration_best", "iteration_mean")}
     bar = tqdm(range(cfg.generations), desc="IWOA", disable=not progress, leave=False)
     for g in bar:
-        j = torch.nan_to_num(fitness(whales[0]), nan=math.inf)
+        j = _evaluate(fitness, whales[0])
         result.evaluations += whales.shape[1]
-        _keep_if_better(result, j, whales[0], g)
+        _keep_if_better(result, j, lambda i: whales[0][i], g)
         leader = torch.argmin(j).view(1)
         a, inertia = _schedule(g, cfg.generations)
         whales = whale_update(whales, leader, a, inertia, cfg.spiral_b, gen, cfg.clip)

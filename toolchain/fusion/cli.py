@@ -28,7 +28,7 @@ from ..evaluation.metrics import SCALAR_METRICS, classification_metrics
 from ..models import SlipNet, build, flatten, load_flat, save_model
 from ..models.mlp import ARCHS
 from ..models.train import EXPERT_EPOCHS, predict
-from .acomerge import AcoMergeConfig, acomerge
+from .acomerge import AcoMergeConfig, acomerge, default_threads
 from .experts import train_experts
 from .finetune import FINETUNE_STEPS, finetune
 from .fitness import CalibrationFitness
@@ -56,7 +56,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sigma", type=float, default=0.05, help="std of the buffer perturbation (default: 0.05)")
     p.add_argument("--finetune-steps", type=int, default=FINETUNE_STEPS,
                    help=f"Adam steps of the Earth fine-tune reference (default: {FINETUNE_STEPS})")
-    p.add_argument("--threads", type=int, default=1, help="torch threads (default: 1, fastest for these small models)")
+    p.add_argument("--threads", type=int, default=default_threads(),
+                   help=f"threads for training and for AcoMerge's batched evaluation (default: {default_threads()}, "
+                        "this machine's cores up to 4)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 

@@ -16,3 +16,35 @@ def test_integration_guide_quotes_the_example_files_in_full():
 def test_readme_links_both_guides():
     readme = (REPO / "README.md").read_text()
     assert "docs/integrating_slipest.md" in readme and "docs/can_interface.md" in readme
+
+
+def _documented_commands() -> list[tuple[str, str]]:
+    """(file, command) for every `fleetlab ...` line inside a bash/sh block of the README and the guides;
+    synopsis lines ("[--opt X]", "a|b") are usage patterns, not commands, and are left out."""
+    import re
+
+    found = []
+    for path in [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]:
+        for block in re.findall(r"```(?:bash|sh)\n(.*?)```", path.read_text(), flags=re.S):
+            for line in block.replace("\\\n", " ").splitlines():
+                line = line.split(" #")[0].strip()
+                if line.startswith("fleetlab ") and not re.search(r"\[|\w\|\w", line):
+                    found.append((path.name, line))
+    return found
+
+
+def test_documented_commands_parse():
+    """Every fleetlab command the guides show names a real subcommand and real options."""
+    import shlex
+
+    from fleetlab.cli import build_parser
+
+    commands = _documented_commands()
+    assert len(commands) > 20 and any("--fleet-ablation" in c for _, c in commands)
+    for name, line in commands:
+        argv = shlex.split(line)[1:]
+        try:
+            args = build_parser(argv[0]).parse_args(argv)
+        except SystemExit:
+            raise AssertionError(f"{name}: '{line}' does not parse") from None
+        assert getattr(args, "_module", None), f"{name}: '{line}' names no subcommand"

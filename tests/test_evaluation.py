@@ -135,11 +135,12 @@ def test_table_marks_best_second_and_significance():
 def test_evaluate_cli_end_to_end(real_data_dir, tmp_path, capsys):
     out, js = tmp_path / "out", tmp_path / "r.json"
     rc = main(["evaluate", "--data", str(real_data_dir), "--protocol", "traverse", "--runs", "2", "--cal-size", "150",
-               "--epochs", "1", "--generations", "3", "--ants", "6", "--buffer-ablation", "--jobs", "2",
-               "--json", str(js), "--out", str(out), "--no-progress"])
+               "--epochs", "1", "--generations", "3", "--ants", "6", "--buffer-ablation", "--fleet-ablation",
+               "--jobs", "2", "--json", str(js), "--out", str(out), "--no-progress"])
     assert rc == 0
     result = json.loads(js.read_text())
-    assert set(result["results"]) == set(METHODS) | {"buffer-centroid-random", "buffer-random"}
+    assert set(result["results"]) == set(METHODS) | {"buffer-centroid-random", "buffer-random",
+                                                     "acomerge-earth-only", "acomerge-fleet-only"}
     for by_size in result["results"].values():
         assert set(by_size["150"]["balanced_accuracy"]) >= {"mean", "std"}
         assert set(by_size["150"]["macro_f1"]) >= {"mean", "std"}
@@ -147,9 +148,10 @@ def test_evaluate_cli_end_to_end(real_data_dir, tmp_path, capsys):
     assert json.loads((out / "results.json").read_text())["results"] == result["results"]
     table = (out / "table.md").read_text()
     assert table in capsys.readouterr().out
-    for label in ("Joint + FullFinetune", "Evolutionary Merge", "Ensemble distillation", "MMAS only", "random×48"):
+    for label in ("Joint + FullFinetune", "Evolutionary Merge", "Ensemble distillation", "MMAS only", "random×48",
+                  "fleet experts only", "on D_Cal"):
         assert label in table
-    for name in ("metrics.png", "confusion_150.png", "convergence.png", "buffer_ablation.png"):
+    for name in ("metrics.png", "confusion_150.png", "convergence.png", "buffer_ablation.png", "fleet_ablation.png"):
         assert (out / name).stat().st_size > 1000
 
 
@@ -161,6 +163,7 @@ def test_evaluate_cli_end_to_end(real_data_dir, tmp_path, capsys):
         (["--cal-size", "5000"], "leave no test rows"),
         (["--protocol", "traverse", "--cal-size", "1200"], "traverse split needs"),
         (["--runs", "0"], "at least 1"),
+        (["--finetune-lr", "0"], "fine-tuning rate positive"),
     ],
 )
 def test_evaluate_cli_bad_input(real_data_dir, capsys, extra, message):
@@ -186,3 +189,67 @@ def test_buffer_sigma_reaches_the_run_buffer():
         assert buf.shape == (48, 543)
         noise = torch.cat([buf[(buf - c).abs().amax(dim=1) < 0.5] - c for c in (0.0, 1.0, 2.0)])
         assert abs(float(noise[noise != 0].std()) - sigma) < 0.1 * sigma
+
+
+def test_fleet_ablation_buffers_hold_only_the_kept_experts():
+    import torch
+
+    from fleetlab.evaluation.methods import fleet_ablation_buffer
+
+    experts = torch.stack([torch.zeros(543), torch.ones(543), torch.full((543,), 2.0)])
+    earth, buf = fleet_ablation_buffer("acomerge-earth-only", experts, seed=0)
+    assert torch.equal(earth, experts[:1]) and buf.shape == (48, 543)
+    assert float(buf.abs().max()) < 0.5 and torch.equal(buf[0], experts[0])
+    fleet, buf = fleet_ablation_buffer("acomerge-fleet-only", experts, seed=0, sigma=0.005)
+    assert torch.equal(fleet, experts[1:]) and buf.shape == (48, 543)
+    nearest = (buf.unsqueeze(1) - experts[1:].unsqueeze(0)).abs().amax(dim=2).min(dim=1).values
+    assert float(nearest.max()) < 0.1  # every row is a fleet expert or a copy of one
+    with pytest.raises(ValueError, match="at least one fleet expert"):
+        fleet_ablation_buffer("acomerge-fleet-only", experts[:1], seed=0)
+
+
+def test_fleet_ablation_and_calibration_fit_in_an_evaluation(dataset):
+    settings = EvalSettings(cal_sizes=(150,), runs=2, seed=3, epochs=1, budget=TINY, methods=("earth-ft",),
+                            fleet_ablation=True)
+    assert settings.all_methods == ("earth-ft", "acomerge", "acomerge-earth-only", "acomerge-fleet-only")
+    result = run_mccv(dataset, settings, n_jobs=2, progress=False)
+    res = result["results"]
+    assert set(res) == set(settings.all_methods)
+    runs = {m: res[m]["150"]["balanced_accuracy"]["runs"] for m in res}
+    assert runs["acomerge-earth-only"] != runs["acomerge"] != runs["acomerge-fleet-only"]
+    for m in res:
+        fit = res[m]["150"]["calibration_fit"]["balanced_accuracy"]
+        assert 0.0 <= fit["mean"] <= 1.0 and fit["std"] >= 0.0
+    # AcoMerge keeps the best model it evaluated on D_Cal, and its J never rises
+    for m in ("acomerge", "acomerge-earth-only", "acomerge-fleet-only"):
+        curve = result["convergence"][m]["150"]["mean"]
+        assert all(b <= a for a, b in zip(curve, curve[1:]))
+    table = markdown_table(result)
+    assert "Fleet ablation" in table and "AcoMerge, Earth expert only" in table
+    fit_rows = {line.split("|")[1].strip(): line for line in table.split("calibration rows vs")[1].splitlines()
+                if line.startswith("| ") and "Method" not in line}
+    gap = res["earth-ft"]["150"]["calibration_fit"]["balanced_accuracy"]["mean"] - \
+        res["earth-ft"]["150"]["balanced_accuracy"]["mean"]
+    assert f"{gap:+.3f}" in fit_rows["Earth + FullFinetune"]
+
+
+def test_finetune_lr_reaches_earth_and_joint_finetune():
+    import torch
+
+    from fleetlab.evaluation.methods import Sources, fit_method
+    from fleetlab.fusion.baselines import earth_finetune, model_from_flat
+    from fleetlab.models import build, flatten
+
+    rng = np.random.default_rng(0)
+    x, y = rng.normal(size=(60, 12)).astype(np.float32), np.arange(60) % 3
+    flat = flatten(build("sn-s", seed=1)).numpy()
+    src = Sources(arch="sn-s", roles=["earth"], experts=flat[None], aligned=flat[None], joint=flat, seconds={})
+    budget = Budget(steps=5)
+    default, _ = fit_method("earth-ft", src, x, y, seed=2, buffer_seed=0, budget=budget)
+    by_hand = flatten(earth_finetune(model_from_flat("sn-s", torch.as_tensor(flat)), x, y, 2, steps=5))
+    assert torch.equal(default, by_hand)  # default rate = the experts' 0.0035
+    for method in ("earth-ft", "joint-ft"):
+        slow, _ = fit_method(method, src, x, y, seed=2, buffer_seed=0, budget=Budget(steps=5, finetune_lr=1e-4))
+        fast, _ = fit_method(method, src, x, y, seed=2, buffer_seed=0, budget=Budget(steps=5, finetune_lr=1e-2))
+        moved = [float((m - torch.as_tensor(flat)).abs().max()) for m in (slow, fast)]
+        assert moved[0] < moved[1]  # Adam moves each weight by about lr per step

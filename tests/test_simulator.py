@@ -249,6 +249,26 @@ def test_cli_writes_a_dataset_folder(tmp_path):
     assert all({"rover", "terrain", "gravity", "seed"} <= set(e) for e in meta["files"].values())
 
 
+def test_fleet_choice_keeps_earth_and_target_traverses(small_scenario, tmp_path):
+    """--fleet swaps the fleet rovers only: Earth and target files are byte-identical, the fleet
+    roles follow the chosen rovers (a sister 'leo' included), and duplicates/unknowns are refused."""
+    sister = write_scenario(tmp_path / "sister", seed=7, scale=0.08, fleet=("leo", "hauler"))
+    ds = load_dataset(sister)
+    assert ds.roles == ["earth", "fleet_hauler", "fleet_leo", "target"]
+    kept = [p.name for p in small_scenario.glob("*.csv") if not p.name.startswith("fleet_scout")]
+    assert any(n.startswith("target") for n in kept) and any(n.startswith("earth") for n in kept)
+    for name in kept:  # fleet_hauler keeps its seed slot too
+        assert (small_scenario / name).read_bytes() == (sister / name).read_bytes(), name
+    meta = json.loads((sister / "dataset.json").read_text())
+    assert meta["fleet"] == ["leo", "hauler"]
+    assert {e["rover"] for n, e in meta["files"].items() if n.startswith("fleet_leo")} == {"leo"}
+    roles = [role for role, _, _ in scenario_specs(7, 0.08, fleet=("scout", "hauler", "leo"))]
+    assert roles.count("fleet_leo") == roles.count("fleet_scout") > 0
+    for bad, message in ((("leo", "leo"), "once"), (("rover9",), "one or more of"), ((), "one or more of")):
+        with pytest.raises(ValueError, match=message):
+            scenario_specs(7, 0.08, fleet=bad)
+
+
 def test_cli_rejects_bad_options(tmp_path, capsys):
     assert cli_main(["simulate", "--out", str(tmp_path / "x"), "--scale", "0"]) == 1
     err = capsys.readouterr().err
@@ -257,6 +277,9 @@ def test_cli_rejects_bad_options(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "samples per" in err and "Traceback" not in err
     assert not any((tmp_path / "x").glob("*.csv"))
+    assert cli_main(["simulate", "--out", str(tmp_path / "x"), "--fleet", "scout,moonbuggy"]) == 1
+    err = capsys.readouterr().err
+    assert "moonbuggy" in err and "Traceback" not in err
 
 
 def test_bench_data_json(capsys):

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ..data.splits import PROTOCOLS
 from ..models import ARCHS
+from ..models.train import EXPERT_LR
 from .mccv import BACKENDS, EvalSettings, run_mccv
 from .methods import METHODS, Budget, parse_methods
 
@@ -42,10 +43,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sigma", type=float, default=0.05,
                    help="std of the Gaussian-perturbed expert copies in the AcoMerge/ModelSwarm buffer "
                    "(default: 0.05, the paper's value; the reference code used 0.005)")
+    p.add_argument("--finetune-lr", type=float, default=EXPERT_LR, metavar="LR",
+                   help="Adam learning rate of Earth + FullFinetune and Joint + FullFinetune (default: "
+                   f"{EXPERT_LR:g}, the experts' rate; the paper grid-searched it, so try a few)")
     p.add_argument("--methods", default="all", metavar="LIST",
                    help=f"comma-separated methods out of: {', '.join(METHODS)} (default: all)")
     p.add_argument("--buffer-ablation", action="store_true",
                    help="also run AcoMerge on the ablation buffers (experts×3 + centroid-random×45, random×48)")
+    p.add_argument("--fleet-ablation", action="store_true",
+                   help="also run AcoMerge with the Earth expert only and with the fleet experts only (same "
+                   "buffer size): what the fleet adds beyond the Earth expert and the search itself")
     p.add_argument("--jobs", type=int, default=1, help="parallel local worker processes for the MCCV jobs (default: 1)")
     p.add_argument("--backend", choices=BACKENDS, default="loky",
                    help="where MCCV jobs run: local processes (loky) or an existing Dask cluster (default: loky)")
@@ -63,8 +70,9 @@ def settings_from_args(args: argparse.Namespace) -> EvalSettings:
     return EvalSettings(
         protocol=args.protocol, arch=args.arch, cal_sizes=tuple(args.cal_sizes or DEFAULT_CAL_SIZES),
         runs=args.runs, seed=args.seed, epochs=args.epochs,
-        budget=Budget(steps=args.generations, ants=args.ants, sigma=args.sigma),
+        budget=Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, finetune_lr=args.finetune_lr),
         methods=tuple(parse_methods(args.methods)), buffer_ablation=args.buffer_ablation,
+        fleet_ablation=args.fleet_ablation,
     )
 
 

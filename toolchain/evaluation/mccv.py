@@ -33,7 +33,7 @@ from tqdm.auto import tqdm
 from ..data.dataset import TARGET, Dataset
 from ..data.splits import PROTOCOLS, make_split
 from ..models import ARCHS, batched_logits, flatten
-from .methods import ACO_FAMILY, BUFFER_METHODS, GROUPS, METHODS, Budget, Sources, fit_method
+from .methods import ACO_FAMILY, BUFFER_METHODS, FLEET_METHODS, GROUPS, METHODS, Budget, Sources, fit_method
 from .metrics import SCALAR_METRICS, classification_metrics
 from .stats import FORMS, corrected_resampled_ttest
 
@@ -52,14 +52,17 @@ class EvalSettings:
     budget: Budget = field(default_factory=Budget)
     methods: tuple[str, ...] = METHODS
     buffer_ablation: bool = False
+    fleet_ablation: bool = False
 
     def __post_init__(self):
         if self.protocol not in PROTOCOLS:
             raise ValueError(f"unknown protocol {self.protocol!r}; choose one of {', '.join(PROTOCOLS)}")
         if self.arch not in ARCHS:
             raise ValueError(f"unknown architecture {self.arch!r}; choose one of {', '.join(ARCHS)}")
-        if self.runs < 1 or self.epochs < 1 or self.budget.steps < 1 or self.budget.ants < 1 or self.budget.sigma < 0:
-            raise ValueError("runs, epochs, generations and ants must all be at least 1, sigma not negative")
+        b = self.budget
+        if self.runs < 1 or self.epochs < 1 or b.steps < 1 or b.ants < 1 or b.sigma < 0 or not b.finetune_lr > 0:
+            raise ValueError("runs, epochs, generations and ants must all be at least 1, sigma not negative, "
+                             "the fine-tuning rate positive")
         if not self.cal_sizes or min(self.cal_sizes) < 3:
             raise ValueError(f"calibration sizes must be at least 3 rows, got {list(self.cal_sizes)}")
         unknown = set(self.methods) - set(METHODS)
@@ -68,13 +71,15 @@ class EvalSettings:
 
     @property
     def all_methods(self) -> tuple[str, ...]:
-        """The methods to run: the chosen ones, plus the buffer ablation (which needs AcoMerge
-        itself as its 'experts' buffer curve)."""
+        """The methods to run: the chosen ones, plus the buffer and fleet ablations (which need
+        AcoMerge itself as their reference)."""
         methods = list(self.methods)
+        if (self.buffer_ablation or self.fleet_ablation) and "acomerge" not in methods:
+            methods.append("acomerge")
         if self.buffer_ablation:
-            if "acomerge" not in methods:
-                methods.append("acomerge")
             methods += list(BUFFER_METHODS)
+        if self.fleet_ablation:
+            methods += list(FLEET_METHODS)
         return tuple(methods)
 
 
@@ -166,10 +171,14 @@ def run_job(cal_size: int, run: int, method: str, src: Sources, target: Target, 
         seconds = time.perf_counter() - t0
         with torch.no_grad():
             pred = batched_logits(src.arch, flat.unsqueeze(0), torch.as_tensor(x_test))[0].argmax(dim=1).numpy()
+            pred_cal = batched_logits(src.arch, flat.unsqueeze(0), torch.as_tensor(x_cal))[0].argmax(dim=1).numpy()
+    fit = classification_metrics(y_cal, pred_cal)
     return {
         "method": method, "cal_size": cal_size, "run": run, "n_cal": int(len(split.cal)),
         "n_test": int(len(split.test)), "seconds": seconds, "history": history,
         **classification_metrics(y_test, pred),
+        # the same scores on D_Cal itself: the fit the method reached, beside what it generalises to
+        "calibration_fit": {k: fit[k] for k in SCALAR_METRICS},
     }
 
 
@@ -249,7 +258,8 @@ def summarise(jobs: list[dict], settings: EvalSettings) -> dict:
     per-run scores, summed confusion matrices; t-test of best vs second; convergence curves.
 
     JSON layout: {"results": {METHOD: {"150": {"balanced_accuracy": {"mean", "std", "runs"},
-    "macro_f1": {...}, "precision": {...}, "recall": {...}, "confusion_matrix": ..., ...}}},
+    "macro_f1": {...}, "precision": {...}, "recall": {...}, "confusion_matrix": ...,
+    "calibration_fit": {"balanced_accuracy": {"mean", "std"}, "macro_f1": {...}}, ...}}},
     "ttest": {...}, "convergence": {...}, "config": {...}}.
     """
     results: dict[str, dict] = {}
@@ -261,6 +271,7 @@ def summarise(jobs: list[dict], settings: EvalSettings) -> dict:
             entry = {k: {**_mean_std([r[k] for r in rs]), "runs": [r[k] for r in rs]} for k in SCALAR_METRICS}
             entry.update({k: _mean_std([r[k] for r in rs]) for k in ("precision", "recall")})
             entry["confusion_matrix"] = np.sum([r["confusion_matrix"] for r in rs], axis=0).tolist()
+            entry["calibration_fit"] = {k: _mean_std([r["calibration_fit"][k] for r in rs]) for k in SCALAR_METRICS}
             entry["n_runs"] = len(rs)
             entry["n_cal"] = int(rs[0]["n_cal"])
             entry["n_test_mean"] = float(np.mean([r["n_test"] for r in rs]))

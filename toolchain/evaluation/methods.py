@@ -16,6 +16,7 @@ import torch
 from ..fusion import baselines as bl
 from ..fusion.baselines.modelswarm import BUFFER_COPIES, BUFFER_SIGMA  # 3 experts x (1 + 15) = 48 candidates
 from ..models import flatten
+from ..models.train import EXPERT_LR
 
 # Groups of the paper's table, in its order, and the ablations shown beneath it.
 GROUPS: dict[str, tuple[str, ...]] = {
@@ -27,15 +28,19 @@ GROUPS: dict[str, tuple[str, ...]] = {
 METHODS: tuple[str, ...] = tuple(m for ms in GROUPS.values() for m in ms)
 # Buffer ablation: AcoMerge on other buffers ("experts" is AcoMerge's own buffer).
 BUFFER_METHODS: dict[str, str] = {"buffer-centroid-random": "centroid_random", "buffer-random": "random"}
-GROUPS_WITH_BUFFER = {**GROUPS, "Buffer ablation": tuple(BUFFER_METHODS)}
+# Fleet ablation: AcoMerge with some of the experts left out of its buffer (same buffer size),
+# which measures what the fleet contributes beyond the Earth expert and the search itself.
+FLEET_METHODS: tuple[str, ...] = ("acomerge-earth-only", "acomerge-fleet-only")
+GROUPS_WITH_BUFFER = {**GROUPS, "Buffer ablation": tuple(BUFFER_METHODS), "Fleet ablation": FLEET_METHODS}
 LABELS: dict[str, str] = {
     "joint-ft": "Joint + FullFinetune", "earth-ft": "Earth + FullFinetune", "model-base": "Model Base",
     "adamerging": "AdaMerging", "evomerge": "Evolutionary Merge", "modelswarm": "ModelSwarm",
     "acomerge": "AcoMerge", "distill": "Ensemble distillation", "mmas-only": "MMAS only",
     "iwoa-only": "IWOA only", "buffer-centroid-random": "buffer: experts×3 + centroid-random×45",
     "buffer-random": "buffer: random×48",
+    "acomerge-earth-only": "AcoMerge, Earth expert only", "acomerge-fleet-only": "AcoMerge, fleet experts only",
 }
-ACO_FAMILY = ("acomerge", "mmas-only", "iwoa-only", *BUFFER_METHODS)
+ACO_FAMILY = ("acomerge", "mmas-only", "iwoa-only", *BUFFER_METHODS, *FLEET_METHODS)
 
 
 def parse_methods(text: str | None) -> list[str]:
@@ -66,6 +71,7 @@ class Budget:
     steps: int = bl.BUDGET_STEPS  # AcoMerge generations = optimisation steps of every baseline
     ants: int = 300
     sigma: float = BUFFER_SIGMA  # std of the perturbed copies in the 48-model buffer (paper 0.05)
+    finetune_lr: float = EXPERT_LR  # Adam rate of Earth/Joint + FullFinetune (the experts' rate)
 
 
 def _aco_config(variant: str, budget: Budget):
@@ -85,6 +91,21 @@ def make_run_buffer(aligned: torch.Tensor, kind: str, seed: int, sigma: float = 
     return make_buffer(aligned, copies=BUFFER_COPIES, sigma=sigma, seed=seed, kind=kind)
 
 
+def fleet_ablation_buffer(method: str, aligned: torch.Tensor, seed: int, sigma: float = BUFFER_SIGMA
+                          ) -> tuple[torch.Tensor, torch.Tensor]:
+    """(kept experts, buffer) of a fleet-ablation method: the Earth expert (row 0) alone, or the
+    fleet experts (rows 1..) alone, each with enough perturbed copies to keep the buffer at about
+    its full size K·(1 + 15) (exactly 48 for three experts)."""
+    from ..fusion.buffer import make_buffer
+
+    n_all = aligned.shape[0]
+    if n_all < 2:
+        raise ValueError(f"{method} needs the Earth expert and at least one fleet expert, got {n_all} expert(s)")
+    kept = aligned[:1] if method == "acomerge-earth-only" else aligned[1:]
+    copies = max(0, round(n_all * (1 + BUFFER_COPIES) / kept.shape[0]) - 1)
+    return kept, make_buffer(kept, copies=copies, sigma=sigma, seed=seed)
+
+
 def fit_method(
     method: str, src: Sources, x_cal: np.ndarray, y_cal: np.ndarray, seed: int, buffer_seed: int, budget: Budget
 ) -> tuple[torch.Tensor, list[float] | None]:
@@ -95,11 +116,13 @@ def fit_method(
     if method == "model-base":
         return flatten(bl.model_base(arch, x_cal, y_cal, seed, steps=steps)), None
     if method == "earth-ft":
-        return flatten(bl.earth_finetune(bl.model_from_flat(arch, src.experts[0]), x_cal, y_cal, seed, steps=steps)), None
+        earth = bl.model_from_flat(arch, src.experts[0])
+        return flatten(bl.earth_finetune(earth, x_cal, y_cal, seed, steps=steps, lr=budget.finetune_lr)), None
     if method == "joint-ft":
         if src.joint is None:
             raise ValueError("joint-ft needs the joint model, which was not trained")
-        return flatten(bl.joint_finetune(bl.model_from_flat(arch, src.joint), x_cal, y_cal, seed, steps=steps)), None
+        joint = bl.model_from_flat(arch, src.joint)
+        return flatten(bl.joint_finetune(joint, x_cal, y_cal, seed, steps=steps, lr=budget.finetune_lr)), None
     if method == "adamerging":
         return bl.adamerging(aligned, arch, x_cal, y_cal, seed, steps=steps), None
     if method == "evomerge":
@@ -112,10 +135,13 @@ def fit_method(
     if method in ACO_FAMILY:
         from ..fusion.acomerge import acomerge
 
-        kind = BUFFER_METHODS.get(method, "experts")
-        buffer = make_run_buffer(aligned, kind, buffer_seed, budget.sigma)
+        if method in FLEET_METHODS:
+            aligned_kept, buffer = fleet_ablation_buffer(method, aligned, buffer_seed, budget.sigma)
+        else:
+            aligned_kept = aligned
+            buffer = make_run_buffer(aligned, BUFFER_METHODS.get(method, "experts"), buffer_seed, budget.sigma)
         variant = method if method in ("mmas-only", "iwoa-only") else "acomerge"
-        res = acomerge(aligned, arch, x_cal, y_cal, config=_aco_config(variant, budget), seed=seed, buffer=buffer)
+        res = acomerge(aligned_kept, arch, x_cal, y_cal, config=_aco_config(variant, budget), seed=seed, buffer=buffer)
         curve = [float(v) for v in res.history.get("best_so_far", [])]  # best J on D_Cal per generation
         return torch.as_tensor(res.best_flat, dtype=torch.float32), curve
     raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")

@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .methods import BUFFER_METHODS, LABELS  # noqa: E402
+from .methods import BUFFER_METHODS, FLEET_METHODS, LABELS  # noqa: E402
 from .metrics import SCALAR_METRICS  # noqa: E402
 from .tables import CLASS_NAMES, COLUMN_NAMES  # noqa: E402
 
@@ -98,22 +98,27 @@ def convergence(result: dict, path: Path) -> Path | None:
     return _save(fig, path)
 
 
-def buffer_ablation(result: dict, path: Path) -> Path | None:
-    """Convergence per buffer kind (curves) and the test metrics per buffer kind."""
-    methods = [m for m in ("acomerge", *BUFFER_METHODS) if m in result.get("convergence", {})]
+def _fleet_label(m: str) -> str:
+    return "all experts (AcoMerge)" if m == "acomerge" else LABELS[m].removeprefix("AcoMerge, ")
+
+
+def ablation(result: dict, path: Path, methods: tuple[str, ...], label) -> Path | None:
+    """Convergence per AcoMerge variant (curves) and its test metrics (bars): the buffer
+    ablation (buffer kinds) and the fleet ablation (which experts are in the buffer)."""
+    methods = [m for m in ("acomerge", *methods) if m in result.get("convergence", {})]
     if len(methods) < 2:
         return None
     sizes = list(result["convergence"][methods[0]])
     fig, axes = plt.subplots(2, len(sizes), figsize=(5 * len(sizes), 7), squeeze=False)
     for k, c in enumerate(sizes):
-        _curves(axes[0][k], result, methods, c, _buffer_label)
+        _curves(axes[0][k], result, methods, c, label)
         ax = axes[1][k]
         x = np.arange(len(methods))
         for i, metric in enumerate(SCALAR_METRICS):
             stats = [result["results"][m][c][metric] for m in methods]
             ax.bar(x + (i - 0.5) * 0.38, [s["mean"] for s in stats], 0.38, yerr=[s["std"] for s in stats],
                    capsize=3, label=COLUMN_NAMES[metric])
-        ax.set_xticks(x, [_buffer_label(m).replace(" + ", " +\n").replace(" (", "\n(") for m in methods], fontsize=7)
+        ax.set_xticks(x, [label(m).replace(" + ", " +\n").replace(" (", "\n(") for m in methods], fontsize=7)
         ax.set_ylim(0, 1)
         ax.set_ylabel("test score")
         ax.legend(fontsize=7)
@@ -125,7 +130,9 @@ def write_plots(result: dict, out_dir: Path) -> list[Path]:
     paths = [metric_bars(result, out_dir / "metrics.png")]
     for c in next(iter(result["results"].values())):
         paths.append(confusion_matrices(result, c, out_dir / f"confusion_{c}.png"))
-    for p in (convergence(result, out_dir / "convergence.png"), buffer_ablation(result, out_dir / "buffer_ablation.png")):
+    for p in (convergence(result, out_dir / "convergence.png"),
+              ablation(result, out_dir / "buffer_ablation.png", tuple(BUFFER_METHODS), _buffer_label),
+              ablation(result, out_dir / "fleet_ablation.png", FLEET_METHODS, _fleet_label)):
         if p is not None:
             paths.append(p)
     return paths

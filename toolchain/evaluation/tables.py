@@ -63,7 +63,7 @@ def markdown_table(result: dict) -> str:
                 f"t = {nb['t']:.3f}, p = {nb['p']:.4f} (reference form: t = {ref['t']:.3f}, p = {ref['p']:.4f}); "
                 f"n_train = {test['n_train']}, n_test = {test['n_test']:.0f}"
             )
-    return "\n".join(lines + notes + [""] + per_class_table(result)) + "\n"
+    return "\n".join(lines + notes + [""] + per_class_table(result) + fit_table(result)) + "\n"
 
 
 def per_class_table(result: dict) -> list[str]:
@@ -80,3 +80,22 @@ def per_class_table(result: dict) -> list[str]:
             lines.append("| " + " | ".join([LABELS.get(m, m), *cells]) + " |")
         lines.append("")
     return lines
+
+
+def fit_table(result: dict) -> list[str]:
+    """Balanced accuracy on D_Cal itself beside the test score: a large gap means the method
+    fitted the calibration rows more than the test rows reward (over-fitting D_Cal)."""
+    results = result["results"]
+    if not all("calibration_fit" in e for m in results.values() for e in m.values()):
+        return []  # results written before the fit was recorded
+    sizes = list(next(iter(results.values())))
+    header = ["Method"] + [f"{k} (D_Cal={c})" for c in sizes for k in ("on D_Cal", "on test", "gap")]
+    lines = ["Balanced accuracy on the calibration rows vs on the test rows (mean over runs):", "",
+             "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for m in results:
+        cells = [LABELS.get(m, m)]
+        for c in sizes:
+            fit, test = results[m][c]["calibration_fit"]["balanced_accuracy"]["mean"], results[m][c]["balanced_accuracy"]["mean"]
+            cells += [f"{fit:.3f}", f"{test:.3f}", f"{fit - test:+.3f}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines + [""]

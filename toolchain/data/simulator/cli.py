@@ -10,7 +10,8 @@ import numpy as np
 
 from ..contracts import CLASS_NAMES, DEFAULT_RATE_HZ
 from ..dataset import load_dataset
-from .scenario import SCENARIO, write_scenario
+from .rovers import ROVERS
+from .scenario import DEFAULT_FLEET, SCENARIO, write_scenario
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -25,6 +26,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scale", type=float, default=1.0,
                         help="shrink (<1) or grow the number and length of traverses; 1.0 gives ~7,200 windows (default 1.0)")
     parser.add_argument("--rate", type=float, default=DEFAULT_RATE_HZ, help=f"raw sample rate in Hz (default {DEFAULT_RATE_HZ:g})")
+    parser.add_argument("--fleet", metavar="ROVERS", default=",".join(DEFAULT_FLEET),
+                        help=f"comma-separated fleet rovers on the Moon, out of {', '.join(ROVERS)} (the target "
+                        f"rover is leo, so 'leo' adds a sister rover); the Earth and target traverses do not "
+                        f"change with the fleet (default: {','.join(DEFAULT_FLEET)})")
     parser.add_argument("--raw", action="store_true", help="also save the raw samples of each traverse as .npz")
 
 
@@ -33,8 +38,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--rate must be a positive number of Hz, got {args.rate}")
     if not np.isfinite(args.scale) or not 0 < args.scale <= 10:
         raise ValueError(f"--scale must be in (0, 10], got {args.scale}")
+    fleet = tuple(r.strip() for r in args.fleet.split(",") if r.strip())
     t0 = time.perf_counter()
-    out = write_scenario(args.out, args.seed, args.scale, args.rate, raw=args.raw, progress=True)
+    out = write_scenario(args.out, args.seed, args.scale, args.rate, raw=args.raw, progress=True, fleet=fleet)
     elapsed = time.perf_counter() - t0
     ds = load_dataset(out)
     print(f"wrote {len(ds.files)} traverses to {out} in {elapsed:.1f} s (seed {args.seed}, scale {args.scale:g})")

@@ -9,10 +9,14 @@
   come from different traverses.
 
 `write_scenario` writes one Fleet-To-Lab CSV per traverse plus `dataset.json`.
+`fleet` replaces the two fleet rovers by any built-in rovers (the target's sister
+`leo` included) driving the same lunar terrains; the Earth and target traverses
+stay byte-identical whatever the fleet, so scenarios can be compared run for run.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +29,7 @@ from ..csvio import WindowTable, write_windows_csv
 from ..dataset import EARTH, FLEET_PREFIX, TARGET, write_manifest
 from ..features import WindowSpec
 from .engine import Trace, TraverseSpec, simulate_batch
-from .rovers import GRAVITY_EARTH, GRAVITY_MOON
+from .rovers import GRAVITY_EARTH, GRAVITY_MOON, ROVERS
 
 GENERATOR = "fleetlab.data.simulator/1"
 
@@ -48,17 +52,41 @@ SCENARIO: tuple[TraverseGroup, ...] = (
 )
 
 
+DEFAULT_FLEET: tuple[str, ...] = tuple(g.rover for g in SCENARIO if g.role.startswith(FLEET_PREFIX))
+
+
 def traverse_seed(seed: int, group: int, traverse: int) -> int:
     """Independent, reproducible seed of one traverse of the scenario."""
     return int(np.random.SeedSequence([seed, group, traverse]).generate_state(1)[0])
 
 
-def scenario_specs(seed: int, scale: float = 1.0) -> list[tuple[str, str, TraverseSpec]]:
+def scenario_groups(fleet: tuple[str, ...] | None = None) -> list[tuple[int, TraverseGroup]]:
+    """(seed group id, group) of the scenario with the given fleet rovers (default: scout, hauler).
+
+    The Earth and target groups keep their ids, and fleet rover i takes the id the default
+    scenario gives fleet slot i (1, 2, then 4, 5, ...), so the same seed draws the same
+    Earth and target traverses whatever the fleet.
+    """
+    fleet = DEFAULT_FLEET if fleet is None else tuple(fleet)
+    unknown = [r for r in fleet if r not in ROVERS]
+    if unknown or not fleet:
+        raise ValueError(f"fleet rovers must be one or more of {', '.join(ROVERS)}; got {', '.join(fleet) or 'none'}")
+    if len(set(fleet)) != len(fleet):
+        raise ValueError(f"each fleet rover may appear once (one role per rover), got {', '.join(fleet)}")
+    template = next(g for g in SCENARIO if g.role.startswith(FLEET_PREFIX))
+    fixed = [(gi, g) for gi, g in enumerate(SCENARIO) if not g.role.startswith(FLEET_PREFIX)]
+    free_ids = [gi for gi, g in enumerate(SCENARIO) if g.role.startswith(FLEET_PREFIX)]
+    free_ids += list(range(len(SCENARIO), len(SCENARIO) + len(fleet)))
+    members = [(free_ids[i], dataclasses.replace(template, role=FLEET_PREFIX + r, rover=r)) for i, r in enumerate(fleet)]
+    return fixed[:1] + members + fixed[1:]  # earth, fleet..., target
+
+
+def scenario_specs(seed: int, scale: float = 1.0, fleet: tuple[str, ...] | None = None) -> list[tuple[str, str, TraverseSpec]]:
     """(role, file stem, spec) of every traverse; `scale` shrinks the number and length of traverses."""
     if not (0.0 < scale <= 10.0):
         raise ValueError(f"scale must be in (0, 10], got {scale}")
     out = []
-    for gi, grp in enumerate(SCENARIO):
+    for gi, grp in scenario_groups(fleet):
         n = max(2, round(grp.n_traverses * math.sqrt(scale)))
         duration = max(20.0, grp.duration_s * scale * grp.n_traverses / n)
         for t in range(n):
@@ -70,9 +98,9 @@ def scenario_specs(seed: int, scale: float = 1.0) -> list[tuple[str, str, Traver
 
 
 def scenario_traces(seed: int, scale: float = 1.0, rate_hz: float = DEFAULT_RATE_HZ,
-                    progress: bool = False) -> list[tuple[str, str, Trace]]:
+                    progress: bool = False, fleet: tuple[str, ...] | None = None) -> list[tuple[str, str, Trace]]:
     """Simulate the built-in scenario: (role, name, Trace) per traverse."""
-    entries = scenario_specs(seed, scale)
+    entries = scenario_specs(seed, scale, fleet)
     specs = [spec for _, _, spec in entries]
     total = sum(int(round(s.duration_s * rate_hz)) for s in specs)
     with tqdm(total=total, desc="simulating", unit="sample", unit_scale=True, disable=not progress) as bar:
@@ -81,7 +109,7 @@ def scenario_traces(seed: int, scale: float = 1.0, rate_hz: float = DEFAULT_RATE
 
 
 def write_scenario(out_dir: Path | str, seed: int, scale: float = 1.0, rate_hz: float = DEFAULT_RATE_HZ,
-                   raw: bool = False, progress: bool = False) -> Path:
+                   raw: bool = False, progress: bool = False, fleet: tuple[str, ...] | None = None) -> Path:
     """Write one window CSV per traverse and dataset.json into out_dir (created); returns out_dir.
 
     With `raw`, also one .npz per traverse with the raw samples and distance increments.
@@ -90,7 +118,7 @@ def write_scenario(out_dir: Path | str, seed: int, scale: float = 1.0, rate_hz: 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, dict] = {}
-    for role, name, trace in scenario_traces(seed, scale, rate_hz, progress):
+    for role, name, trace in scenario_traces(seed, scale, rate_hz, progress, fleet):
         table = WindowTable.from_windows(trace.windows())
         write_windows_csv(out / f"{name}.csv", table)
         entry = {"role": role, **{k: trace.meta[k] for k in ("rover", "terrain", "soils", "gravity", "seed")},
@@ -102,5 +130,6 @@ def write_scenario(out_dir: Path | str, seed: int, scale: float = 1.0, rate_hz: 
                                 channels=np.array(RAW_CHANNELS), **{f"truth_{k}": v for k, v in trace.truth.items()})
             entry["raw"] = f"{name}.npz"
         files[f"{name}.csv"] = entry
-    write_manifest(out, files, {"generator": GENERATOR, "seed": seed, "scale": scale, "rate_hz": rate_hz})
+    write_manifest(out, files, {"generator": GENERATOR, "seed": seed, "scale": scale, "rate_hz": rate_hz,
+                                "fleet": list(DEFAULT_FLEET if fleet is None else fleet)})
     return out

@@ -1,0 +1,9 @@
+# Sourced by the scripts: where fleetlab's virtual environment is, and its bin/ first on PATH so that
+# `fleetlab`, `python` and CMake's find_package(Python3) all mean the venv's interpreter.
+FLEETLAB_VENV="${FLEETLAB_VENV:-$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/.venv}"
+export FLEETLAB_VENV
+activate_fleetlab_venv() {
+  export VIRTUAL_ENV="$FLEETLAB_VENV"
+  export PATH="$FLEETLAB_VENV/bin:$PATH"
+  export PYTHON="$FLEETLAB_VENV/bin/python"
+}

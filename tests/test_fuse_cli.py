@@ -118,9 +118,11 @@ def test_bench_fusion_json():
     res = json.loads(r.stdout)
     for key in ("batched_ms_per_generation", "sequential_ms_per_generation", "speedup", "full_run_s", "full_generation_ms"):
         assert res[key] > 0, key
-    assert res["speedup"] == pytest.approx(res["sequential_ms_per_generation"] / res["batched_ms_per_generation"], rel=0.02)
+    # speedups are printed to 2 decimals: compare within that rounding (a loaded machine gives speedups near 0.1)
+    assert res["speedup"] == pytest.approx(res["sequential_ms_per_generation"] / res["batched_ms_per_generation"],
+                                           rel=0.02, abs=0.0051)
     assert res["speedup_full_generation"] == pytest.approx(
-        res["sequential_ms_per_generation"] / res["full_generation_ms"], rel=0.02)
+        res["sequential_ms_per_generation"] / res["full_generation_ms"], rel=0.02, abs=0.0051)
     assert res["full_generation_ms"] == pytest.approx(1e3 * res["full_run_s"] / 5, abs=0.11)  # full_run_s is rounded to ms
     assert res["max_abs_fitness_diff"] < 1e-4  # batched and one-at-a-time agree on every ant
     assert res["cal_size"] == 60 and res["ants"] == 20

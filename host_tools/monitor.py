@@ -23,7 +23,7 @@ from .serial_framing import Rejected
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="transport", metavar="TRANSPORT", required=True)
     c = sub.add_parser("can", help="listen on a python-can bus", description="Listen on a python-can bus and "
-                       "decode every frame with the DBC (host_tools/slipest.dbc, or --dbc), or replay a python-can log (--replay).")
+                       "decode every frame with the DBC (dbc/slipest.dbc, or --dbc), or replay a python-can log (--replay).")
     c.add_argument("--interface", default="virtual", help="python-can interface (default virtual)")
     c.add_argument("--channel", default=None, help="bus channel (vcan0, /dev/ttyACM0, ...)")
     c.add_argument("--bitrate", type=int, default=None, help="bitrate for slcan/socketcan")

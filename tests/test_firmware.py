@@ -28,7 +28,7 @@ from fleetlab.data.features_int import CHANNEL_LSB, FLAG_GAP, FLAG_INVALID, feat
 from fleetlab.host_tools.bench_c import REPO, cmake_build, library_footprint, target_costs
 
 BUNDLE = REPO / "firmware_c" / "bundles" / "example"
-DBC = cantools.database.load_file(str(REPO / "host_tools" / "slipest.dbc"))
+DBC = cantools.database.load_file(str(REPO / "dbc" / "slipest.dbc"))
 
 
 # --------------------------------------------------------------------------- builds

@@ -34,12 +34,12 @@ from .dbc import (
     frame_id,
 )
 from .emulator import EmulatorProcess, build, default_bundle, find_artifact
-from .links import InprocLink, Link, SerialLink, SlcanLink
+from .links import ALIASES, InprocLink, Link, canonical_link, estimator_links, link_class
 from .reference import Reference
 from .serial_framing import Rejected
 from .sources import FeatureSource, TelemetrySource, resolve, sim_source
 
-LINKS = ("slcan", "serial", "inproc")
+LINKS = (*estimator_links(), *ALIASES)  # accepted by --link (aliases last)
 DEFAULT_SCALE = 0.08
 SAMPLE_RATE_HZ = 50.0
 REALTIME_FRAMES_PER_S = 150.0  # 50 Hz rover, three telemetry frames per sample
@@ -70,7 +70,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="'sim' (simulated raw telemetry, TELEM frames), 'vectors' (the bundle's test vectors, "
                         "FEATURES frames) or a folder of window CSV files (FEATURES frames); default sim")
     p.add_argument("--link", choices=LINKS, default="slcan",
-                   help="slcan: python-can slcan bus on the emulator's pty; serial: COBS+CRC packets on its pty; "
+                   help="slcan: python-can slcan bus on the emulator's pty; cobs (old name: serial): COBS+CRC packets on its pty; "
                         "inproc: the C library via ctypes on a python-can virtual bus (default slcan)")
     p.add_argument("--inject", default=None, metavar="KINDS",
                    help=f"faults to inject: comma list of {', '.join(fault_mod.KINDS)}, or 'all'")
@@ -186,26 +186,26 @@ class _Endpoint:
     """The estimator at the other end of the link, and how to kill/restart it."""
 
     def __init__(self, link_kind: str, bundle: Path):
-        self.kind = link_kind
+        self.cls = link_class(link_kind)
         self.emu: EmulatorProcess | None = None
         self.link: Link | None = None
-        if link_kind == "inproc":
+        if self.cls.in_process:
             self.lib = find_artifact(build(bundle), "libslipest_host.so")
         else:
-            self.emu = EmulatorProcess.for_bundle(bundle, "slcan" if link_kind == "slcan" else "cobs")
+            assert self.cls.emulator_protocol is not None
+            self.emu = EmulatorProcess.for_bundle(bundle, self.cls.emulator_protocol)
 
     def connect(self) -> Link:
-        if self.kind == "inproc":
-            self.link = InprocLink(self.lib)
+        if self.cls.in_process:
+            self.link = self.cls(self.lib)
         else:
             assert self.emu is not None
-            pty = self.emu.start()
-            self.link = SlcanLink(pty, batched=True) if self.kind == "slcan" else SerialLink(pty)
+            self.link = self.cls.over_port(self.emu.start(), full_speed=True)
         return self.link
 
     def restart(self) -> Link:
         """Kill the estimator mid-stream and bring up a fresh one."""
-        if self.kind == "inproc":
+        if self.cls.in_process:
             assert isinstance(self.link, InprocLink)
             self.link.restart()
             return self.link
@@ -252,6 +252,7 @@ def emulate(
 ) -> EmulationResult:
     if link_kind not in LINKS:
         raise ValueError(f"--link must be one of {', '.join(LINKS)}, got {link_kind!r}")
+    link_kind = canonical_link(link_kind)
     bundle = Path(bundle) if bundle else default_bundle()
     ref = Reference.load(bundle)
     kinds = kinds or []

@@ -5,6 +5,10 @@ attached to a python-can virtual bus.
 Every link writes wire items in order and delivers what the estimator answers on a
 queue filled by a reader thread, so a full pty buffer never deadlocks the host: the
 writer blocks (flow control) while the reader keeps draining.
+
+Links are registered by name (`register_link`, `link_class`), as python-can registers its
+bus interfaces: `fleetlab emulate --link NAME` and `fleetlab stream` both pick their link
+class here, so a new link is one class with one decorator.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ import socket
 import threading
 import time
 from pathlib import Path
-from typing import Sequence
+from typing import ClassVar, Sequence
 
 import can
 import serial
@@ -35,6 +39,35 @@ from .serial_framing import (
 )
 
 RxItem = tuple[Frame | Rejected, float]
+
+_LINKS: dict[str, type["Link"]] = {}
+# Old spelling kept as an alias because tests use `--link serial` (and older docs did).
+ALIASES = {"serial": "cobs"}
+
+
+def register_link(cls: type["Link"]) -> type["Link"]:
+    """Class decorator: make `cls` available under `cls.kind`."""
+    if cls.kind in _LINKS or cls.kind in ALIASES:
+        raise ValueError(f"link {cls.kind!r} is registered already")
+    _LINKS[cls.kind] = cls
+    return cls
+
+
+def link_class(name: str) -> type["Link"]:
+    """The link class registered under `name` (or one of its aliases)."""
+    kind = ALIASES.get(name, name)
+    if kind not in _LINKS:
+        raise ValueError(f"unknown link {name!r}; choose from {', '.join(_LINKS)}")
+    return _LINKS[kind]
+
+
+def canonical_link(name: str) -> str:
+    return link_class(name).kind
+
+
+def estimator_links() -> tuple[str, ...]:
+    """Links that reach fleetlab's own estimator: the emulator over a pty, or the library in-process."""
+    return tuple(k for k, c in _LINKS.items() if c.emulator_protocol is not None or c.in_process)
 
 
 def to_message(frame: Frame) -> can.Message:
@@ -71,8 +104,17 @@ def open_can_bus(interface: str, channel: str | None, **kwargs) -> can.BusABC:
 class Link:
     """Base: `write(items)` in order; answers arrive on `rx` as (Frame | Rejected, time)."""
 
-    name = "link"
+    kind: ClassVar[str] = "link"  # registry name
+    emulator_protocol: ClassVar[str | None] = None  # the C emulator's `--link` for this framing, if it speaks it
+    in_process: ClassVar[bool] = False  # the estimator is the C library loaded into this process
+    name = "link"  # this instance, e.g. "slcan:/dev/pts/3"
     corrupt_kinds: frozenset[str] = frozenset()
+
+    @classmethod
+    def over_port(cls, port: str, full_speed: bool = False, **options) -> "Link":
+        """Open this link on a serial port or pty (e.g. a started emulator's). `full_speed`:
+        write many items per call, to measure the link rather than per-call overhead."""
+        raise ValueError(f"the {cls.kind} link does not run over a serial port")
 
     def __init__(self) -> None:
         self.rx: queue.SimpleQueue[RxItem] = queue.SimpleQueue()
@@ -114,8 +156,11 @@ class Link:
         self.close()
 
 
+@register_link
 class CanBusLink(Link):
     """Any python-can bus (slcan, virtual, socketcan, ...)."""
+
+    kind = "can"
 
     def __init__(self, bus: can.BusABC, name: str) -> None:
         super().__init__()
@@ -141,6 +186,7 @@ class CanBusLink(Link):
             pass  # the other end may already be gone
 
 
+@register_link
 class SlcanLink(CanBusLink):
     """python-can's slcan interface on a serial port or pty; malformed lines go to the raw port.
 
@@ -149,7 +195,13 @@ class SlcanLink(CanBusLink):
     serial port many at a time, which measures the link rather than per-call overhead.
     """
 
+    kind = "slcan"
+    emulator_protocol = "slcan"
     corrupt_kinds = frozenset({"bad_crc"})
+
+    @classmethod
+    def over_port(cls, port: str, full_speed: bool = False, **options) -> "SlcanLink":
+        return cls(port, batched=full_speed, **options)
 
     def __init__(self, port: str, bitrate: int | None = 500000, batched: bool = False) -> None:
         super().__init__(open_can_bus("slcan", port, bitrate=bitrate), f"slcan:{port}")
@@ -175,21 +227,28 @@ class SlcanLink(CanBusLink):
                 self.bus.send(to_message(item.frame))
 
 
-class SerialLink(Link):
+@register_link
+class CobsLink(Link):
     """COBS + CRC-16 packets over pyserial (pty or real port), written in chunks for speed."""
 
+    kind = "cobs"
+    emulator_protocol = "cobs"
     corrupt_kinds = frozenset({"bad_crc", "length_mismatch"})
     CHUNK = 256  # packets per write() call
 
     def __init__(self, port: str, baudrate: int = 921600) -> None:
         super().__init__()
-        self.name = f"serial:{port}"
+        self.name = f"cobs:{port}"
         try:
             self.port = serial.Serial(port, baudrate=baudrate, timeout=0.05, write_timeout=None)
         except serial.SerialException as e:
             raise OSError(f"serial port {port}: {e}") from None
         self.decoder = PacketDecoder()
         self._start_reader()
+
+    @classmethod
+    def over_port(cls, port: str, full_speed: bool = False, **options) -> "CobsLink":
+        return cls(port, **options)  # always written in chunks
 
     def _render(self, item: WireItem) -> bytes:
         if item.corrupt is None:
@@ -318,8 +377,12 @@ class InprocEstimatorNode:
 _channel_ids = itertools.count()
 
 
+@register_link
 class InprocLink(CanBusLink):
     """Host side of a python-can virtual bus shared with an in-process C estimator."""
+
+    kind = "inproc"
+    in_process = True
 
     def __init__(self, lib_path: Path | str, channel: str | None = None) -> None:
         channel = channel or f"fleetlab-inproc-{os.getpid()}-{next(_channel_ids)}"

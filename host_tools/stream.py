@@ -35,7 +35,7 @@ from .dbc import (
     feature_frames,
     telemetry_frames,
 )
-from .links import CanBusLink, InprocLink, Link, SerialLink, SlcanLink, open_can_bus, to_message
+from .links import CanBusLink, Link, link_class, open_can_bus, to_message
 from .serial_framing import Rejected
 from .sources import LOG_SUFFIXES, FeatureSource, TelemetrySource, log_frames, resolve
 
@@ -210,22 +210,22 @@ def run(args: argparse.Namespace) -> int:
     if args.transport == "can":
         if args.interface == "virtual" and not args.no_estimator:
             lib = find_artifact(build(args.bundle), "libslipest_host.so")
-            link: Link = InprocLink(lib, channel=args.channel)
+            link: Link = link_class("inproc")(lib, channel=args.channel)
         elif args.interface == "slcan":
             channel = args.channel
             if channel in (None, "emulator"):
-                emu = EmulatorProcess.for_bundle(args.bundle, "slcan")
+                emu = EmulatorProcess.for_bundle(args.bundle, link_class("slcan").emulator_protocol)
                 channel = emu.start()
-            link = SlcanLink(channel, bitrate=args.bitrate)
+            link = link_class("slcan").over_port(channel, bitrate=args.bitrate)
         else:
             kw = {"bitrate": args.bitrate} if args.interface not in ("virtual",) else {}
             link = CanBusLink(open_can_bus(args.interface, args.channel, **kw), f"{args.interface}:{args.channel}")
-    else:
+    else:  # the serial transport carries the COBS link
         port = args.port
         if port == "emulator":
-            emu = EmulatorProcess.for_bundle(args.bundle, "cobs")
+            emu = EmulatorProcess.for_bundle(args.bundle, link_class("cobs").emulator_protocol)
             port = emu.start()
-        link = SerialLink(port, baudrate=args.baudrate)
+        link = link_class("cobs").over_port(port, baudrate=args.baudrate)
     log = TrafficLog(args.log)
     try:
         total = None

@@ -1,7 +1,8 @@
 """Fusion methods by name: one signature in, one result type out.
 
 A method is a function `fit(inputs: FusionInputs) -> FusedModel`. It is added with one
-`register(...)` call (see `fusion/methods.py` for the paper's methods); `fleetlab fuse
+`register(...)` call (see `fusion/methods.py` for the paper's methods, which the `fleetlab.fusion`
+package registers when it is imported); `fleetlab fuse
 --method NAME`, `fleetlab evaluate --methods` and their `--help` read this registry, so a
 new method needs no other edit.
 """
@@ -98,12 +99,7 @@ def unregister(name: str) -> None:
     _REGISTRY.pop(name, None)
 
 
-def _load_builtin() -> None:
-    from . import methods  # noqa: F401  (registers the paper's methods on import)
-
-
 def get(name: str) -> MethodSpec:
-    _load_builtin()
     if name not in _REGISTRY:
         raise ValueError(f"unknown fusion method {name!r}; choose from {', '.join(selectable())}")
     return _REGISTRY[name]
@@ -111,7 +107,6 @@ def get(name: str) -> MethodSpec:
 
 def all_methods() -> dict[str, MethodSpec]:
     """Every registered method, in registration order (the paper's table order first)."""
-    _load_builtin()
     return dict(_REGISTRY)
 
 

@@ -22,9 +22,9 @@ from tqdm import tqdm
 
 from fleetlab.data.features_int import FLAG_GAP, FLAG_INVALID, SAMPLES_PER_WINDOW
 
-from . import faults as fault_mod
-from .compare import EstimatorModel, WindowVerdict, compare_status, compare_windows
-from .dbc import (
+from .verify import faults as fault_mod
+from .verify.compare import EstimatorModel, WindowVerdict, compare_status, compare_windows
+from .wire.dbc import (
     TELEM_NAMES,
     OutputAssembler,
     StatusReport,
@@ -35,8 +35,8 @@ from .dbc import (
 )
 from .emulator import EmulatorProcess, build, default_bundle, find_artifact
 from .links import ALIASES, InprocLink, Link, canonical_link, estimator_links, link_class
-from .reference import Reference
-from .serial_framing import Rejected
+from .verify.reference import Reference
+from .wire.serial_framing import Rejected
 from .sources import FeatureSource, TelemetrySource, resolve, sim_source
 
 LINKS = (*estimator_links(), *ALIASES)  # accepted by --link (aliases last)

@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 from ..paths import build_root, default_bundle, repo_root
-from .dbc import DBC_PATH, dbc_path
+from .wire.dbc import DBC_PATH, dbc_path
 
 EMULATOR_TARGET = "slipest_emu"
 HOST_LIBRARY_TARGET = "slipest_host"

@@ -13,7 +13,6 @@ class here, so a new link is one class with one decorator.
 
 from __future__ import annotations
 
-import ctypes
 import itertools
 import os
 import queue
@@ -26,9 +25,10 @@ from typing import ClassVar, Sequence
 import can
 import serial
 
-from .compare import WireItem
-from .dbc import Frame
-from .serial_framing import (
+from .binding import CEstimator
+from .wire.dbc import Frame
+from .wire.items import WireItem
+from .wire.serial_framing import (
     PacketDecoder,
     Rejected,
     encode_bad_crc_packet,
@@ -280,69 +280,7 @@ class CobsLink(Link):
             pass
 
 
-# --- in-process estimator: the C library through ctypes ------------------------------------
-
-
-class CFrame(ctypes.Structure):
-    _fields_ = [("id", ctypes.c_uint32), ("dlc", ctypes.c_uint8), ("data", ctypes.c_uint8 * 8)]
-
-
-class CCounters(ctypes.Structure):
-    _fields_ = [(n, ctypes.c_uint32) for n in ("frames_received", "frames_rejected", "samples_dropped",
-                                                "windows_flagged", "windows_done", "saturations")]
-
-
-MAX_OUT = 9  # SLIPEST_NODE_MAX_OUT
-
-
-class CEstimator:
-    """One estimator node (`slipest_node_t`) from libslipest_host.so."""
-
-    def __init__(self, lib_path: Path | str) -> None:
-        lib = ctypes.CDLL(str(lib_path))
-        lib.slipest_node_size.restype = ctypes.c_size_t
-        lib.slipest_frame_size.restype = ctypes.c_size_t
-        lib.slipest_node_init.argtypes = [ctypes.c_void_p]
-        lib.slipest_node_handle.argtypes = [ctypes.c_void_p, ctypes.POINTER(CFrame), ctypes.POINTER(CFrame),
-                                            ctypes.c_size_t]
-        lib.slipest_node_link_error.argtypes = [ctypes.c_void_p]
-        lib.slipest_node_counters.argtypes = [ctypes.c_void_p, ctypes.POINTER(CCounters)]
-        lib.slipest_node_model_hash32.restype = ctypes.c_uint32
-        if lib.slipest_frame_size() != ctypes.sizeof(CFrame):
-            raise OSError(f"{lib_path}: slipest_frame_t is {lib.slipest_frame_size()} bytes, ctypes expects "
-                          f"{ctypes.sizeof(CFrame)}")
-        self.lib = lib
-        self._ctx = ctypes.create_string_buffer(lib.slipest_node_size())
-        self._in = CFrame()
-        self._out = (CFrame * MAX_OUT)()
-        self.reset()
-
-    def reset(self) -> None:
-        """A fresh node, as after a power cycle."""
-        r = self.lib.slipest_node_init(self._ctx)
-        if r < 0:
-            raise OSError(f"slipest_node_init failed ({r})")
-
-    def handle(self, frame: Frame) -> list[Frame]:
-        self._in.id = frame.can_id
-        self._in.dlc = len(frame.data)
-        ctypes.memmove(self._in.data, frame.data, len(frame.data))
-        n = self.lib.slipest_node_handle(self._ctx, ctypes.byref(self._in), self._out, MAX_OUT)
-        if n <= 0:
-            return []  # rejected frames are counted by the node itself
-        return [Frame(o.id, bytes(o.data[: o.dlc])) for o in self._out[:n]]
-
-    def link_error(self) -> None:
-        self.lib.slipest_node_link_error(self._ctx)
-
-    def counters(self) -> dict[str, int]:
-        c = CCounters()
-        self.lib.slipest_node_counters(self._ctx, ctypes.byref(c))
-        return {n: getattr(c, n) for n, _ in CCounters._fields_}
-
-    @property
-    def model_hash32(self) -> int:
-        return int(self.lib.slipest_node_model_hash32())
+# --- in-process estimator: the C library (fleetlab.host_tools.binding) on a virtual bus ---
 
 
 class InprocEstimatorNode:

@@ -15,9 +15,9 @@ from typing import Callable
 
 import can
 
-from .dbc import Frame, OutputAssembler, StatusReport, WindowEstimate, add_dbc_option, apply_dbc_option, by_id
+from .wire.dbc import Frame, OutputAssembler, StatusReport, WindowEstimate, add_dbc_option, apply_dbc_option, by_id
 from .links import from_message, open_can_bus
-from .serial_framing import Rejected
+from .wire.serial_framing import Rejected
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -20,8 +20,8 @@ from tqdm import tqdm
 
 from fleetlab.data.features_int import SAMPLES_PER_WINDOW
 
-from .compare import WireItem
-from .dbc import (
+from .wire.items import WireItem
+from .wire.dbc import (
     CONTROL_RESET,
     CONTROL_STATUS,
     Frame,
@@ -36,7 +36,7 @@ from .dbc import (
     telemetry_frames,
 )
 from .links import CanBusLink, Link, link_class, open_can_bus, to_message
-from .serial_framing import Rejected
+from .wire.serial_framing import Rejected
 from .sources import LOG_SUFFIXES, FeatureSource, TelemetrySource, log_frames, resolve
 
 SAMPLE_RATE_HZ = 50.0

@@ -21,9 +21,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "fuse": ("fleetlab.cli.fuse", "train the experts and fuse them into one model (AcoMerge or any registered method)"),
     "evaluate": ("fleetlab.cli.evaluate", "Monte Carlo cross-validation of AcoMerge against the paper's baselines"),
     "export": ("fleetlab.cli.export", "export a model to ONNX, fixed-point C headers and test vectors"),
-    "emulate": ("fleetlab.host_tools.emulate", "run the C estimator in the host emulation loop and compare bit for bit"),
-    "stream": ("fleetlab.host_tools.stream", "stream telemetry or features to the estimator over CAN or serial"),
-    "monitor": ("fleetlab.host_tools.monitor", "watch slip estimates and status frames on a CAN bus"),
+    "emulate": ("fleetlab.cli.emulate", "run the C estimator in the host emulation loop and compare bit for bit"),
+    "stream": ("fleetlab.cli.stream", "stream telemetry or features to the estimator over CAN or serial"),
+    "monitor": ("fleetlab.cli.monitor", "watch slip estimates and status frames on a CAN bus"),
     "bench": ("fleetlab.cli.bench", "benchmarks: featurisation and simulation, fusion, C inference"),
     "demo": ("fleetlab.demo", "the whole pipeline on built-in defaults, ending in a report"),
 }

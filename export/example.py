@@ -2,7 +2,7 @@
 
     python -m fleetlab.export.example [--out DIR] [--seed 1] [--scale 0.3]
 
-Runs `fleetlab simulate --seed SEED --scale SCALE` into a temporary folder, trains an SN-S on
+Simulates the built-in scenario (as `fleetlab simulate --seed SEED --scale SCALE`) into a temporary folder, trains an SN-S on
 its `earth` and `target` windows (Adam, the expert hyper-parameters, fixed seed, one thread so
 the result is the same on every machine), and exports it with the project's own exporter:
 test vectors drawn from the simulated windows plus the edge cases, accuracy report included.
@@ -19,16 +19,18 @@ from pathlib import Path
 import numpy as np
 import torch
 
-REPO = Path(__file__).resolve().parents[1]
-DEFAULT_OUT = REPO / "firmware_c" / "bundles" / "example"
+from ..models.train import EXPERT_EPOCHS
+from ..paths import default_bundle
+
+DEFAULT_OUT = default_bundle()
 TRAIN_ROLES = ("earth", "target")
 N_VECTORS = 1200
 
 
-def make_example(out: Path, seed: int = 1, scale: float = 0.3, epochs: int = 70, keep: Path | None = None) -> Path:
+def make_example(out: Path, seed: int = 1, scale: float = 0.3, epochs: int = EXPERT_EPOCHS, keep: Path | None = None) -> Path:
     """Simulate, train, export into `out`; with `keep`, also leave the model and the simulated data there."""
-    from fleetlab.cli import main as fleetlab_main
     from fleetlab.data.dataset import load_dataset
+    from fleetlab.data.simulator.scenario import write_scenario
     from fleetlab.models import build, save_model
     from fleetlab.models.train import train_classifier
 
@@ -37,8 +39,7 @@ def make_example(out: Path, seed: int = 1, scale: float = 0.3, epochs: int = 70,
 
     with tempfile.TemporaryDirectory(prefix="fleetlab-example-") as tmp:
         sim = Path(tmp) / "sim"
-        if fleetlab_main(["simulate", "--out", str(sim), "--seed", str(seed), "--scale", str(scale)]) != 0:
-            raise OSError("fleetlab simulate failed")
+        write_scenario(sim, seed, scale, progress=True)  # what `fleetlab simulate --seed --scale` writes
         ds = load_dataset(sim)
         x = np.concatenate([ds.xy(r)[0] for r in TRAIN_ROLES])
         y = np.concatenate([ds.xy(r)[1] for r in TRAIN_ROLES])
@@ -92,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"bundle directory (default {DEFAULT_OUT})")
     p.add_argument("--seed", type=int, default=1, help="simulator and training seed (default 1)")
     p.add_argument("--scale", type=float, default=0.3, help="simulator scale (default 0.3)")
-    p.add_argument("--epochs", type=int, default=70, help="training epochs (default 70)")
+    p.add_argument("--epochs", type=int, default=EXPERT_EPOCHS, help=f"training epochs (default {EXPERT_EPOCHS})")
     p.add_argument("--keep", type=Path, help="also keep the trained model and the simulated data in this folder")
     args = p.parse_args(argv)
     out = make_example(args.out, args.seed, args.scale, args.epochs, args.keep)

@@ -9,8 +9,6 @@ agree exactly. Floor division by a power of two replaces C's arithmetic-shift he
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import torch
 
@@ -116,13 +114,9 @@ def run(qp: QParams, q_inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return logits.numpy().astype(np.int32), sat.numpy().astype(np.int32)
 
 
-def q_logits_of(bundle_or_params: QParams | str | Path, q_inputs: np.ndarray, return_saturations: bool = False):
-    """Integer logits (N,3) int32 of a bundle directory (verified on load) or of QParams."""
-    qp = bundle_or_params
-    if not isinstance(qp, QParams):
-        from .bundle import load_bundle
-
-        qp = load_bundle(bundle_or_params).qparams
+def q_logits_of(qp: QParams, q_inputs: np.ndarray, return_saturations: bool = False):
+    """Integer logits (N,3) int32 of fixed-point parameters (of a bundle: `load_bundle(dir).qparams`;
+    this module does not load bundles itself, so bundle -> vectors -> intref stays one-way)."""
     logits, sat = run(qp, q_inputs)
     return (logits, sat) if return_saturations else logits
 

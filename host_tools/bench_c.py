@@ -32,8 +32,10 @@ from typing import Callable
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-DEFAULT_BUNDLE = REPO / "firmware_c" / "bundles" / "example"
+from ..paths import default_bundle, repo_root
+
+REPO = repo_root()
+DEFAULT_BUNDLE = default_bundle()
 QEMU = "qemu-system-arm"
 TARGETS = {  # cpu -> (toolchain file, QEMU machine)
     "cortex-m4": ("firmware_c/cmake/cortex-m4.cmake", "mps2-an386"),

@@ -1,4 +1,4 @@
-"""`fleetlab emulate`: run the C estimator in the host emulation loop and compare bit for bit.
+"""The host emulation loop behind `fleetlab emulate`: run the C estimator and compare bit for bit.
 
 The host builds the emulator for a bundle (CMake), starts it on a pty (or loads the C
 library in-process), streams a source through the chosen link at full speed, collects
@@ -10,8 +10,6 @@ estimator lifetime. Exit code 0 only when everything agrees and nothing was lost
 
 from __future__ import annotations
 
-import argparse
-import json
 import queue
 import time
 from dataclasses import dataclass, field
@@ -22,78 +20,27 @@ from tqdm import tqdm
 
 from fleetlab.data.features_int import FLAG_GAP, FLAG_INVALID, SAMPLES_PER_WINDOW
 
-from . import faults as fault_mod
-from .compare import EstimatorModel, WindowVerdict, compare_status, compare_windows
-from .dbc import (
+from .verify import faults as fault_mod
+from .verify.compare import EstimatorModel, WindowVerdict, compare_status, compare_windows
+from .wire.dbc import (
     TELEM_NAMES,
     OutputAssembler,
     StatusReport,
     WindowEstimate,
-    add_dbc_option,
-    apply_dbc_option,
     frame_id,
 )
 from .emulator import EmulatorProcess, build, default_bundle, find_artifact
-from .links import InprocLink, Link, SerialLink, SlcanLink
-from .reference import Reference
-from .serial_framing import Rejected
-from .sources import FeatureSource, TelemetrySource, resolve, sim_source
+from .links import ALIASES, InprocLink, Link, canonical_link, estimator_links, link_class
+from .sources import FeatureSource, TelemetrySource, sim_source
+from .verify.reference import Reference
+from .wire.serial_framing import Rejected
 
-LINKS = ("slcan", "serial", "inproc")
+LINKS = (*estimator_links(), *ALIASES)  # accepted by --link (aliases last)
 DEFAULT_SCALE = 0.08
 SAMPLE_RATE_HZ = 50.0
 REALTIME_FRAMES_PER_S = 150.0  # 50 Hz rover, three telemetry frames per sample
 REALTIME_WINDOWS_PER_S = 0.5
 CHUNK = 64  # wire items per write; the reader thread drains answers meanwhile
-
-
-EPILOG = """\
-Output: a summary; with --json FILE the same as JSON: windows, bit_exact, mismatches,
-flagged_windows, rejected_frames (estimator's count), dropped_frames (sent but never
-received, uncounted), injected_faults, detected_faults, latency_us {p50, p99} (from the
-frame that closes a window to its SLIP_ESTIMATE, full-speed stream), plus detail keys.
-Exit status 0 only if every window is bit-exact, every status counter matches the host's
-prediction, nothing was lost uncounted and every injected fault was detected.
-
-Faults (--inject): bad_crc (serial: CRC inverted; slcan: malformed line), wrong_length,
-unknown_id, dropped_sample, reordered_samples, duplicated_frame, restart (kill the
-emulator mid-window, start it again, CONTROL reset, resume at the next window boundary).
-"""
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.epilog = EPILOG
-    p.formatter_class = argparse.RawDescriptionHelpFormatter
-    p.add_argument("--bundle", type=Path, default=None,
-                   help="export bundle directory (default: the committed example bundle firmware_c/bundles/example)")
-    p.add_argument("--source", default="sim",
-                   help="'sim' (simulated raw telemetry, TELEM frames), 'vectors' (the bundle's test vectors, "
-                        "FEATURES frames) or a folder of window CSV files (FEATURES frames); default sim")
-    p.add_argument("--link", choices=LINKS, default="slcan",
-                   help="slcan: python-can slcan bus on the emulator's pty; serial: COBS+CRC packets on its pty; "
-                        "inproc: the C library via ctypes on a python-can virtual bus (default slcan)")
-    p.add_argument("--inject", default=None, metavar="KINDS",
-                   help=f"faults to inject: comma list of {', '.join(fault_mod.KINDS)}, or 'all'")
-    p.add_argument("--inject-rate", type=float, default=0.05, metavar="R",
-                   help="probability that a window carries one fault (default 0.05)")
-    p.add_argument("--restart-every", type=int, default=0, metavar="N",
-                   help="also kill and restart the estimator every N windows (0: never)")
-    p.add_argument("--soak", type=int, default=0, metavar="FRAMES",
-                   help="throughput soak: stream at least FRAMES telemetry frames (simulator data, repeated) "
-                        "at full speed and report frames/s and windows/s")
-    p.add_argument("--max-windows", type=int, default=0, metavar="N",
-                   help="stream only the first N windows of the source (0: all)")
-    p.add_argument("--realtime", action="store_true",
-                   help="pace like the rover (one sample = 3 frames every 20 ms, or one feature set per 2 s) "
-                        "instead of full speed; latency then measures the estimator, not a queue")
-    p.add_argument("--seed", type=int, default=0, help="simulator and fault-injection seed (default 0)")
-    p.add_argument("--scale", type=float, default=DEFAULT_SCALE,
-                   help=f"simulator scenario scale (default {DEFAULT_SCALE}, >= 500 windows)")
-    p.add_argument("--json", type=Path, default=None, metavar="FILE", help="write the summary as JSON")
-    p.add_argument("--timeout", type=float, default=20.0,
-                   help="seconds to wait for the estimator's answers at the end of a lifetime (default 20)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_dbc_option(p)
 
 
 @dataclass
@@ -186,26 +133,26 @@ class _Endpoint:
     """The estimator at the other end of the link, and how to kill/restart it."""
 
     def __init__(self, link_kind: str, bundle: Path):
-        self.kind = link_kind
+        self.cls = link_class(link_kind)
         self.emu: EmulatorProcess | None = None
         self.link: Link | None = None
-        if link_kind == "inproc":
+        if self.cls.in_process:
             self.lib = find_artifact(build(bundle), "libslipest_host.so")
         else:
-            self.emu = EmulatorProcess.for_bundle(bundle, "slcan" if link_kind == "slcan" else "cobs")
+            assert self.cls.emulator_protocol is not None
+            self.emu = EmulatorProcess.for_bundle(bundle, self.cls.emulator_protocol)
 
     def connect(self) -> Link:
-        if self.kind == "inproc":
-            self.link = InprocLink(self.lib)
+        if self.cls.in_process:
+            self.link = self.cls(self.lib)
         else:
             assert self.emu is not None
-            pty = self.emu.start()
-            self.link = SlcanLink(pty, batched=True) if self.kind == "slcan" else SerialLink(pty)
+            self.link = self.cls.over_port(self.emu.start(), full_speed=True)
         return self.link
 
     def restart(self) -> Link:
         """Kill the estimator mid-stream and bring up a fresh one."""
-        if self.kind == "inproc":
+        if self.cls.in_process:
             assert isinstance(self.link, InprocLink)
             self.link.restart()
             return self.link
@@ -252,6 +199,7 @@ def emulate(
 ) -> EmulationResult:
     if link_kind not in LINKS:
         raise ValueError(f"--link must be one of {', '.join(LINKS)}, got {link_kind!r}")
+    link_kind = canonical_link(link_kind)
     bundle = Path(bundle) if bundle else default_bundle()
     ref = Reference.load(bundle)
     kinds = kinds or []
@@ -381,52 +329,7 @@ def soak_source(frames: int, seed: int, scale: float, base: TelemetrySource | No
     return TelemetrySource(f"soak({frames} frames of {base.name})", samples, [("soak", n_samples // 100)])
 
 
-def _first_windows(source: TelemetrySource | FeatureSource, n: int) -> TelemetrySource | FeatureSource:
+def first_windows(source: TelemetrySource | FeatureSource, n: int) -> TelemetrySource | FeatureSource:
     if isinstance(source, TelemetrySource):
         return TelemetrySource(f"{source.name}[:{n} windows]", source.samples_q[: n * SAMPLES_PER_WINDOW], [])
     return FeatureSource(f"{source.name}[:{n} windows]", source.feat_q[:n])
-
-
-def print_summary(s: dict) -> None:
-    print(f"emulate over {s['link']} from {s['source']}")
-    print(f"  windows {s['windows']}: bit-exact {s['bit_exact']}, mismatches {s['mismatches']} "
-          f"(unflagged {s['mismatches_unflagged']}), flagged {s['flagged_windows']}, "
-          f"unexplained {s['unexplained_windows']}")
-    print(f"  frames sent {s['frames_sent']}, rejected {s['rejected_frames']}, lost uncounted {s['dropped_frames']}")
-    print(f"  faults injected {s['injected_faults']}, detected {s['detected_faults']} {s['faults_by_kind'] or ''}")
-    if s["restarts"]:
-        print(f"  restarts {s['restarts']}: {s['samples_lost_to_restart']} samples "
-              f"({s['samples_skipped_by_restart']} never sent) / {s['windows_lost_to_restart']} windows lost to restart")
-    pace = "real-time" if s.get("realtime") else "full-speed"
-    print(f"  latency p50 {s['latency_us']['p50']:.0f} us, p99 {s['latency_us']['p99']:.0f} us ({pace} stream)")
-    print(f"  throughput {s['frames_per_s']:.0f} frames/s, {s['windows_per_s']:.1f} windows/s in {s['stream_s']:.2f} s "
-          f"(real time needs {REALTIME_FRAMES_PER_S:.0f} frames/s, {REALTIME_WINDOWS_PER_S} windows/s: "
-          f"x{s['frames_per_s'] / REALTIME_FRAMES_PER_S:.0f})")
-    for p in s["status_problems"] + s["host_rx_errors"] + s["first_problems"]:
-        print(f"  PROBLEM: {p}")
-
-
-def run(args: argparse.Namespace) -> int:
-    apply_dbc_option(args)
-    bundle = args.bundle or default_bundle()
-    if args.soak:
-        if args.source != "sim":
-            raise ValueError("--soak streams simulator telemetry; drop --source")
-        source: TelemetrySource | FeatureSource = soak_source(args.soak, args.seed, args.scale)
-    else:
-        source = resolve(args.source, args.seed, args.scale, bundle)
-    if args.max_windows < 0:
-        raise ValueError("--max-windows must be >= 0")
-    if args.max_windows:
-        source = _first_windows(source, args.max_windows)
-    kinds = fault_mod.parse_kinds(args.inject, args.link, isinstance(source, FeatureSource))
-    if args.restart_every < 0:
-        raise ValueError("--restart-every must be >= 0")
-    result = emulate(bundle, source, args.link, kinds, args.inject_rate, args.restart_every, args.seed,
-                     args.timeout, progress=not args.no_progress, realtime=args.realtime)
-    s = result.summary()
-    print_summary(s)
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(s, indent=2) + "\n")
-    return 0 if result.ok() else 1

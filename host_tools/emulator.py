@@ -21,31 +21,12 @@ import threading
 import time
 from pathlib import Path
 
-import fleetlab.host_tools as _pkg
-
-from .dbc import DBC_PATH, dbc_path
+from ..paths import build_root, default_bundle, repo_root
+from .wire.dbc import DBC_PATH, dbc_path
 
 EMULATOR_TARGET = "slipest_emu"
 HOST_LIBRARY_TARGET = "slipest_host"
 PTY_RE = re.compile(rb"(/dev/pts/\d+|/dev/tty\w+)")
-
-
-def repo_root() -> Path:
-    """The source tree this package was installed from (editable install: host_tools/..)."""
-    root = Path(_pkg.__file__).resolve().parent.parent
-    if not (root / "CMakeLists.txt").is_file():
-        raise OSError(f"{root}: no CMakeLists.txt; `fleetlab emulate` needs the fleetlab source tree")
-    return root
-
-
-def default_bundle() -> Path:
-    return repo_root() / "firmware_c" / "bundles" / "example"
-
-
-def build_root() -> Path:
-    """Where our build dirs go: `$FLEETLAB_BUILD_ROOT`, else `build/` in the source tree."""
-    env = os.environ.get("FLEETLAB_BUILD_ROOT", "").strip()
-    return Path(env).resolve() if env else repo_root() / "build"
 
 
 def build_dir_for(bundle: Path, dbc: Path | None = None) -> Path:

@@ -5,11 +5,14 @@ attached to a python-can virtual bus.
 Every link writes wire items in order and delivers what the estimator answers on a
 queue filled by a reader thread, so a full pty buffer never deadlocks the host: the
 writer blocks (flow control) while the reader keeps draining.
+
+Links are registered by name (`register_link`, `link_class`), as python-can registers its
+bus interfaces: `fleetlab emulate --link NAME` and `fleetlab stream` both pick their link
+class here, so a new link is one class with one decorator.
 """
 
 from __future__ import annotations
 
-import ctypes
 import itertools
 import os
 import queue
@@ -17,14 +20,15 @@ import socket
 import threading
 import time
 from pathlib import Path
-from typing import Sequence
+from typing import ClassVar, Sequence
 
 import can
 import serial
 
-from .compare import WireItem
-from .dbc import Frame
-from .serial_framing import (
+from .binding import CEstimator
+from .wire.dbc import Frame
+from .wire.items import WireItem
+from .wire.serial_framing import (
     PacketDecoder,
     Rejected,
     encode_bad_crc_packet,
@@ -35,6 +39,35 @@ from .serial_framing import (
 )
 
 RxItem = tuple[Frame | Rejected, float]
+
+_LINKS: dict[str, type["Link"]] = {}
+# Old spelling kept as an alias because tests use `--link serial` (and older docs did).
+ALIASES = {"serial": "cobs"}
+
+
+def register_link(cls: type["Link"]) -> type["Link"]:
+    """Class decorator: make `cls` available under `cls.kind`."""
+    if cls.kind in _LINKS or cls.kind in ALIASES:
+        raise ValueError(f"link {cls.kind!r} is registered already")
+    _LINKS[cls.kind] = cls
+    return cls
+
+
+def link_class(name: str) -> type["Link"]:
+    """The link class registered under `name` (or one of its aliases)."""
+    kind = ALIASES.get(name, name)
+    if kind not in _LINKS:
+        raise ValueError(f"unknown link {name!r}; choose from {', '.join(_LINKS)}")
+    return _LINKS[kind]
+
+
+def canonical_link(name: str) -> str:
+    return link_class(name).kind
+
+
+def estimator_links() -> tuple[str, ...]:
+    """Links that reach fleetlab's own estimator: the emulator over a pty, or the library in-process."""
+    return tuple(k for k, c in _LINKS.items() if c.emulator_protocol is not None or c.in_process)
 
 
 def to_message(frame: Frame) -> can.Message:
@@ -71,8 +104,17 @@ def open_can_bus(interface: str, channel: str | None, **kwargs) -> can.BusABC:
 class Link:
     """Base: `write(items)` in order; answers arrive on `rx` as (Frame | Rejected, time)."""
 
-    name = "link"
+    kind: ClassVar[str] = "link"  # registry name
+    emulator_protocol: ClassVar[str | None] = None  # the C emulator's `--link` for this framing, if it speaks it
+    in_process: ClassVar[bool] = False  # the estimator is the C library loaded into this process
+    name = "link"  # this instance, e.g. "slcan:/dev/pts/3"
     corrupt_kinds: frozenset[str] = frozenset()
+
+    @classmethod
+    def over_port(cls, port: str, full_speed: bool = False, **options) -> "Link":
+        """Open this link on a serial port or pty (e.g. a started emulator's). `full_speed`:
+        write many items per call, to measure the link rather than per-call overhead."""
+        raise ValueError(f"the {cls.kind} link does not run over a serial port")
 
     def __init__(self) -> None:
         self.rx: queue.SimpleQueue[RxItem] = queue.SimpleQueue()
@@ -114,8 +156,11 @@ class Link:
         self.close()
 
 
+@register_link
 class CanBusLink(Link):
     """Any python-can bus (slcan, virtual, socketcan, ...)."""
+
+    kind = "can"
 
     def __init__(self, bus: can.BusABC, name: str) -> None:
         super().__init__()
@@ -141,6 +186,7 @@ class CanBusLink(Link):
             pass  # the other end may already be gone
 
 
+@register_link
 class SlcanLink(CanBusLink):
     """python-can's slcan interface on a serial port or pty; malformed lines go to the raw port.
 
@@ -149,7 +195,13 @@ class SlcanLink(CanBusLink):
     serial port many at a time, which measures the link rather than per-call overhead.
     """
 
+    kind = "slcan"
+    emulator_protocol = "slcan"
     corrupt_kinds = frozenset({"bad_crc"})
+
+    @classmethod
+    def over_port(cls, port: str, full_speed: bool = False, **options) -> "SlcanLink":
+        return cls(port, batched=full_speed, **options)
 
     def __init__(self, port: str, bitrate: int | None = 500000, batched: bool = False) -> None:
         super().__init__(open_can_bus("slcan", port, bitrate=bitrate), f"slcan:{port}")
@@ -175,21 +227,28 @@ class SlcanLink(CanBusLink):
                 self.bus.send(to_message(item.frame))
 
 
-class SerialLink(Link):
+@register_link
+class CobsLink(Link):
     """COBS + CRC-16 packets over pyserial (pty or real port), written in chunks for speed."""
 
+    kind = "cobs"
+    emulator_protocol = "cobs"
     corrupt_kinds = frozenset({"bad_crc", "length_mismatch"})
     CHUNK = 256  # packets per write() call
 
     def __init__(self, port: str, baudrate: int = 921600) -> None:
         super().__init__()
-        self.name = f"serial:{port}"
+        self.name = f"cobs:{port}"
         try:
             self.port = serial.Serial(port, baudrate=baudrate, timeout=0.05, write_timeout=None)
         except serial.SerialException as e:
             raise OSError(f"serial port {port}: {e}") from None
         self.decoder = PacketDecoder()
         self._start_reader()
+
+    @classmethod
+    def over_port(cls, port: str, full_speed: bool = False, **options) -> "CobsLink":
+        return cls(port, **options)  # always written in chunks
 
     def _render(self, item: WireItem) -> bytes:
         if item.corrupt is None:
@@ -221,69 +280,7 @@ class SerialLink(Link):
             pass
 
 
-# --- in-process estimator: the C library through ctypes ------------------------------------
-
-
-class CFrame(ctypes.Structure):
-    _fields_ = [("id", ctypes.c_uint32), ("dlc", ctypes.c_uint8), ("data", ctypes.c_uint8 * 8)]
-
-
-class CCounters(ctypes.Structure):
-    _fields_ = [(n, ctypes.c_uint32) for n in ("frames_received", "frames_rejected", "samples_dropped",
-                                                "windows_flagged", "windows_done", "saturations")]
-
-
-MAX_OUT = 9  # SLIPEST_NODE_MAX_OUT
-
-
-class CEstimator:
-    """One estimator node (`slipest_node_t`) from libslipest_host.so."""
-
-    def __init__(self, lib_path: Path | str) -> None:
-        lib = ctypes.CDLL(str(lib_path))
-        lib.slipest_node_size.restype = ctypes.c_size_t
-        lib.slipest_frame_size.restype = ctypes.c_size_t
-        lib.slipest_node_init.argtypes = [ctypes.c_void_p]
-        lib.slipest_node_handle.argtypes = [ctypes.c_void_p, ctypes.POINTER(CFrame), ctypes.POINTER(CFrame),
-                                            ctypes.c_size_t]
-        lib.slipest_node_link_error.argtypes = [ctypes.c_void_p]
-        lib.slipest_node_counters.argtypes = [ctypes.c_void_p, ctypes.POINTER(CCounters)]
-        lib.slipest_node_model_hash32.restype = ctypes.c_uint32
-        if lib.slipest_frame_size() != ctypes.sizeof(CFrame):
-            raise OSError(f"{lib_path}: slipest_frame_t is {lib.slipest_frame_size()} bytes, ctypes expects "
-                          f"{ctypes.sizeof(CFrame)}")
-        self.lib = lib
-        self._ctx = ctypes.create_string_buffer(lib.slipest_node_size())
-        self._in = CFrame()
-        self._out = (CFrame * MAX_OUT)()
-        self.reset()
-
-    def reset(self) -> None:
-        """A fresh node, as after a power cycle."""
-        r = self.lib.slipest_node_init(self._ctx)
-        if r < 0:
-            raise OSError(f"slipest_node_init failed ({r})")
-
-    def handle(self, frame: Frame) -> list[Frame]:
-        self._in.id = frame.can_id
-        self._in.dlc = len(frame.data)
-        ctypes.memmove(self._in.data, frame.data, len(frame.data))
-        n = self.lib.slipest_node_handle(self._ctx, ctypes.byref(self._in), self._out, MAX_OUT)
-        if n <= 0:
-            return []  # rejected frames are counted by the node itself
-        return [Frame(o.id, bytes(o.data[: o.dlc])) for o in self._out[:n]]
-
-    def link_error(self) -> None:
-        self.lib.slipest_node_link_error(self._ctx)
-
-    def counters(self) -> dict[str, int]:
-        c = CCounters()
-        self.lib.slipest_node_counters(self._ctx, ctypes.byref(c))
-        return {n: getattr(c, n) for n, _ in CCounters._fields_}
-
-    @property
-    def model_hash32(self) -> int:
-        return int(self.lib.slipest_node_model_hash32())
+# --- in-process estimator: the C library (fleetlab.host_tools.binding) on a virtual bus ---
 
 
 class InprocEstimatorNode:
@@ -318,8 +315,12 @@ class InprocEstimatorNode:
 _channel_ids = itertools.count()
 
 
+@register_link
 class InprocLink(CanBusLink):
     """Host side of a python-can virtual bus shared with an in-process C estimator."""
+
+    kind = "inproc"
+    in_process = True
 
     def __init__(self, lib_path: Path | str, channel: str | None = None) -> None:
         channel = channel or f"fleetlab-inproc-{os.getpid()}-{next(_channel_ids)}"

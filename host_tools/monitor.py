@@ -7,7 +7,6 @@ wrong length, are counted and shown — never skipped silently.
 
 from __future__ import annotations
 
-import argparse
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,25 +14,9 @@ from typing import Callable
 
 import can
 
-from .dbc import Frame, OutputAssembler, StatusReport, WindowEstimate, add_dbc_option, apply_dbc_option, by_id
-from .links import from_message, open_can_bus
-from .serial_framing import Rejected
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    sub = p.add_subparsers(dest="transport", metavar="TRANSPORT", required=True)
-    c = sub.add_parser("can", help="listen on a python-can bus", description="Listen on a python-can bus and "
-                       "decode every frame with the DBC (host_tools/slipest.dbc, or --dbc), or replay a python-can log (--replay).")
-    c.add_argument("--interface", default="virtual", help="python-can interface (default virtual)")
-    c.add_argument("--channel", default=None, help="bus channel (vcan0, /dev/ttyACM0, ...)")
-    c.add_argument("--bitrate", type=int, default=None, help="bitrate for slcan/socketcan")
-    c.add_argument("--replay", type=Path, default=None, metavar="LOG",
-                   help="decode a python-can log (.log/.asc/.blf) instead of a live bus")
-    c.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: until Ctrl-C)")
-    c.add_argument("--count", type=int, default=0, help="stop after this many estimates (0: no limit)")
-    c.add_argument("--log", type=Path, default=None, metavar="FILE", help="also log every frame (python-can format)")
-    c.add_argument("--all", action="store_true", help="print every decoded frame, not only estimates and status")
-    add_dbc_option(c)
+from .links import from_message
+from .wire.dbc import Frame, OutputAssembler, StatusReport, WindowEstimate, by_id
+from .wire.serial_framing import Rejected
 
 
 @dataclass
@@ -112,26 +95,3 @@ def monitor_log(path: Path, show: Callable[[str], None] | None = print, show_all
         if line and show:
             show(line)
     return mon.stats
-
-
-def run(args: argparse.Namespace) -> int:
-    apply_dbc_option(args)
-    if args.replay:
-        stats = monitor_log(args.replay, show_all=args.all)
-    else:
-        kw = {"bitrate": args.bitrate} if args.bitrate else {}
-        bus = open_can_bus(args.interface, args.channel, **kw)
-        logger = can.Logger(str(args.log)) if args.log else None
-        try:
-            stats = monitor_bus(bus, args.duration, args.count, print, logger, args.all)
-        except KeyboardInterrupt:
-            stats = None
-        finally:
-            if logger is not None:
-                logger.stop()
-            bus.shutdown()
-        if stats is None:
-            return 130
-    print(f"{stats.frames} frames: {len(stats.estimates)} estimates, {len(stats.statuses)} status reports, "
-          f"{stats.unknown} unknown/undecodable, {len(stats.problems)} problems")
-    return 0

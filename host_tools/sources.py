@@ -15,7 +15,7 @@ import numpy as np
 
 from fleetlab.data.features_int import SAMPLES_PER_WINDOW, quantize_features, quantize_samples
 
-from .dbc import Frame
+from .wire.dbc import Frame
 
 
 @dataclass

@@ -13,7 +13,7 @@ from pathlib import Path
 import can
 import pytest
 
-from fleetlab.host_tools import dbc
+from fleetlab.host_tools.wire import dbc
 
 REPO = Path(__file__).resolve().parents[1]
 SHIFT = 0x400

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from fleetlab.data.dataset import EARTH, TARGET
-from fleetlab.data.simulator.domain_gap import earth_to_moon_gap
+from fleetlab.evaluation.domain_gap import earth_to_moon_gap
 from fleetlab.data.simulator.engine import simulate_batch
 from fleetlab.data.simulator.scenario import scenario_specs
 

@@ -12,9 +12,10 @@ import pytest
 from fleetlab.cli import main
 from fleetlab.data.dataset import load_dataset
 from fleetlab.evaluation.mccv import EvalSettings, run_mccv
-from fleetlab.evaluation.methods import METHODS, Budget, parse_methods
+from fleetlab.evaluation.methods import parse_methods, selectable
 from fleetlab.evaluation.metrics import classification_metrics
 from fleetlab.evaluation.tables import markdown_table
+from fleetlab.fusion.registry import Budget
 
 TINY = Budget(steps=3, ants=6)
 
@@ -56,7 +57,7 @@ def test_metrics_by_hand():
 
 
 def test_method_parsing():
-    assert parse_methods(None) == list(METHODS) == parse_methods("all")
+    assert parse_methods(None) == list(selectable()) == parse_methods("all")
     assert parse_methods("distill, acomerge") == ["acomerge", "distill"]  # table order
     with pytest.raises(ValueError, match="unknown method"):
         parse_methods("acomerge,telepathy")
@@ -139,7 +140,7 @@ def test_evaluate_cli_end_to_end(real_data_dir, tmp_path, capsys):
                "--jobs", "2", "--json", str(js), "--out", str(out), "--no-progress"])
     assert rc == 0
     result = json.loads(js.read_text())
-    assert set(result["results"]) == set(METHODS) | {"buffer-centroid-random", "buffer-random",
+    assert set(result["results"]) == set(selectable()) | {"buffer-centroid-random", "buffer-random",
                                                      "acomerge-earth-only", "acomerge-fleet-only"}
     for by_size in result["results"].values():
         assert set(by_size["150"]["balanced_accuracy"]) >= {"mean", "std"}
@@ -181,7 +182,7 @@ def test_evaluate_cli_missing_data_dir(tmp_path, capsys):
 def test_buffer_sigma_reaches_the_run_buffer():
     import torch
 
-    from fleetlab.evaluation.methods import make_run_buffer
+    from fleetlab.fusion.methods import make_run_buffer
 
     experts = torch.stack([torch.zeros(543), torch.ones(543), torch.full((543,), 2.0)])
     for sigma in (0.05, 0.005):
@@ -194,7 +195,7 @@ def test_buffer_sigma_reaches_the_run_buffer():
 def test_fleet_ablation_buffers_hold_only_the_kept_experts():
     import torch
 
-    from fleetlab.evaluation.methods import fleet_ablation_buffer
+    from fleetlab.fusion.methods import fleet_ablation_buffer
 
     experts = torch.stack([torch.zeros(543), torch.ones(543), torch.full((543,), 2.0)])
     earth, buf = fleet_ablation_buffer("acomerge-earth-only", experts, seed=0)
@@ -236,7 +237,7 @@ def test_fleet_ablation_and_calibration_fit_in_an_evaluation(dataset):
 def test_finetune_lr_reaches_earth_and_joint_finetune():
     import torch
 
-    from fleetlab.evaluation.methods import Sources, fit_method
+    from fleetlab.fusion.pipeline import Sources, fuse
     from fleetlab.fusion.baselines import earth_finetune, model_from_flat
     from fleetlab.models import build, flatten
 
@@ -245,11 +246,11 @@ def test_finetune_lr_reaches_earth_and_joint_finetune():
     flat = flatten(build("sn-s", seed=1)).numpy()
     src = Sources(arch="sn-s", roles=["earth"], experts=flat[None], aligned=flat[None], joint=flat, seconds={})
     budget = Budget(steps=5)
-    default, _ = fit_method("earth-ft", src, x, y, seed=2, buffer_seed=0, budget=budget)
+    default = fuse("earth-ft", src, x, y, seed=2, buffer_seed=0, budget=budget).flat
     by_hand = flatten(earth_finetune(model_from_flat("sn-s", torch.as_tensor(flat)), x, y, 2, steps=5))
     assert torch.equal(default, by_hand)  # default rate = the experts' 0.0035
     for method in ("earth-ft", "joint-ft"):
-        slow, _ = fit_method(method, src, x, y, seed=2, buffer_seed=0, budget=Budget(steps=5, finetune_lr=1e-4))
-        fast, _ = fit_method(method, src, x, y, seed=2, buffer_seed=0, budget=Budget(steps=5, finetune_lr=1e-2))
+        slow = fuse(method, src, x, y, seed=2, buffer_seed=0, budget=Budget(steps=5, finetune_lr=1e-4)).flat
+        fast = fuse(method, src, x, y, seed=2, buffer_seed=0, budget=Budget(steps=5, finetune_lr=1e-2)).flat
         moved = [float((m - torch.as_tensor(flat)).abs().max()) for m in (slow, fast)]
         assert moved[0] < moved[1]  # Adam moves each weight by about lr per step

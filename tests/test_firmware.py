@@ -28,7 +28,7 @@ from fleetlab.data.features_int import CHANNEL_LSB, FLAG_GAP, FLAG_INVALID, feat
 from fleetlab.host_tools.bench_c import REPO, cmake_build, library_footprint, target_costs
 
 BUNDLE = REPO / "firmware_c" / "bundles" / "example"
-DBC = cantools.database.load_file(str(REPO / "host_tools" / "slipest.dbc"))
+DBC = cantools.database.load_file(str(REPO / "dbc" / "slipest.dbc"))
 
 
 # --------------------------------------------------------------------------- builds
@@ -302,6 +302,7 @@ def test_node_is_bit_exact_with_the_python_references(lib):
 
 def test_node_features_frames_round_trip_through_the_dbc(lib):
     """Random FEATURES frames encoded by cantools, decoded by the generated C codec."""
+    from fleetlab.export.bundle import load_bundle
     from fleetlab.export.intref import q_logits_of
 
     rng = np.random.default_rng(9)
@@ -317,7 +318,7 @@ def test_node_features_frames_round_trip_through_the_dbc(lib):
     est = estimates(outputs)
     assert [e["window_counter"] for e in est] == list(range(40))
     assert all(e["flags"] & 0x08 for e in est)
-    assert [e["logits"] for e in est] == q_logits_of(BUNDLE, q_in).tolist()
+    assert [e["logits"] for e in est] == q_logits_of(load_bundle(BUNDLE).qparams, q_in).tolist()
     # status frames after every 10 windows: 4 x 3 frames
     assert sum(1 for fid, _ in outputs if fid == 0x300) == 4 and c.windows_done == 40
 

@@ -10,12 +10,14 @@ import time
 import pytest
 
 from fleetlab.cli import main as fleetlab_main
-from fleetlab.host_tools import faults
-from fleetlab.host_tools.compare import EstimatorModel, WireItem
-from fleetlab.host_tools.dbc import OutputAssembler, StatusReport, control_frame
+from fleetlab.host_tools.verify import faults
+from fleetlab.host_tools.verify.compare import EstimatorModel
+from fleetlab.host_tools.wire.dbc import OutputAssembler, StatusReport, control_frame
 from fleetlab.host_tools.emulate import DEFAULT_SCALE, emulate, soak_source
 from fleetlab.host_tools.emulator import EmulatorProcess, build, default_bundle, find_artifact
-from fleetlab.host_tools.links import CEstimator, SlcanLink
+from fleetlab.host_tools.binding import CEstimator
+from fleetlab.host_tools.links import SlcanLink
+from fleetlab.host_tools.wire.items import WireItem
 from fleetlab.host_tools.sources import TelemetrySource, sim_source
 
 JSON_KEYS = {"windows", "bit_exact", "mismatches", "flagged_windows", "rejected_frames", "dropped_frames",
@@ -144,7 +146,7 @@ def test_realtime_pacing_measures_the_estimator_latency(bundle, sim):
 
 
 def test_model_matches_the_c_node_across_a_reset(bundle, sim):
-    from fleetlab.host_tools.dbc import OutputAssembler, WindowEstimate, telemetry_frames
+    from fleetlab.host_tools.wire.dbc import OutputAssembler, WindowEstimate, telemetry_frames
 
     est = CEstimator(find_artifact(build(bundle), "libslipest_host.so"))
     x = sim.samples_q[:500]

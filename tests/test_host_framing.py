@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fleetlab.host_tools import dbc
-from fleetlab.host_tools.dbc import Frame, OutputAssembler, StatusReport, WindowEstimate
-from fleetlab.host_tools.serial_framing import (
+from fleetlab.host_tools.wire import dbc
+from fleetlab.host_tools.wire.dbc import Frame, OutputAssembler, StatusReport, WindowEstimate
+from fleetlab.host_tools.wire.serial_framing import (
     PacketDecoder,
     Rejected,
     SlcanLineReader,

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from fleetlab.data import features_int as fi
-from fleetlab.host_tools import faults
-from fleetlab.host_tools.compare import EstimatorModel, WireItem, compare_status, compare_windows
-from fleetlab.host_tools.dbc import Frame, StatusReport, WindowEstimate, control_frame, telemetry_frames
+from fleetlab.host_tools.verify import faults
+from fleetlab.host_tools.verify.compare import EstimatorModel, compare_status, compare_windows
+from fleetlab.host_tools.wire.items import WireItem
+from fleetlab.host_tools.wire.dbc import Frame, StatusReport, WindowEstimate, control_frame, telemetry_frames
 
 
 def _samples(n_windows: int, seed: int = 0) -> np.ndarray:

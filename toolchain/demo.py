@@ -18,7 +18,13 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+from .fusion.acomerge import AcoMergeConfig
+from .models.train import EXPERT_EPOCHS
+from .paths import repo_root
+
+_ACO = AcoMergeConfig()  # the paper's search budget: the full demo runs it as is
+
+REPO_ROOT = repo_root()
 
 
 @dataclass(frozen=True)
@@ -35,7 +41,7 @@ class Profile:
     bench_iterations: int  # onnxruntime/torch inferences per timing round of `bench c`
 
 
-FULL = Profile(scale=1.0, epochs=70, generations=130, ants=300, runs=10, emulate_scale=0.5, cortex_m4=True,
+FULL = Profile(scale=1.0, epochs=EXPERT_EPOCHS, generations=_ACO.generations, ants=_ACO.n_ants, runs=10, emulate_scale=0.5, cortex_m4=True,
                bench_iterations=2000)
 QUICK = Profile(scale=0.3, epochs=12, generations=25, ants=80, runs=2, emulate_scale=0.1, cortex_m4=True,
                 bench_iterations=200)

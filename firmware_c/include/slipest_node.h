@@ -69,5 +69,7 @@ const char *slipest_node_model_hash_hex(void);
 /* sizeof(slipest_node_t) and friends, for ctypes callers that allocate the context. */
 size_t slipest_node_size(void);
 size_t slipest_frame_size(void);
+/* SLIPEST_NODE_MAX_OUT, the output capacity slipest_node_handle needs. */
+size_t slipest_node_max_out(void);
 
 #endif

@@ -23,6 +23,9 @@ const char *slipest_node_model_hash_hex(void) { return slipest_model_hash_hex();
 size_t slipest_node_size(void) { return sizeof(slipest_node_t); }
 size_t slipest_frame_size(void) { return sizeof(slipest_frame_t); }
 
+/* SLIPEST_NODE_MAX_OUT as a value, so ctypes callers size their output buffer from the library. */
+size_t slipest_node_max_out(void) { return (size_t)SLIPEST_NODE_MAX_OUT; }
+
 static int reject(slipest_node_t *node, int status)
 {
     node->c.frames_rejected++;

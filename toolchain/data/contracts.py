@@ -20,7 +20,7 @@ RAW_CHANNELS: tuple[str, ...] = (
 N_CHANNELS = len(RAW_CHANNELS)
 CH = {name: i for i, name in enumerate(RAW_CHANNELS)}
 
-# Integer LSB of each raw channel as carried on CAN (host_tools/slipest.dbc).
+# Integer LSB of each raw channel as carried on CAN (dbc/slipest.dbc).
 # The C feature extractor works in these units; value_physical = raw * LSB.
 RAW_LSB: dict[str, float] = {
     "wheel_speed": 0.001,

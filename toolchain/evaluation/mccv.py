@@ -32,8 +32,11 @@ from tqdm.auto import tqdm
 
 from ..data.dataset import TARGET, Dataset
 from ..data.splits import PROTOCOLS, make_split
-from ..models import ARCHS, batched_logits, flatten
-from .methods import ACO_FAMILY, BUFFER_METHODS, FLEET_METHODS, GROUPS, METHODS, Budget, Sources, fit_method
+from ..models import ARCHS, batched_logits
+from ..fusion.pipeline import Sources, align_sources, fuse, needs_joint, train_expert_flats, train_joint_flat
+from ..fusion.registry import Budget
+from ..models.train import EXPERT_EPOCHS
+from .methods import UNRANKED_GROUPS, buffer_methods, fleet_methods, selectable, table_groups
 from .metrics import SCALAR_METRICS, classification_metrics
 from .stats import FORMS, corrected_resampled_ttest
 
@@ -48,9 +51,9 @@ class EvalSettings:
     cal_sizes: tuple[int, ...] = (150, 200)
     runs: int = 30
     seed: int = 0
-    epochs: int = 70  # expert (and joint model) epochs
+    epochs: int = EXPERT_EPOCHS  # expert (and joint model) epochs
     budget: Budget = field(default_factory=Budget)
-    methods: tuple[str, ...] = METHODS
+    methods: tuple[str, ...] = field(default_factory=selectable)
     buffer_ablation: bool = False
     fleet_ablation: bool = False
 
@@ -65,7 +68,7 @@ class EvalSettings:
                              "the fine-tuning rate positive")
         if not self.cal_sizes or min(self.cal_sizes) < 3:
             raise ValueError(f"calibration sizes must be at least 3 rows, got {list(self.cal_sizes)}")
-        unknown = set(self.methods) - set(METHODS)
+        unknown = set(self.methods) - set(selectable())
         if unknown or not self.methods:
             raise ValueError(f"unknown or no methods: {sorted(unknown)}")
 
@@ -77,9 +80,9 @@ class EvalSettings:
         if (self.buffer_ablation or self.fleet_ablation) and "acomerge" not in methods:
             methods.append("acomerge")
         if self.buffer_ablation:
-            methods += list(BUFFER_METHODS)
+            methods += list(buffer_methods())
         if self.fleet_ablation:
-            methods += list(FLEET_METHODS)
+            methods += list(fleet_methods())
         return tuple(methods)
 
 
@@ -104,34 +107,27 @@ def single_threaded_torch():
 
 
 def _train_experts_job(dataset: Dataset, settings: EvalSettings, progress: bool) -> tuple[list[str], np.ndarray, float]:
-    from ..fusion.experts import train_experts
-
     with single_threaded_torch():
         t0 = time.perf_counter()
-        experts = train_experts(dataset, settings.arch, seed=settings.seed, epochs=settings.epochs, progress=progress)
-        return list(experts), torch.stack([flatten(m) for m in experts.values()]).numpy(), time.perf_counter() - t0
+        roles, experts = train_expert_flats(dataset, settings.arch, settings.seed, settings.epochs, progress)
+        return roles, experts, time.perf_counter() - t0
 
 
 def _train_joint_job(dataset: Dataset, settings: EvalSettings, progress: bool) -> tuple[np.ndarray, float]:
-    from ..fusion.baselines import train_joint
-
     with single_threaded_torch():
         t0 = time.perf_counter()
-        joint = train_joint(dataset, settings.arch, seed=settings.seed, epochs=settings.epochs, progress=progress)
-        return flatten(joint).numpy(), time.perf_counter() - t0
+        joint = train_joint_flat(dataset, settings.arch, settings.seed, settings.epochs, progress)
+        return joint, time.perf_counter() - t0
 
 
 def prepare_sources(
     dataset: Dataset, settings: EvalSettings, n_jobs: int = 1, backend: str = "loky",
     scheduler: str | None = None, progress: bool = True,
 ) -> Sources:
-    """Train the experts and (if joint-ft is evaluated) the joint model — two independent jobs,
+    """Train the experts and (if a method needs it) the joint model — two independent jobs,
     run in parallel when workers allow — then align the experts to the Earth expert."""
-    from ..fusion.baselines import model_from_flat
-    from ..fusion.rebasin import align_to_reference
-
     tasks = [joblib.delayed(_train_experts_job)(dataset, settings, progress)]
-    if "joint-ft" in settings.all_methods:
+    if needs_joint(settings.all_methods):
         tasks.append(joblib.delayed(_train_joint_job)(dataset, settings, progress))
     done = execute(tasks, n_jobs, backend, scheduler, progress=False, ordered=True)
     roles, experts, t_experts = done[0]
@@ -139,13 +135,8 @@ def prepare_sources(
     joint = None
     if len(done) > 1:
         joint, seconds["joint"] = done[1]
-    t0 = time.perf_counter()
     with single_threaded_torch():
-        models = [model_from_flat(settings.arch, torch.as_tensor(e)) for e in experts]
-        aligned = torch.stack(align_to_reference(models, settings.arch, reference=0))
-    seconds["rebasin"] = time.perf_counter() - t0
-    return Sources(arch=settings.arch, roles=roles, experts=experts, aligned=aligned.to(torch.float32).numpy(),
-                   joint=joint, seconds=seconds)
+        return align_sources(settings.arch, roles, experts, joint, seconds)
 
 
 @dataclass(frozen=True)
@@ -162,12 +153,13 @@ def run_job(cal_size: int, run: int, method: str, src: Sources, target: Target, 
         x_cal, y_cal = target.x[split.cal], target.y[split.cal]
         x_test, y_test = target.x[split.test], target.y[split.test]
         t0 = time.perf_counter()
-        flat, history = fit_method(
+        fused = fuse(
             method, src, x_cal, y_cal,
             seed=derive_seed(settings.seed, cal_size, run, method_code(method)),
             buffer_seed=derive_seed(settings.seed, cal_size, run),
             budget=settings.budget,
         )
+        flat, history = fused.flat, fused.curve
         seconds = time.perf_counter() - t0
         with torch.no_grad():
             pred = batched_logits(src.arch, flat.unsqueeze(0), torch.as_tensor(x_test))[0].argmax(dim=1).numpy()
@@ -276,7 +268,7 @@ def summarise(jobs: list[dict], settings: EvalSettings) -> dict:
             entry["n_cal"] = int(rs[0]["n_cal"])
             entry["n_test_mean"] = float(np.mean([r["n_test"] for r in rs]))
             results[m][str(c)] = entry
-            if m in ACO_FAMILY and rs[0]["history"]:
+            if rs[0]["history"]:  # methods that keep a convergence curve
                 convergence_m[str(c)] = _mean_std([r["history"] for r in rs])
         if convergence_m:
             convergence[m] = convergence_m
@@ -291,7 +283,7 @@ def summarise(jobs: list[dict], settings: EvalSettings) -> dict:
 
 def table_methods(results: dict) -> list[str]:
     """Methods that compete for best/second: the paper's table (not the ablations)."""
-    main = [m for g, ms in GROUPS.items() if g != "Ablation" for m in ms]
+    main = [m for g, ms in table_groups().items() if g not in UNRANKED_GROUPS for m in ms]
     return [m for m in main if m in results]
 
 

@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .methods import BUFFER_METHODS, FLEET_METHODS, LABELS  # noqa: E402
+from .methods import LABELS, buffer_methods, fleet_methods  # noqa: E402
 from .metrics import SCALAR_METRICS  # noqa: E402
 from .tables import CLASS_NAMES, COLUMN_NAMES  # noqa: E402
 
@@ -131,8 +131,8 @@ def write_plots(result: dict, out_dir: Path) -> list[Path]:
     for c in next(iter(result["results"].values())):
         paths.append(confusion_matrices(result, c, out_dir / f"confusion_{c}.png"))
     for p in (convergence(result, out_dir / "convergence.png"),
-              ablation(result, out_dir / "buffer_ablation.png", tuple(BUFFER_METHODS), _buffer_label),
-              ablation(result, out_dir / "fleet_ablation.png", FLEET_METHODS, _fleet_label)):
+              ablation(result, out_dir / "buffer_ablation.png", buffer_methods(), _buffer_label),
+              ablation(result, out_dir / "fleet_ablation.png", fleet_methods(), _fleet_label)):
         if p is not None:
             paths.append(p)
     return paths

@@ -9,7 +9,7 @@ is significant (p < 0.05, Nadeau-Bengio form, see `stats`).
 
 from __future__ import annotations
 
-from .methods import GROUPS_WITH_BUFFER, LABELS
+from .methods import LABELS, table_groups
 from .metrics import SCALAR_METRICS
 
 COLUMN_NAMES = {"balanced_accuracy": "Bal. Acc.", "macro_f1": "Macro F1"}
@@ -30,7 +30,7 @@ def markdown_table(result: dict) -> str:
     sizes = list(next(iter(results.values())).keys())
     header = ["Group", "Method"] + [f"{COLUMN_NAMES[m]} (D_Cal={c})" for c in sizes for m in SCALAR_METRICS]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    for group, methods in GROUPS_WITH_BUFFER.items():
+    for group, methods in table_groups().items():
         present = [m for m in methods if m in results]
         for i, m in enumerate(present):
             cells = [group if i == 0 else "", LABELS.get(m, m)]

@@ -61,7 +61,7 @@ _SCALE = np.array([0.4, 0.08, 11.0, 10.0, 0.05, 0.45, 0.05, 0.25, 0.07, 1.2, 0.2
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.epilog = (
-        "Prints batched_ms_per_generation (one generation's 300 ants evaluated as AcoMerge does), "
+        "Prints batched_ms_per_generation (one generation's ants evaluated as AcoMerge does), "
         "sequential_ms_per_generation (the same ants one at a time through an nn.Module, the reference code's way), "
         "their speedup, full_generation_ms (construction + evaluation + update in a real run) and full_run_s. "
         f"Targets: speedup >= {TARGET_SPEEDUP:g}, full run <= {TARGET_FULL_RUN_S:g} s."
@@ -69,8 +69,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.add_argument("--data", type=Path, help="dataset folder: draw D_Cal from its target rows (default: synthetic)")
     p.add_argument("--arch", default="sn-s", choices=sorted(ARCHS), help="architecture (default: sn-s)")
-    p.add_argument("--ants", type=int, default=300, help="ants per generation (default: 300)")
-    p.add_argument("--generations", type=int, default=130, help="generations of the full run (default: 130)")
+    aco = AcoMergeConfig()
+    p.add_argument("--ants", type=int, default=aco.n_ants, help=f"ants per generation (default: {aco.n_ants})")
+    p.add_argument("--generations", type=int, default=aco.generations,
+                   help=f"generations of the full run (default: {aco.generations})")
     p.add_argument("--cal-size", type=int, default=200, help="|D_Cal| (default: 200)")
     p.add_argument("--repeats", type=int, default=40,
                    help="repeats of the batched timing, best kept; the sequential baselines run a tenth as often, "

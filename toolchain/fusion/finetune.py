@@ -12,8 +12,9 @@ import numpy as np
 
 from ..models import SlipNet
 from ..models.train import EXPERT_BATCH, EXPERT_LR, train_classifier
+from .acomerge import AcoMergeConfig
 
-FINETUNE_STEPS = 130
+FINETUNE_STEPS = AcoMergeConfig.generations  # same budget as AcoMerge's generations
 
 
 def finetune(

@@ -12,8 +12,9 @@ import torch
 
 from ...models import SlipNet, batched_logits, build, load_flat
 from ...models.mlp import param_shapes
+from ..acomerge import AcoMergeConfig
 
-BUDGET_STEPS = 130
+BUDGET_STEPS = AcoMergeConfig.generations  # the paper's shared budget of optimisation steps
 
 
 def as_tensor_xy(x: np.ndarray, y: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:

@@ -14,10 +14,10 @@ import numpy as np
 import torch
 from sklearn.metrics import balanced_accuracy_score
 
-from ...models import build
-from ...models.train import predict, train_classifier
-from ..dataset import EARTH, TARGET
-from .engine import Trace
+from ..data.dataset import EARTH, TARGET
+from ..data.simulator.engine import Trace
+from ..models import build
+from ..models.train import predict, train_classifier
 
 
 @dataclass(frozen=True)

@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .compare import WireItem
-from .dbc import CONTROL_RESET, CONTROL_STATUS, Frame, by_id, control_frame, feature_frames, telemetry_frames
+from ..wire.items import WireItem
+from ..wire.dbc import CONTROL_RESET, CONTROL_STATUS, Frame, by_id, control_frame, feature_frames, telemetry_frames
 
 KINDS = (
     "bad_crc",

@@ -7,13 +7,14 @@ import json
 import sys
 from pathlib import Path
 
-from ..data.splits import PROTOCOLS
-from ..models import ARCHS
+from ..evaluation.mccv import BACKENDS, EvalSettings, run_mccv
+from ..evaluation.methods import parse_methods, selectable
+from ..fusion.registry import Budget
 from ..models.train import EXPERT_LR
-from .mccv import BACKENDS, EvalSettings, run_mccv
-from .methods import METHODS, Budget, parse_methods
+from . import options
 
-DEFAULT_CAL_SIZES = (150, 200)
+DEFAULT_CAL_SIZES = EvalSettings.cal_sizes
+DEFAULT_RUNS = EvalSettings.runs
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -25,41 +26,34 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "macro-F1, per-class precision/recall, confusion matrices and a corrected resampled t-test "
         "(Nadeau & Bengio) of the best method against the second."
     )
-    p.add_argument("--data", required=True, type=Path, metavar="DIR",
-                   help="dataset folder: made by 'fleetlab simulate' (dataset.json) or the original Fleet-To-Lab CSVs")
-    p.add_argument("--protocol", choices=PROTOCOLS, default="paper",
-                   help="calibration draw: 'paper' = stratified random rows (as in the paper), "
-                   "'traverse' = leakage-free, calibration and test from different traverses (default: paper)")
-    p.add_argument("--arch", choices=list(ARCHS), default="sn-s", help="model architecture (default: sn-s)")
+    options.data_dir(p)
+    options.protocol(p)
+    options.arch(p)
     p.add_argument("--cal-size", type=int, action="append", dest="cal_sizes", metavar="N",
-                   help="calibration size |D_Cal|; repeat for several (default: 150 and 200)")
-    p.add_argument("--runs", type=int, default=30, help="MCCV runs per calibration size (default: 30)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the experts and of every method's search (default: 0)")
-    p.add_argument("--epochs", type=int, default=70, help="training epochs of the experts and the joint model (default: 70)")
-    p.add_argument("--generations", type=int, default=130,
-                   help="AcoMerge generations = optimisation steps of EVERY method (Adam steps, CMA-ES "
-                   "generations, PSO iterations) (default: 130)")
-    p.add_argument("--ants", type=int, default=300, help="AcoMerge ants per generation (default: 300)")
-    p.add_argument("--sigma", type=float, default=0.05,
-                   help="std of the Gaussian-perturbed expert copies in the AcoMerge/ModelSwarm buffer "
-                   "(default: 0.05, the paper's value; the reference code used 0.005)")
+                   help="calibration size |D_Cal|; repeat for several (default: "
+                   f"{' and '.join(map(str, DEFAULT_CAL_SIZES))})")
+    p.add_argument("--runs", type=int, default=DEFAULT_RUNS, help=f"MCCV runs per calibration size (default: {DEFAULT_RUNS})")
+    options.seed(p, "the experts and of every method's search")
+    options.epochs(p, "the experts and the joint model")
+    options.search_budget(p, "AcoMerge generations = optimisation steps of EVERY method (Adam steps, CMA-ES "
+                          "generations, PSO iterations)")
     p.add_argument("--finetune-lr", type=float, default=EXPERT_LR, metavar="LR",
                    help="Adam learning rate of Earth + FullFinetune and Joint + FullFinetune (default: "
                    f"{EXPERT_LR:g}, the experts' rate; the paper grid-searched it, so try a few)")
     p.add_argument("--methods", default="all", metavar="LIST",
-                   help=f"comma-separated methods out of: {', '.join(METHODS)} (default: all)")
+                   help=f"comma-separated methods out of: {', '.join(selectable())} (default: all)")
     p.add_argument("--buffer-ablation", action="store_true",
                    help="also run AcoMerge on the ablation buffers (experts×3 + centroid-random×45, random×48)")
     p.add_argument("--fleet-ablation", action="store_true",
                    help="also run AcoMerge with the Earth expert only and with the fleet experts only (same "
                    "buffer size): what the fleet adds beyond the Earth expert and the search itself")
-    p.add_argument("--jobs", type=int, default=1, help="parallel local worker processes for the MCCV jobs (default: 1)")
+    options.jobs(p)
     p.add_argument("--backend", choices=BACKENDS, default="loky",
                    help="where MCCV jobs run: local processes (loky) or an existing Dask cluster (default: loky)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address, e.g. tcp://host:8786 (with --backend dask)")
-    p.add_argument("--json", type=Path, metavar="FILE", help="write the results as JSON")
+    options.json_file(p)
     p.add_argument("--out", type=Path, metavar="DIR", help="write results.json, table.md and the plots into DIR")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    options.no_progress(p)
 
 
 def settings_from_args(args: argparse.Namespace) -> EvalSettings:
@@ -78,8 +72,8 @@ def settings_from_args(args: argparse.Namespace) -> EvalSettings:
 
 def run(args: argparse.Namespace) -> int:
     from ..data.dataset import load_dataset
-    from .plots import write_plots
-    from .tables import markdown_table
+    from ..evaluation.plots import write_plots
+    from ..evaluation.tables import markdown_table
 
     settings = settings_from_args(args)
     dataset = load_dataset(args.data)

@@ -8,8 +8,8 @@ cantools in the tests). That keeps 100k+ frames/s encodable in pure Python.
 A rover may use its own CAN IDs: point `$FLEETLAB_DBC` (or `--dbc FILE` of
 `fleetlab emulate|stream|monitor`) at a copy of the DBC with other frame IDs. Such a
 DBC must keep every message name, length and signal layout of the repo's DBC
-(`check_layout`); the C build takes the same file as `-DSLIPEST_DBC=...` and runs
-this module as a script to refuse an incompatible one (docs/can_interface.md).
+(`check_layout`, in `dbc/layout.py`); the C build takes the same file as `-DSLIPEST_DBC=...` and runs
+that check as a script to refuse an incompatible one (docs/can_interface.md).
 """
 
 from __future__ import annotations
@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import os
 import struct
-import sys
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -25,7 +24,9 @@ from pathlib import Path
 import cantools
 import numpy as np
 
-DBC_PATH = Path(__file__).with_name("slipest.dbc")  # the repo's DBC: reference layout and default
+from ...dbc import DBC_PATH, check_layout
+from ...dbc import load as _load
+
 DBC_ENV = "FLEETLAB_DBC"  # environment variable naming another DBC (other CAN IDs, same layout)
 
 # Frame names used by the host tools (IDs come from the DBC).
@@ -122,7 +123,7 @@ def add_dbc_option(parser: argparse.ArgumentParser) -> None:
     """`--dbc FILE` for the commands that talk CAN (emulate, stream, monitor)."""
     parser.add_argument("--dbc", type=Path, default=None, metavar="FILE",
                         help=f"CAN database with the rover's own frame IDs (default: ${DBC_ENV} or "
-                             "host_tools/slipest.dbc); must keep the layout of host_tools/slipest.dbc. "
+                             "dbc/slipest.dbc); must keep the layout of dbc/slipest.dbc. "
                              "A started emulator is built against it")
 
 
@@ -138,43 +139,6 @@ def _checked(path: Path) -> Path:
     if path != DBC_PATH.resolve():
         check_layout(_load(path), path.name)
     return path
-
-
-@lru_cache(maxsize=4)
-def _load(path: Path) -> cantools.database.can.Database:
-    try:
-        return cantools.database.load_file(str(path))
-    except Exception as e:  # cantools raises several parser-specific types
-        raise ValueError(f"{path}: not a readable DBC file: {e}") from None
-
-
-def _layout(db: cantools.database.can.Database) -> dict[str, tuple]:
-    """Everything the estimator relies on, per message: length, senders, and each signal's
-    name, position, size, byte order, sign, scale and offset. Frame IDs are left out."""
-    return {
-        m.name: (m.length, tuple(sorted(m.senders)), tuple(
-            (s.name, s.start, s.length, s.byte_order, s.is_signed, s.scale, s.offset)
-            for s in sorted(m.signals, key=lambda s: s.start)))
-        for m in db.messages
-    }
-
-
-def check_layout(db: cantools.database.can.Database, source: str) -> None:
-    """Refuse a DBC that differs from the repo's in anything but frame IDs (and comments).
-
-    The C node and the host tools hard-wire message names and signal layouts; only the IDs
-    are free. IDs must be 11-bit and distinct."""
-    ref, got = _layout(_load(DBC_PATH.resolve())), _layout(db)
-    problems = [f"message {n} missing" for n in ref if n not in got]
-    problems += [f"message {n} is not in host_tools/slipest.dbc" for n in got if n not in ref]
-    problems += [f"{n}: layout differs from host_tools/slipest.dbc (length, senders or signals)"
-                 for n in ref if n in got and got[n] != ref[n]]
-    ids = [m.frame_id for m in db.messages]
-    problems += [f"{m.name}: ID 0x{m.frame_id:X} is not an 11-bit standard ID"
-                 for m in db.messages if m.is_extended_frame or not 0 <= m.frame_id <= 0x7FF]
-    problems += [f"ID 0x{i:03X} used by more than one message" for i in sorted(set(ids)) if ids.count(i) > 1]
-    if problems:
-        raise ValueError(f"{source}: incompatible with the estimator: " + "; ".join(problems))
 
 
 def database() -> cantools.database.can.Database:
@@ -333,23 +297,3 @@ class OutputAssembler:
             self._status = {}
             return report
         return None
-
-
-def main(argv: list[str] | None = None) -> int:
-    """`python host_tools/dbc.py check FILE`: the CMake build's gate for `-DSLIPEST_DBC`."""
-    p = argparse.ArgumentParser(description="check that a DBC keeps the layout of host_tools/slipest.dbc "
-                                            "(only frame IDs may differ)")
-    p.add_argument("command", choices=["check"])
-    p.add_argument("dbc", type=Path)
-    args = p.parse_args(argv)
-    try:
-        _checked(args.dbc)
-    except (ValueError, OSError) as e:
-        print(f"slipest DBC check: {e}", file=sys.stderr)
-        return 1
-    print(f"{args.dbc}: layout matches host_tools/slipest.dbc")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

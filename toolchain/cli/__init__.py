@@ -1,8 +1,10 @@
 """`fleetlab` command line: one subcommand per everyday task.
 
-Each subcommand lives in its own module, which provides
-`add_arguments(parser)` and `run(args) -> int`. The module is imported only
-when its subcommand runs, so `fleetlab --help` stays fast.
+The CLI layer sits on top of every library package. Each subcommand is a thin module
+(`fleetlab.cli.<name>` where it has been moved here) providing `add_arguments(parser)`
+and `run(args) -> int`; `COMMANDS` below is the one table of subcommands. A module is
+imported only when its subcommand runs, so `fleetlab --help` stays fast. Shared option
+groups (data folder, seeds, budgets, jobs, JSON output) are in `options`.
 """
 
 from __future__ import annotations
@@ -12,17 +14,17 @@ import importlib
 import importlib.util
 import sys
 
-# name -> (module, one-line help, longer description)
+# name -> (module, one-line help): the one table of subcommands
 COMMANDS: dict[str, tuple[str, str]] = {
     "simulate": ("fleetlab.data.simulator.cli", "simulate rover telemetry and write window CSVs (built-in fleet scenario)"),
     "data": ("fleetlab.data.info", "inspect a dataset folder: rows, roles, class mix, feature statistics"),
-    "fuse": ("fleetlab.fusion.cli", "train the experts and fuse them with AcoMerge into one model"),
-    "evaluate": ("fleetlab.evaluation.cli", "Monte Carlo cross-validation of AcoMerge against the paper's baselines"),
-    "export": ("fleetlab.export.cli", "export a model to ONNX, fixed-point C headers and test vectors"),
-    "emulate": ("fleetlab.host_tools.emulate", "run the C estimator in the host emulation loop and compare bit for bit"),
-    "stream": ("fleetlab.host_tools.stream", "stream telemetry or features to the estimator over CAN or serial"),
-    "monitor": ("fleetlab.host_tools.monitor", "watch slip estimates and status frames on a CAN bus"),
-    "bench": ("fleetlab.bench", "benchmarks: featurisation and simulation, fusion, C inference"),
+    "fuse": ("fleetlab.cli.fuse", "train the experts and fuse them into one model (AcoMerge or any registered method)"),
+    "evaluate": ("fleetlab.cli.evaluate", "Monte Carlo cross-validation of AcoMerge against the paper's baselines"),
+    "export": ("fleetlab.cli.export", "export a model to ONNX, fixed-point C headers and test vectors"),
+    "emulate": ("fleetlab.cli.emulate", "run the C estimator in the host emulation loop and compare bit for bit"),
+    "stream": ("fleetlab.cli.stream", "stream telemetry or features to the estimator over CAN or serial"),
+    "monitor": ("fleetlab.cli.monitor", "watch slip estimates and status frames on a CAN bus"),
+    "bench": ("fleetlab.cli.bench", "benchmarks: featurisation and simulation, fusion, C inference"),
     "demo": ("fleetlab.demo", "the whole pipeline on built-in defaults, ending in a report"),
 }
 
@@ -41,7 +43,7 @@ def _available() -> dict[str, tuple[str, str]]:
 
 def build_parser(selected: str | None = None) -> argparse.ArgumentParser:
     """The parser; only the `selected` subcommand's module is imported for its options."""
-    from . import __version__
+    from .. import __version__
 
     parser = argparse.ArgumentParser(
         prog="fleetlab",

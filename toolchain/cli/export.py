@@ -51,7 +51,7 @@ def _print_checks(lines: list[str]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .bundle import check_bundle, export_bundle
+    from ..export.bundle import check_bundle, export_bundle
 
     if args.check_only is not None:
         print(f"checking {args.check_only}")
@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
 
     from fleetlab.models import load_model
 
-    from .vectors import draw_inputs, simulator_windows
+    from ..export.vectors import draw_inputs, simulator_windows
 
     model, meta = load_model(args.model)
     if meta["arch"] != "sn-s" and not args.onnx_only:

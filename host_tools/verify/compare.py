@@ -17,7 +17,7 @@ import numpy as np
 from fleetlab.data import features_int as fi
 from fleetlab.export.intref import argmax_lowest
 
-from .dbc import (
+from ..wire.dbc import (
     CONTROL_RESET,
     CONTROL_STATUS,
     FEATURE_FRAME_NAMES,
@@ -29,20 +29,7 @@ from .dbc import (
     dbc_length,
     frame_id,
 )
-
-
-@dataclass(frozen=True, slots=True)
-class WireItem:
-    """One unit written to the link: a frame, or a corrupted rendering of one.
-
-    corrupt: None (send `frame` as is), 'bad_crc' (serial: CRC inverted; slcan: malformed
-    line) or 'length_mismatch' (serial: dlc byte disagrees with the packet length).
-    fault: index into the injection log of the fault that produced this item, or -1.
-    """
-
-    frame: Frame
-    corrupt: str | None = None
-    fault: int = -1
+from ..wire.items import WireItem
 
 
 @dataclass

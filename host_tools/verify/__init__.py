@@ -1,0 +1,2 @@
+"""Verification of the C estimator against the references: the host model of the node's
+rules (`compare`), a bundle's integer and float references (`reference`), fault plans (`faults`)."""

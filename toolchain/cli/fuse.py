@@ -1,0 +1,106 @@
+"""`fleetlab fuse`: train the experts, fuse them with one registered method on D_Cal, report.
+
+Writes the run folder described in `fleetlab.evaluation.fuse_report`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+from pathlib import Path
+
+import torch
+
+from ..data.calibration import calibration_set
+from ..data.dataset import load_dataset
+from ..evaluation.fuse_report import Row, scores, write_run
+from ..fusion import registry
+from ..fusion.baselines import model_from_flat
+from ..fusion.finetune import FINETUNE_STEPS, finetune
+from ..fusion.fitness import CalibrationFitness
+from ..fusion.pipeline import fuse, needs_joint, prepare_sources
+from ..fusion.registry import Budget
+from ..models import flatten
+from . import options
+
+DEFAULT_METHOD = "acomerge"
+DEFAULT_CAL_SIZE = 150
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    methods = registry.selectable()
+    p.description = (
+        "Train one expert per source (Earth analog + each fleet rover), align them with Git Re-Basin, "
+        "fuse them with a registered method (AcoMerge by default) on a small calibration set of the target "
+        "rover, and compare the fused model with the Earth expert fine-tuned on the same calibration set."
+    )
+    options.data_dir(p, "dataset folder (dataset.json or Fleet-To-Lab file names)")
+    p.add_argument("--out", required=True, type=Path, help="run folder to create/overwrite (RUN)")
+    p.add_argument("--method", default=DEFAULT_METHOD, choices=methods, metavar="NAME",
+                   help=f"fusion method, one of: {', '.join(methods)} (default: {DEFAULT_METHOD})")
+    options.arch(p)
+    p.add_argument("--cal-size", type=int, default=DEFAULT_CAL_SIZE,
+                   help=f"|D_Cal| rows drawn from the target data (default: {DEFAULT_CAL_SIZE})")
+    p.add_argument("--calibration", type=Path, help="use this window CSV (Fleet-To-Lab format) as D_Cal instead of drawing one")
+    options.protocol(p)
+    options.seed(p, "the experts, the split and the method's search")
+    options.epochs(p)
+    options.search_budget(p, "AcoMerge generations = optimisation steps of the method", copies=True)
+    p.add_argument("--finetune-steps", type=int, default=FINETUNE_STEPS,
+                   help=f"Adam steps of the Earth fine-tune reference (default: {FINETUNE_STEPS})")
+    options.threads(p)
+    options.no_progress(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    options.at_least_one(args, "cal_size", "epochs", "generations", "ants", "finetune_steps", "threads")
+    previous_threads = torch.get_num_threads()
+    torch.set_num_threads(args.threads)
+    try:
+        return _fuse(args)
+    finally:
+        torch.set_num_threads(previous_threads)
+
+
+def _fuse(args: argparse.Namespace) -> int:
+    progress = not args.no_progress
+    label = registry.get(args.method).label
+    seconds: dict[str, float] = {}
+    dataset = load_dataset(args.data)
+    dataset.check_roles()
+    cal = calibration_set(dataset, args.protocol, args.cal_size, args.seed, args.calibration)  # bad input fails early
+
+    t0 = time.perf_counter()
+    src = prepare_sources(dataset, args.arch, args.seed, args.epochs, joint=needs_joint([args.method]), progress=progress)
+    seconds["experts"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    budget = Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, copies=args.copies, threads=args.threads)
+    fused = fuse(args.method, src, cal.x_cal, cal.y_cal, seed=args.seed, buffer_seed=args.seed, budget=budget)
+    seconds[args.method] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    earth = model_from_flat(args.arch, torch.as_tensor(src.experts[0]))
+    tuned = finetune(earth, cal.x_cal, cal.y_cal, steps=args.finetune_steps, seed=args.seed)
+    seconds["finetune"] = time.perf_counter() - t0
+
+    cal_loss = CalibrationFitness(args.arch, cal.x_cal, cal.y_cal)
+    details = fused.details
+    fused_j = details.get("best_fitness", float(cal_loss(fused.flat)))
+    expert_j = details.get("expert_fitness") or [float(cal_loss(torch.as_tensor(a))) for a in src.aligned]
+    rows = [Row(f"{label} (fused)", fused_j, scores(fused.module(), cal.x_test, cal.y_test)),
+            Row("Earth+FullFinetune", float(cal_loss(flatten(tuned))),
+                scores(tuned, cal.x_test, cal.y_test))]
+    for role, flat, j in zip(src.roles, src.aligned, expert_j):
+        model = model_from_flat(args.arch, torch.as_tensor(flat)).eval()
+        rows.append(Row(f"expert {role} (no adaptation)", j, scores(model, cal.x_test, cal.y_test)))
+
+    run_info = {"data": str(args.data), "seed": args.seed, "epochs": args.epochs,
+                "finetune_steps": args.finetune_steps, "budget": dataclasses.asdict(budget)}
+    write_run(args.out, run_info, dataset, cal, fused, label, tuned, dict(zip(src.roles, src.aligned)), rows, seconds)
+    for r in rows[:2]:
+        print(f"{r.name:20s} D_Cal CE {r.fitness:.4f}  test balanced accuracy {r.scores['balanced_accuracy']:.4f}  "
+              f"macro-F1 {r.scores['macro_f1']:.4f}")
+    print(f"wrote {args.out}/fused.pt, report.md, history.json" + (", convergence.png" if fused.curve else ""))
+    return 0

@@ -1,0 +1,76 @@
+"""Option groups shared by several subcommands. Defaults come from the library's own
+config objects (AcoMergeConfig, the expert training constants), never from literals here."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..data.splits import PROTOCOLS
+from ..fusion.acomerge import AcoMergeConfig, default_threads
+from ..models import ARCHS
+from ..models.train import EXPERT_EPOCHS
+
+ACO = AcoMergeConfig()  # the paper's AcoMerge defaults: the one source of every search default below
+
+
+def data_dir(p: argparse.ArgumentParser, help: str = "dataset folder: made by 'fleetlab simulate' (dataset.json) "
+             "or the original Fleet-To-Lab CSVs") -> None:
+    p.add_argument("--data", required=True, type=Path, metavar="DIR", help=help)
+
+
+def arch(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--arch", default="sn-s", choices=sorted(ARCHS), help="network architecture (default: sn-s)")
+
+
+def protocol(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--protocol", choices=PROTOCOLS, default="paper",
+                   help="calibration draw: 'paper' = stratified random rows (as in the paper), "
+                   "'traverse' = leakage-free, calibration and test from different traverses (default: paper)")
+
+
+def seed(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--seed", type=int, default=0, help=f"seed of {what} (default: 0)")
+
+
+def epochs(p: argparse.ArgumentParser, what: str = "the experts") -> None:
+    p.add_argument("--epochs", type=int, default=EXPERT_EPOCHS,
+                   help=f"training epochs of {what} (default: {EXPERT_EPOCHS})")
+
+
+def search_budget(p: argparse.ArgumentParser, generations_help: str, copies: bool = False) -> None:
+    """--generations, --ants, --sigma (and --copies): AcoMerge's budget and its expert buffer."""
+    p.add_argument("--generations", type=int, default=ACO.generations,
+                   help=f"{generations_help} (default: {ACO.generations})")
+    p.add_argument("--ants", type=int, default=ACO.n_ants, help=f"AcoMerge ants per generation (default: {ACO.n_ants})")
+    if copies:
+        p.add_argument("--copies", type=int, default=ACO.copies,
+                       help=f"perturbed copies per expert in the buffer (default: {ACO.copies})")
+    p.add_argument("--sigma", type=float, default=ACO.sigma,
+                   help=f"std of the Gaussian-perturbed expert copies in the buffer (default: {ACO.sigma:g}, the "
+                   "paper's value; the reference code used 0.005)")
+
+
+def threads(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--threads", type=int, default=default_threads(),
+                   help=f"threads for training and for batched search evaluation (default: {default_threads()}, "
+                        "this machine's cores up to 4)")
+
+
+def jobs(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--jobs", type=int, default=1, help="parallel local worker processes (default: 1)")
+
+
+def json_file(p: argparse.ArgumentParser, what: str = "the results") -> None:
+    p.add_argument("--json", type=Path, metavar="FILE", help=f"write {what} as JSON")
+
+
+def no_progress(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def at_least_one(args: argparse.Namespace, *names: str) -> None:
+    """Refuse counts below 1 with the option's own spelling."""
+    for name in names:
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(args, name)}")

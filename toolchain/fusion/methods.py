@@ -1,0 +1,140 @@
+"""The paper's fusion methods and ablations, each registered under its name.
+
+Every method fits on one calibration draw through `registry.FusionInputs` and returns a
+`registry.FusedModel`. Registration order is the order of the paper's table.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+
+from ..models import flatten
+from . import baselines as bl
+from .acomerge import AcoMergeConfig, acomerge
+from .buffer import make_buffer
+from .registry import Budget, FusedModel, FusionInputs, register
+
+
+def make_run_buffer(aligned: torch.Tensor, kind: str, seed: int, sigma: float = Budget.sigma,
+                    copies: int = Budget.copies) -> torch.Tensor:
+    """The 48-model buffer (3 experts x (1 + 15)) that AcoMerge and ModelSwarm search."""
+    return make_buffer(aligned, copies=copies, sigma=sigma, seed=seed, kind=kind)
+
+
+def fleet_ablation_buffer(method: str, aligned: torch.Tensor, seed: int, sigma: float = Budget.sigma,
+                          copies: int = Budget.copies) -> tuple[torch.Tensor, torch.Tensor]:
+    """(kept experts, buffer) of a fleet-ablation method: the Earth expert (row 0) alone, or the
+    fleet experts (rows 1..) alone, each with enough perturbed copies to keep the buffer at about
+    its full size K·(1 + copies) (exactly 48 for three experts)."""
+    n_all = aligned.shape[0]
+    if n_all < 2:
+        raise ValueError(f"{method} needs the Earth expert and at least one fleet expert, got {n_all} expert(s)")
+    kept = aligned[:1] if method == "acomerge-earth-only" else aligned[1:]
+    kept_copies = max(0, round(n_all * (1 + copies) / kept.shape[0]) - 1)
+    return kept, make_buffer(kept, copies=kept_copies, sigma=sigma, seed=seed)
+
+
+def aco_config(budget: Budget, phases: tuple[str, ...] | None = None) -> AcoMergeConfig:
+    """AcoMerge's configuration under `budget` (the paper's values for everything else)."""
+    cfg = dataclasses.replace(AcoMergeConfig(), generations=budget.steps, n_ants=budget.ants, copies=budget.copies,
+                              sigma=budget.sigma, threads=budget.threads)
+    return dataclasses.replace(cfg, phases=phases) if phases else cfg
+
+
+def _flat(name: str, inp: FusionInputs, flat: torch.Tensor) -> FusedModel:
+    return FusedModel(method=name, arch=inp.arch, flat=torch.as_tensor(flat, dtype=torch.float32))
+
+
+# --- fine-tuned and trained-from-scratch references ---
+def _model_base(inp: FusionInputs) -> FusedModel:
+    model = bl.model_base(inp.arch, inp.x_cal, inp.y_cal, inp.seed, steps=inp.budget.steps)
+    return _flat("model-base", inp, flatten(model))
+
+
+def _earth_ft(inp: FusionInputs) -> FusedModel:
+    earth = bl.model_from_flat(inp.arch, inp.experts[0])
+    tuned = bl.earth_finetune(earth, inp.x_cal, inp.y_cal, inp.seed, steps=inp.budget.steps, lr=inp.budget.finetune_lr)
+    return _flat("earth-ft", inp, flatten(tuned))
+
+
+def _joint_ft(inp: FusionInputs) -> FusedModel:
+    joint = bl.model_from_flat(inp.arch, inp.joint)
+    tuned = bl.joint_finetune(joint, inp.x_cal, inp.y_cal, inp.seed, steps=inp.budget.steps, lr=inp.budget.finetune_lr)
+    return _flat("joint-ft", inp, flatten(tuned))
+
+
+# --- merging baselines over the aligned experts ---
+def _adamerging(inp: FusionInputs) -> FusedModel:
+    return _flat("adamerging", inp, bl.adamerging(inp.aligned, inp.arch, inp.x_cal, inp.y_cal, inp.seed,
+                                                  steps=inp.budget.steps))
+
+
+def _evomerge(inp: FusionInputs) -> FusedModel:
+    return _flat("evomerge", inp, bl.evomerge(inp.aligned, inp.arch, inp.x_cal, inp.y_cal, inp.seed,
+                                              steps=inp.budget.steps))
+
+
+def _modelswarm(inp: FusionInputs) -> FusedModel:
+    b = inp.budget
+    buffer = make_run_buffer(inp.aligned, "experts", inp.buffer_seed, b.sigma, b.copies)
+    return _flat("modelswarm", inp, bl.modelswarm(inp.aligned, inp.arch, inp.x_cal, inp.y_cal, inp.seed,
+                                                  steps=b.steps, buffer=buffer))
+
+
+def _distill(inp: FusionInputs) -> FusedModel:
+    student = bl.distill(inp.experts, inp.arch, inp.x_cal, inp.y_cal, inp.seed, steps=inp.budget.steps)
+    return _flat("distill", inp, flatten(student))
+
+
+# --- AcoMerge and its ablations ---
+def _aco_run(name: str, inp: FusionInputs, kept: torch.Tensor, buffer: torch.Tensor,
+             phases: tuple[str, ...] | None = None) -> FusedModel:
+    cfg = aco_config(inp.budget, phases)
+    res = acomerge(kept, inp.arch, inp.x_cal, inp.y_cal, config=cfg, seed=inp.seed, buffer=buffer)
+    details = {"config": dataclasses.asdict(cfg), "best_fitness": res.best_fitness, "best_origin": res.best_origin,
+               "evaluations": res.evaluations, "expert_fitness": res.expert_fitness, "history": res.history}
+    return FusedModel(method=name, arch=inp.arch, flat=torch.as_tensor(res.best_flat, dtype=torch.float32),
+                      curve=[float(v) for v in res.history.get("best_so_far", [])], details=details)
+
+
+def _aco_on_buffer(name: str, kind: str = "experts", phases: tuple[str, ...] | None = None):
+    def fit(inp: FusionInputs) -> FusedModel:
+        b = inp.budget
+        return _aco_run(name, inp, inp.aligned, make_run_buffer(inp.aligned, kind, inp.buffer_seed, b.sigma, b.copies),
+                        phases)
+    fit.__name__ = fit.__qualname__ = f"fit_{name.replace('-', '_')}"
+    return fit
+
+
+def _aco_fleet_ablation(name: str):
+    def fit(inp: FusionInputs) -> FusedModel:
+        kept, buffer = fleet_ablation_buffer(name, inp.aligned, inp.buffer_seed, inp.budget.sigma, inp.budget.copies)
+        return _aco_run(name, inp, kept, buffer)
+    fit.__name__ = fit.__qualname__ = f"fit_{name.replace('-', '_')}"
+    return fit
+
+
+# One line per method: name, fit, label, table group.
+register("joint-ft", _joint_ft, "Joint + FullFinetune", "Fine-tuned", needs_joint=True)
+register("earth-ft", _earth_ft, "Earth + FullFinetune", "Fine-tuned")
+register("model-base", _model_base, "Model Base", "Fine-tuned")
+register("adamerging", _adamerging, "AdaMerging", "Merging")
+register("evomerge", _evomerge, "Evolutionary Merge", "Merging")
+register("modelswarm", _modelswarm, "ModelSwarm", "Merging")
+register("acomerge", _aco_on_buffer("acomerge"), "AcoMerge", "Merging")
+register("distill", _distill, "Ensemble distillation", "Distillation")
+register("mmas-only", _aco_on_buffer("mmas-only", phases=("mmas",)), "MMAS only", "Ablation")
+# whole-model IWOA over the buffer (ModelSwarm's search, PSO replaced)
+register("iwoa-only", _aco_on_buffer("iwoa-only", phases=("iwoa",)), "IWOA only", "Ablation")
+# Buffer ablation: AcoMerge on other buffers than its own expert buffer.
+register("buffer-centroid-random", _aco_on_buffer("buffer-centroid-random", "centroid_random"),
+         "buffer: experts×3 + centroid-random×45", "Buffer ablation")
+register("buffer-random", _aco_on_buffer("buffer-random", "random"), "buffer: random×48", "Buffer ablation")
+# Fleet ablation: AcoMerge with some experts left out of its buffer (same buffer size): what the
+# fleet contributes beyond the Earth expert and the search itself.
+register("acomerge-earth-only", _aco_fleet_ablation("acomerge-earth-only"), "AcoMerge, Earth expert only",
+         "Fleet ablation")
+register("acomerge-fleet-only", _aco_fleet_ablation("acomerge-fleet-only"), "AcoMerge, fleet experts only",
+         "Fleet ablation")

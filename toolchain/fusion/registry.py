@@ -1,0 +1,127 @@
+"""Fusion methods by name: one signature in, one result type out.
+
+A method is a function `fit(inputs: FusionInputs) -> FusedModel`. It is added with one
+`register(...)` call (see `fusion/methods.py` for the paper's methods, which the `fleetlab.fusion`
+package registers when it is imported); `fleetlab fuse
+--method NAME`, `fleetlab evaluate --methods` and their `--help` read this registry, so a
+new method needs no other edit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from ..models import SlipNet, build, load_flat
+from ..models.train import EXPERT_LR
+from .acomerge import AcoMergeConfig
+
+_ACO = AcoMergeConfig()
+
+
+@dataclass(frozen=True)
+class Budget:
+    """The shared budget of one comparison; defaults are the paper's (AcoMergeConfig)."""
+
+    steps: int = _ACO.generations  # AcoMerge generations = optimisation steps of every method
+    ants: int = _ACO.n_ants  # AcoMerge ants per generation
+    sigma: float = _ACO.sigma  # std of the perturbed copies in the expert buffer
+    finetune_lr: float = EXPERT_LR  # Adam rate of Earth/Joint + FullFinetune (the experts' rate)
+    copies: int = _ACO.copies  # perturbed copies per expert in the buffer: 3 experts x (1 + 15) = 48
+    threads: int = 1  # torch intra-op threads of a search that batches its candidates
+
+
+@dataclass(frozen=True)
+class FusionInputs:
+    """Everything a method may use: the source models and one calibration draw."""
+
+    arch: str
+    roles: tuple[str, ...]  # expert roles, Earth first
+    experts: torch.Tensor  # (K, T) float32 flat experts as trained
+    aligned: torch.Tensor  # (K, T) the same, Git Re-Basin aligned to the Earth expert
+    joint: torch.Tensor | None  # (T,) the joint model, when a method asked for it
+    x_cal: np.ndarray
+    y_cal: np.ndarray
+    seed: int  # the method's own search seed
+    buffer_seed: int  # shared by the methods of one draw, so buffer-based methods see one buffer
+    budget: Budget = field(default_factory=Budget)
+
+
+@dataclass
+class FusedModel:
+    """What every method returns: a flat parameter vector of `arch`, plus its metadata."""
+
+    method: str
+    arch: str
+    flat: torch.Tensor  # (T,) float32
+    curve: list[float] | None = None  # best fitness on D_Cal per step, for searches that keep one
+    details: dict = field(default_factory=dict)  # method-specific, JSON-ready (e.g. AcoMerge's history)
+
+    def module(self) -> SlipNet:
+        """The fused network in eval mode."""
+        return load_flat(build(self.arch), self.flat).eval()
+
+
+FitFunction = Callable[[FusionInputs], FusedModel]
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    name: str
+    fit: FitFunction
+    label: str  # name in tables and reports
+    group: str  # table group ("Merging", ...); ablation groups are only run on request
+    needs_joint: bool = False  # the joint model must be trained first
+
+
+# Groups that only run through their ablation switch, never through `--methods all`.
+ABLATION_GROUPS = ("Buffer ablation", "Fleet ablation")
+_REGISTRY: dict[str, MethodSpec] = {}
+
+
+def register(name: str, fit: FitFunction, label: str | None = None, group: str = "Other",
+             needs_joint: bool = False) -> MethodSpec:
+    """Add a method under `name` (lower-case, no commas or spaces); names are unique."""
+    if not name or name != name.strip().lower() or any(c in name for c in ", "):
+        raise ValueError(f"method name {name!r}: use lower-case letters, digits and dashes")
+    if name in _REGISTRY and _REGISTRY[name].fit is not fit:
+        raise ValueError(f"fusion method {name!r} is registered already")
+    spec = MethodSpec(name, fit, label or name, group, needs_joint)
+    _REGISTRY[name] = spec
+    return spec
+
+
+def unregister(name: str) -> None:
+    """Remove a method (for throw-away methods in tests); unknown names are ignored."""
+    _REGISTRY.pop(name, None)
+
+
+def get(name: str) -> MethodSpec:
+    if name not in _REGISTRY:
+        raise ValueError(f"unknown fusion method {name!r}; choose from {', '.join(selectable())}")
+    return _REGISTRY[name]
+
+
+def all_methods() -> dict[str, MethodSpec]:
+    """Every registered method, in registration order (the paper's table order first)."""
+    return dict(_REGISTRY)
+
+
+def selectable() -> tuple[str, ...]:
+    """Names that `--methods` / `--method` accept: every method outside the ablation groups."""
+    return tuple(n for n, s in all_methods().items() if s.group not in ABLATION_GROUPS)
+
+
+def in_group(group: str) -> tuple[str, ...]:
+    return tuple(n for n, s in all_methods().items() if s.group == group)
+
+
+def fit(name: str, inputs: FusionInputs) -> FusedModel:
+    """Run method `name` on `inputs`."""
+    spec = get(name)
+    if spec.needs_joint and inputs.joint is None:
+        raise ValueError(f"{name} needs the joint model, which was not trained")
+    return spec.fit(inputs)

@@ -23,12 +23,12 @@ from fleetlab.data.contracts import CLASS_NAMES, FEATURE_NAMES
 from fleetlab.data.features_int import FEATURE_LSB, quantize_features
 from fleetlab.models.mlp import arch_of
 
-from . import headers, manifest, onnx_export, vectors
+from . import headers, manifest, model_image, onnx_export, vectors
 from .quant import FloatParams, QParams, quantize
 
 ONNX_FILE = "model.onnx"
 # Every file a bundle can hold; an export removes the ones it does not rewrite (never other files).
-BUNDLE_FILES = (ONNX_FILE, "slipest_model_f32.h", "slipest_model_q.h", "vectors.npz", "vectors.bin",
+BUNDLE_FILES = (ONNX_FILE, "slipest_model_f32.h", "slipest_model_q.h", "model.img", "vectors.npz", "vectors.bin",
                 "accuracy.json", "accuracy.md", "manifest.json")
 ROUNDING = {
     "rsr": "rsr(x,k) = floor((x + 2^(k-1)) / 2^k) for k >= 1, x for k = 0 (round half up)",
@@ -84,6 +84,8 @@ def export_bundle(
     data_dirs: list[Path] | None = None,
     onnx_only: bool = False,
     vector_sources: dict | None = None,
+    c_name: str = headers.DEFAULT_C_NAME,
+    model_version: int = 1,
 ) -> Bundle:
     """Export `model` into directory `out` (created; existing bundle files are replaced)."""
     out = Path(out)
@@ -113,7 +115,8 @@ def export_bundle(
         fp = FloatParams.from_model(model)
         qp = quantize(fp)
         content = manifest.content_hash(qp, fp)
-        names += [p.name for p in headers.write_headers(out, qp, fp, content)]
+        names += [p.name for p in headers.write_headers(out, qp, fp, content, c_name, model_version)]
+        names.append(model_image.write_image(out, qp, fp, content, model_version).name)
         steps.update()
         v = vectors.make_vectors(model, qp, inputs)
         names += [p.name for p in vectors.write_vectors(out, v)]
@@ -157,11 +160,15 @@ def export_bundle(
             **qp.scalars(),
             "rounding": ROUNDING,
             "arrays": {
-                h_name: {"from": attr, "ctype": ctype, "shape": list(np.shape(getattr(qp, attr)))}
-                for h_name, attr, ctype, _, _ in headers.Q_ARRAYS
+                headers.Q_MEMBERS[attr]: {"from": attr, "ctype": ctype, "shape": list(np.shape(getattr(qp, attr)))}
+                for attr, ctype, _, _ in headers.Q_ARRAYS
             },
         }
-        m["headers"] = {"fixed_point": headers.Q_HEADER, "float": headers.F32_HEADER}
+        m["headers"] = {"fixed_point": headers.Q_HEADER, "float": headers.F32_HEADER,
+                        "model_q": f"slipest_{c_name}_q", "model_f32": f"slipest_{c_name}_f32"}
+        m["model_version"] = int(model_version)
+        m["model_image"] = {"file": model_image.IMAGE_FILE, "format_version": model_image.FORMAT_VERSION,
+                            "arch_id": model_image.ARCH_SN_S, "byte_order": "little-endian"}
         m["vectors"] = vec_info
     m["files"] = manifest.file_entries(out, names)
     manifest.write_manifest(out, m)
@@ -190,7 +197,7 @@ def load_bundle(path: Path | str) -> Bundle:
     msc = m["quantization"]
     for key, value in qsc.items():
         if msc.get(key) != value:
-            raise ValueError(f"{qfile}: {headers.Q_MACROS[key]} = {value}, manifest.json says {msc.get(key)}")
+            raise ValueError(f"{qfile}: .{key} = {value}, manifest.json says {msc.get(key)}")
     qp = QParams(
         w1=qarr["w1"], b1=qarr["b1"], g=qarr["g"], bb=qarr["bb"], w2=qarr["w2"], b2=qarr["b2"], gelu=qarr["gelu"],
         rsqrt_seed=qarr["rsqrt_seed"].astype(np.int64), fg=qsc["fg"], fy=qsc["fy"], eps_m=qsc["eps_m"],
@@ -241,4 +248,12 @@ def check_bundle(path: Path | str, model: torch.nn.Module | None = None) -> list
             raise ValueError(f"{b.path / 'vectors.bin'}: array {name} differs from vectors.npz")
     done.append(f"integer reference reproduces q_logits bit for bit on {len(v)} vectors; vectors.bin == vectors.npz")
     done.append(f"fixed-point vs float class agreement on the vectors: {np.mean(v.q_class == v.f_class):.4%}")
+    if model_image.IMAGE_FILE in b.manifest["files"]:
+        img = model_image.read_image((b.path / model_image.IMAGE_FILE).read_bytes())
+        same = img.content_hash == b.content_hash and all(
+            np.array_equal(img.qparams_arrays[a], np.asarray(getattr(b.qparams, a))) for a, _, _ in model_image.Q_LAYOUT)
+        if not same:
+            raise ValueError(f"{b.path / model_image.IMAGE_FILE}: parameters or hash differ from the headers")
+        done.append(f"model.img (format {model_image.FORMAT_VERSION}, model version {img.model_version}) holds "
+                    "the headers' parameters")
     return done

@@ -3,7 +3,8 @@
 The content hash is sha256 over a canonical serialisation of the model content: the scheme
 scalars (JSON, sorted keys), then every integer array of the fixed-point path and every float32
 array of the float path, each preceded by its name, dtype and shape, little-endian bytes.
-Both C headers embed it (string and first 4 bytes big-endian as SLIPEST_MODEL_HASH32).
+Both C headers name it, their model structs carry its first 4 bytes (big-endian) as hash32, and
+model.img ends with it.
 The manifest also lists the sha256 and size of every other bundle file.
 """
 

@@ -25,12 +25,18 @@ class CEstimator:
         lib = ctypes.CDLL(str(lib_path))
         lib.slipest_node_size.restype = ctypes.c_size_t
         lib.slipest_frame_size.restype = ctypes.c_size_t
-        lib.slipest_node_init.argtypes = [ctypes.c_void_p]
+        # the node runs the model the library was built with (its bundle): pointers to const structs
+        lib.slipest_bundle_model_q.restype = ctypes.c_void_p
+        lib.slipest_bundle_model_f32.restype = ctypes.c_void_p
+        lib.slipest_node_init.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+        lib.slipest_node_model_q.argtypes = [ctypes.c_void_p]
+        lib.slipest_node_model_q.restype = ctypes.c_void_p
+        lib.slipest_model_hash32.argtypes = [ctypes.c_void_p]
         lib.slipest_node_handle.argtypes = [ctypes.c_void_p, ctypes.POINTER(CFrame), ctypes.POINTER(CFrame),
                                             ctypes.c_size_t]
         lib.slipest_node_link_error.argtypes = [ctypes.c_void_p]
         lib.slipest_node_counters.argtypes = [ctypes.c_void_p, ctypes.POINTER(CCounters)]
-        lib.slipest_node_model_hash32.restype = ctypes.c_uint32
+        lib.slipest_model_hash32.restype = ctypes.c_uint32
         lib.slipest_node_max_out.restype = ctypes.c_size_t
         if lib.slipest_frame_size() != ctypes.sizeof(CFrame):
             raise OSError(f"{lib_path}: slipest_frame_t is {lib.slipest_frame_size()} bytes, ctypes expects "
@@ -44,7 +50,7 @@ class CEstimator:
 
     def reset(self) -> None:
         """A fresh node, as after a power cycle."""
-        r = self.lib.slipest_node_init(self._ctx)
+        r = self.lib.slipest_node_init(self._ctx, self.lib.slipest_bundle_model_q(), self.lib.slipest_bundle_model_f32())
         if r < 0:
             raise OSError(f"slipest_node_init failed ({r})")
 
@@ -67,4 +73,4 @@ class CEstimator:
 
     @property
     def model_hash32(self) -> int:
-        return int(self.lib.slipest_node_model_hash32())
+        return int(self.lib.slipest_model_hash32(self.lib.slipest_node_model_q(self._ctx)))

@@ -110,10 +110,11 @@ def host_library(bundle: Path | str | None = None) -> Path:
 class EmulatorProcess:
     """The `slipest_emu` process on a pty (`--link slcan` or `--link cobs`)."""
 
-    def __init__(self, exe: Path, link: str, start_timeout: float = 10.0):
+    def __init__(self, exe: Path, link: str, start_timeout: float = 10.0, model: Path | None = None):
         if link not in ("slcan", "cobs"):
             raise ValueError(f"emulator link must be 'slcan' or 'cobs', got {link!r}")
         self.exe, self.link, self.start_timeout = Path(exe), link, start_timeout
+        self.model = Path(model) if model is not None else None  # model.img served instead of the built-in one
         self.proc: subprocess.Popen | None = None
         self.pty_path: str | None = None
         self.starts = 0
@@ -121,14 +122,19 @@ class EmulatorProcess:
 
     @classmethod
     def for_bundle(cls, bundle: Path | str | None, link: str) -> "EmulatorProcess":
-        bdir = build(bundle)
+        img = Path(bundle or default_bundle()) / "model.img"
+        if img.is_file():
+            # one emulator build serves every bundle: it reads the bundle's model image at run time
+            return cls(find_artifact(build(None), EMULATOR_TARGET), link, model=img)
+        bdir = build(bundle)  # a bundle without model.img (exported before it existed): built in
         return cls(find_artifact(bdir, EMULATOR_TARGET), link)
 
     def start(self) -> str:
         """Start the emulator; returns the pty path it serves."""
         if self.proc is not None:
             raise RuntimeError("emulator already running")
-        self.proc = subprocess.Popen([str(self.exe), "--pty", "--link", self.link], stdout=subprocess.PIPE,
+        model = ["--model", str(self.model)] if self.model is not None else []
+        self.proc = subprocess.Popen([str(self.exe), *model, "--pty", "--link", self.link], stdout=subprocess.PIPE,
                                      stderr=subprocess.PIPE, start_new_session=True)
         self.starts += 1
         line_buf = b""

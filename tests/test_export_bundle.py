@@ -117,8 +117,8 @@ def test_manifest_and_headers_agree(exported) -> None:
     assert qhash32 == fhash32 == int(m["content_hash32"], 16) == int(m["content_hash"][:8], 16)
     for key, value in qsc.items():
         assert m["quantization"][key] == value, key
-    for cname, attr, ctype, _, _ in headers.Q_ARRAYS:
-        assert list(qarr[attr].shape) == m["quantization"]["arrays"][cname]["shape"]
+    for attr, ctype, _, _ in headers.Q_ARRAYS:
+        assert list(qarr[attr].shape) == m["quantization"]["arrays"][headers.Q_MEMBERS[attr]]["shape"]
     # the headers hold exactly what quantize() makes of the model, and its exact float32 weights
     model, _ = load_model(model_path)
     fp = FloatParams.from_model(model)
@@ -130,9 +130,11 @@ def test_manifest_and_headers_agree(exported) -> None:
     assert eps == np.float32(1e-5)
     assert m["content_hash"] == manifest.content_hash(qp, fp)
     assert m["quantization"]["fy"] == qp.fy and m["quantization"]["logit_scale"] == qp.logit_scale
-    # every #define size matches the array it sizes
+    # the header defines one const model struct named after the bundle, over arrays sized by the public API
     text = (b / "slipest_model_q.h").read_text()
-    assert re.search(r"#define SLIPEST_Q_N_HIDDEN 30\b", text) and "static const int16_t slipest_q_w1[" in text
+    assert "static const slipest_model_q_t slipest_main_q = {" in text and ".n_hidden = 30," in text
+    assert "static const int16_t slipest_main_q_w1[SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES]" in text
+    assert "#define SLIPEST_Q_" not in text  # every scale and shift is a struct member, none a macro
     assert m["feature_names"][0] == "feat_w_vel_mean" and len(m["feature_lsb"]) == 12
 
 
@@ -168,7 +170,7 @@ def test_edited_bundle_is_refused(exported, tmp_path) -> None:
     c = _copy(b, tmp_path)
     q = c / "slipest_model_q.h"
     text = q.read_text()
-    m = re.search(r"(slipest_q_w1\[[^\]]*\] = \{\s*)(-?\d+)", text)
+    m = re.search(r"(slipest_main_q_w1\[[^\]]*\] = \{\s*)(-?\d+)", text)
     new = str(int(m[2]) + 1 if int(m[2]) < 9 else int(m[2]) - 1)
     assert len(new) == len(m[2])  # same size: only the hash can tell
     q.write_text(text[: m.start(2)] + new + text[m.end(2):])

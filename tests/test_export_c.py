@@ -15,6 +15,10 @@ from fleetlab.export.vectors import draw_inputs
 REPO = Path(__file__).resolve().parents[1]
 INCLUDE = REPO / "firmware_c" / "include"
 KERNELS = [REPO / "firmware_c" / "src" / "slipest_infer_q.c", REPO / "firmware_c" / "src" / "slipest_infer_f32.c"]
+# model validation and the one vectors.bin reader, linked beside the kernels
+SUPPORT = [REPO / "firmware_c" / "src" / "slipest_model.c", REPO / "firmware_c" / "common" / "slipest_vectors.c",
+           REPO / "firmware_c" / "src" / "slipest_model_hash.c"]
+COMMON = REPO / "firmware_c" / "common"
 CHECK_SRC = REPO / "export" / "c" / "check_vectors.c"
 EXAMPLE = REPO / "firmware_c" / "bundles" / "example"
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
@@ -39,7 +43,8 @@ def fresh_bundle(tmp_path_factory) -> Path:
 
 def build_check(bundle: Path, out: Path, cc: str, flags: list[str]) -> Path:
     exe = out / f"check_{Path(cc).name}"
-    cmd = [cc, *STRICT, "-O2", *flags, f"-I{INCLUDE}", f"-I{bundle}", str(CHECK_SRC), *map(str, KERNELS), "-lm", "-o", str(exe)]
+    cmd = [cc, *STRICT, "-O2", *flags, f"-I{INCLUDE}", f"-I{COMMON}", f"-I{bundle}", str(CHECK_SRC),
+           *map(str, KERNELS), *map(str, SUPPORT), "-lm", "-o", str(exe)]
     res = subprocess.run(cmd, capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     return exe
@@ -53,7 +58,7 @@ def test_kernels_match_vectors_gcc_sanitized(which, fresh_bundle, tmp_path) -> N
     assert res.returncode == 0, res.stdout + res.stderr
     assert re.search(r"q mismatches 0 .*f32 > tol 0", res.stdout)
     man = (bundle / "manifest.json").read_text()
-    assert re.search(r"hash32 0x([0-9a-f]{8}) ([0-9a-f]{64})", res.stdout)[2] in man
+    assert f'"content_hash32": "0x{re.search(r"hash32 0x([0-9a-f]{8})", res.stdout)[1]}"' in man
 
 
 def test_kernels_match_vectors_clang(fresh_bundle, tmp_path) -> None:
@@ -81,10 +86,16 @@ def test_fixed_point_kernel_has_no_float_and_fits(cpu, tmp_path) -> None:
     """No soft-float helper on a core without FPU; flash (code + model) <= 6 KB; no RAM but the stack."""
     cc = need(ARM_GCC)
     obj = tmp_path / "q.o"
-    cmd = [cc, *STRICT, "-Os", f"-mcpu={cpu}", "-mthumb", "-mfloat-abi=soft", "-fstack-usage", f"-I{INCLUDE}", f"-I{EXAMPLE}",
-           "-c", str(KERNELS[0]), "-o", str(obj)]
-    res = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path)
+    # the kernel and the example model (the const struct the bundle's header defines), as one object
+    base = [cc, *STRICT, "-Os", f"-mcpu={cpu}", "-mthumb", "-mfloat-abi=soft", "-fstack-usage", f"-I{INCLUDE}", f"-I{EXAMPLE}"]
+    parts = []
+    for src in (KERNELS[0], REPO / "firmware_c" / "src" / "slipest_bundle_q.c"):
+        parts.append(tmp_path / (src.stem + ".o"))
+        res = subprocess.run([*base, "-c", str(src), "-o", str(parts[-1])], capture_output=True, text=True, cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+    res = subprocess.run([need("arm-none-eabi-ld"), "-r", *map(str, parts), "-o", str(obj)], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
+    (tmp_path / "q.su").write_text((tmp_path / "slipest_infer_q.su").read_text())
     nm = subprocess.run([need("arm-none-eabi-nm"), "-u", str(obj)], capture_output=True, text=True).stdout
     assert not re.search(r"__aeabi_[fd]|__(add|sub|mul|div)[sd]f3|__float|__fix", nm), nm
     sizes = subprocess.run([need("arm-none-eabi-size"), "-A", str(obj)], capture_output=True, text=True).stdout
@@ -119,3 +130,57 @@ def test_c_counts_saturations_and_breaks_ties_like_the_reference(tmp_path) -> No
     exe = build_check(tmp_path, tmp_path, need("gcc"), ["-fsanitize=undefined", "-fno-sanitize-recover=all"])
     res = subprocess.run([str(exe), str(tmp_path / "vectors.bin")], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stdout + res.stderr
+
+
+TWO_MODELS_C = r"""
+#include <stdio.h>
+#include "slipest_infer.h"
+#include "earth_q.h"
+#include "fused_q.h"
+int main(void)
+{
+    int16_t x[SLIPEST_N_FEATURES];
+    int32_t a[SLIPEST_N_CLASSES], b[SLIPEST_N_CLASSES];
+    long t;
+    int j, differ = 0;
+    if (slipest_model_q_check(&slipest_earth_q) != SLIPEST_OK || slipest_model_q_check(&slipest_fused_q) != SLIPEST_OK)
+        return 3;
+    for (t = 0; t < 2000; t++) {
+        for (j = 0; j < SLIPEST_N_FEATURES; j++) x[j] = (int16_t)((t * 7919 + j * 104729) % 20001 - 10000);
+        if (slipest_infer_q(&slipest_earth_q, x, a, 0) < 0 || slipest_infer_q(&slipest_fused_q, x, b, 0) < 0) return 4;
+        if (b[0] - a[0] != DELTA || b[1] != a[1] || b[2] != a[2]) return 1;
+        differ += slipest_infer_q(&slipest_earth_q, x, a, 0) != slipest_infer_q(&slipest_fused_q, x, b, 0);
+    }
+    printf("%08lx %08lx %d\n", (unsigned long)slipest_model_hash32(&slipest_earth_q),
+           (unsigned long)slipest_model_hash32(&slipest_fused_q), differ);
+    return 0;
+}
+"""
+
+
+def test_two_bundles_in_one_image(tmp_path) -> None:
+    """Two bundles' headers (an Earth and a 'fused' model) compile into one program and the kernel
+    runs either through its const struct: the second differs by a head bias only, so its class-0
+    logit is the first's + that bias on every input, and the two hashes differ."""
+    from fleetlab.export import headers, manifest
+    from fleetlab.export.bundle import load_bundle
+
+    b = load_bundle(EXAMPLE)
+    qp, fp = b.qparams, b.fparams
+    (tmp_path / "earth_q.h").write_text(headers.q_header_text(qp, b.content_hash, "earth"))
+    delta = 1 << 20
+    qp.b2 = qp.b2.copy()
+    qp.b2[0] += delta
+    (tmp_path / "fused_q.h").write_text(headers.q_header_text(qp, manifest.content_hash(qp, fp), "fused", version=2))
+    src = tmp_path / "two.c"
+    src.write_text(TWO_MODELS_C)
+    exe = tmp_path / "two"
+    cmd = [need("gcc"), *STRICT, "-O2", "-fsanitize=undefined", "-fno-sanitize-recover=all", f"-DDELTA={delta}",
+           f"-I{INCLUDE}", f"-I{tmp_path}", str(src), str(KERNELS[0]), str(SUPPORT[0]), str(SUPPORT[2]), "-o", str(exe)]
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    res = subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stdout + res.stderr
+    h_earth, h_fused, differ = res.stdout.split()
+    assert h_earth == b.content_hash[:8] and h_fused != h_earth
+    assert int(differ) > 0  # the bias moves some argmax: the two models really are different data

@@ -138,7 +138,7 @@ def test_fuzzers_run_clean(tmp_path):
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr[-4000:]
     execs = dict(re.findall(r"^(fuzz_\w+) executions=(\d+)", proc.stdout, flags=re.M))
-    assert set(execs) == {"fuzz_slcan", "fuzz_cobs", "fuzz_push"}
+    assert set(execs) == {"fuzz_slcan", "fuzz_cobs", "fuzz_push", "fuzz_image"}
     assert all(int(v) > 1000 for v in execs.values()), execs
     print(proc.stdout)
 
@@ -164,6 +164,9 @@ def lib(builds):
     assert so.slipest_frame_size() == ctypes.sizeof(Frame)
     assert so.slipest_window_size() == ctypes.sizeof(Window)
     so.slipest_model_hash32.restype = ctypes.c_uint32
+    so.slipest_model_hash32.argtypes = [ctypes.c_void_p]
+    so.slipest_bundle_model_q.restype = ctypes.c_void_p
+    so.slipest_bundle_model_f32.restype = ctypes.c_void_p
     return so
 
 
@@ -232,7 +235,8 @@ def telemetry_frames(x: np.ndarray, counters: np.ndarray) -> list[tuple[int, byt
 
 def node_run(lib, frames: list[tuple[int, bytes]]):
     node = ctypes.create_string_buffer(lib.slipest_node_size())
-    lib.slipest_node_init(node)
+    assert lib.slipest_node_init(node, ctypes.c_void_p(lib.slipest_bundle_model_q()),
+                                 ctypes.c_void_p(lib.slipest_bundle_model_f32())) == 0
     out = (Frame * 9)()
     outputs = []
     for fid, data in frames:
@@ -297,7 +301,7 @@ def test_node_is_bit_exact_with_the_python_references(lib):
     assert est[2]["flags"] & FLAG_GAP and est[2]["n_samples"] == 99
     assert (c.frames_received, c.frames_rejected) == (len(frames), 3)
     assert (c.samples_dropped, c.windows_flagged, c.windows_done) == (1, 1, 24)
-    assert lib.slipest_model_hash32() == int(b.manifest["content_hash"][:8], 16)
+    assert lib.slipest_model_hash32(ctypes.c_void_p(lib.slipest_bundle_model_q())) == int(b.manifest["content_hash"][:8], 16)
 
 
 def test_node_features_frames_round_trip_through_the_dbc(lib):
@@ -438,3 +442,81 @@ def test_python_can_slcan_adapter_talks_to_the_emulator(builds):
     assert [m.arbitration_id for m in got] == [0x300, 0x301, 0x302]
     rx = DBC.decode_message(0x301, got[1].data)
     assert rx == {"frames_received": 1, "frames_rejected": 0}
+
+
+# --------------------------------------------------------------------------- model image (model.img)
+def _recrc(img: bytes) -> bytes:
+    """Re-seal an edited image with a correct CRC-32, so that the reader's other checks are reached."""
+    import zlib
+
+    body = img[:-36]
+    return body + zlib.crc32(body).to_bytes(4, "little") + img[-32:]
+
+
+def _emu_model(build: Path, img: bytes, tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
+    path = tmp_path / "m.img"
+    path.write_bytes(img)
+    return subprocess.run([str(build / "slipest_emu"), "--model", str(path), *args], capture_output=True, text=True,
+                          timeout=60)
+
+
+def test_emulator_runs_the_model_image_bit_exact(builds, tmp_path) -> None:
+    """The C reader accepts the bundle's model.img and the emulator, loading it at run time (ASan + UBSan
+    build), reproduces every vector; a second model image (other version and head bias) is served by the
+    same binary without a rebuild."""
+    from fleetlab.export import manifest, model_image
+    from fleetlab.export.bundle import load_bundle
+
+    b = load_bundle(BUNDLE)
+    img = (BUNDLE / "model.img").read_bytes()
+    res = _emu_model(builds["asan"], img, tmp_path, "--vectors", str(BUNDLE / "vectors.bin"))
+    assert res.returncode == 0 and "q_exact=1200 f32_within_1e-5=1200" in res.stdout, res.stdout + res.stderr
+    qp = b.qparams
+    qp.b2 = qp.b2.copy()
+    qp.b2[0] = 0  # other data within the same accumulator bound
+    other = model_image.image_bytes(qp, b.fparams, manifest.content_hash(qp, b.fparams), model_version=7)
+    res = _emu_model(builds["asan"], other, tmp_path, "--version")
+    assert res.returncode == 0 and f"model {manifest.content_hash(qp, b.fparams)[:8]} version 7" in res.stdout
+    # ... and it really computes with the new data: the vectors of the old model no longer match
+    res = _emu_model(builds["asan"], other, tmp_path, "--vectors", str(BUNDLE / "vectors.bin"))
+    assert res.returncode == 1 and "FAIL" in res.stdout
+
+
+@pytest.mark.parametrize("case, status", [
+    ("truncated", "wrong length"), ("one byte more", "wrong length"), ("bit flip", "CRC mismatch"),
+    ("magic", "malformed input"), ("format version", "unsupported image format version"),
+    ("architecture", "model architecture mismatch"), ("hidden width", "model architecture mismatch"),
+    ("shift out of range", "value out of range"), ("accumulator bound", "value out of range"),
+    ("hash32", "model hash mismatch"), ("length field", "wrong length"),
+])
+def test_c_reader_rejects_bad_images(builds, tmp_path, case, status) -> None:
+    """Every corruption is refused with its status, never a crash or an out-of-bounds read (ASan build)."""
+    img = bytearray((BUNDLE / "model.img").read_bytes())
+    if case == "truncated":
+        img = img[:-1]
+    elif case == "one byte more":
+        img += b"\0"
+    elif case == "bit flip":
+        img[100] ^= 0x10
+    elif case == "magic":
+        img[0:4] = b"SLPX"
+    elif case == "format version":
+        img[4] = 2
+    elif case == "architecture":
+        img[6] = 2
+    elif case == "hidden width":
+        img[13] = 29
+    elif case == "shift out of range":
+        img[21] = 40  # fy
+    elif case == "accumulator bound":
+        off = 64 + 720 + 120 + 60 + 120 + 180  # b2[0]
+        img[off:off + 4] = (2**31 - 1).to_bytes(4, "little")
+    elif case == "hash32":
+        img[38] ^= 0xFF
+    elif case == "length field":
+        img[42:46] = (0xFFFFFFF0).to_bytes(4, "little")
+    if case not in ("truncated", "one byte more", "bit flip"):
+        img = bytearray(_recrc(bytes(img)))  # a valid CRC: the check under test must catch it
+    res = _emu_model(builds["asan"], bytes(img), tmp_path, "--version")
+    assert res.returncode == 2 and f"model image rejected: {status}" in res.stderr, res.stdout + res.stderr
+    assert "AddressSanitizer" not in res.stderr and "runtime error" not in res.stderr

@@ -91,7 +91,7 @@ static int argmax_f32(const float x[3])
 }
 #endif
 
-int slipest_vectors_check_q(const slipest_vectors_t *v, uint32_t i, int32_t q_out[3])
+int slipest_vectors_check_q(const slipest_vectors_t *v, const slipest_model_q_t *m, uint32_t i, int32_t q_out[3])
 {
     int16_t q_in[12];
     int32_t want[3];
@@ -99,7 +99,7 @@ int slipest_vectors_check_q(const slipest_vectors_t *v, uint32_t i, int32_t q_ou
     int cls, fail = 0;
     slipest_vectors_q_input(v, i, q_in);
     slipest_vectors_q_logits(v, i, want);
-    cls = slipest_infer_q(q_in, q_out, &sat);
+    cls = slipest_infer_q(m, q_in, q_out, &sat);
     if (cls < 0) return 16;
     if (q_out[0] != want[0] || q_out[1] != want[1] || q_out[2] != want[2]) fail |= 1;
     if (cls != argmax_i32(want) || cls != i32_at(v->q_class, i)) fail |= 2;
@@ -108,13 +108,14 @@ int slipest_vectors_check_q(const slipest_vectors_t *v, uint32_t i, int32_t q_ou
 }
 
 #ifndef SLIPEST_Q_ONLY
-int slipest_vectors_check_f32(const slipest_vectors_t *v, uint32_t i, float tol, float f_out[3])
+int slipest_vectors_check_f32(const slipest_vectors_t *v, const slipest_model_f32_t *m, uint32_t i, float tol,
+                             float f_out[3])
 {
     float in[12], want[3];
     int k, cls, fail = 0;
     slipest_vectors_input(v, i, in);
     slipest_vectors_torch_logits(v, i, want);
-    cls = slipest_infer_f32(in, f_out);
+    cls = slipest_infer_f32(m, in, f_out);
     if (cls < 0) return 16;
     for (k = 0; k < 3; k++) {
         /* |d| <= tol * max(1, |want|): absolute near zero, relative for large logits, where

@@ -7,6 +7,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "slipest_model.h"
+
 typedef struct {
     uint32_t n;
     const uint8_t *inputs;       /* float32 (n,12) physical units */
@@ -30,7 +32,8 @@ void slipest_vectors_q_logits(const slipest_vectors_t *v, uint32_t i, int32_t ou
  * not the argmax of q_logits, 16 kernel error, 32 saturation count
  * differs; f32 path 4 a logit off by > tol, 8 class differs
  * from the torch argmax, 16 kernel error. The logits computed are written to *_out. */
-int slipest_vectors_check_q(const slipest_vectors_t *v, uint32_t i, int32_t q_out[3]);
-int slipest_vectors_check_f32(const slipest_vectors_t *v, uint32_t i, float tol, float f_out[3]);
+int slipest_vectors_check_q(const slipest_vectors_t *v, const slipest_model_q_t *m, uint32_t i, int32_t q_out[3]);
+int slipest_vectors_check_f32(const slipest_vectors_t *v, const slipest_model_f32_t *m, uint32_t i, float tol,
+                             float f_out[3]);
 
 #endif

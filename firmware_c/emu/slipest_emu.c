@@ -4,6 +4,8 @@
  *   slipest_emu --stdio --link slcan|cobs             serve stdin/stdout
  *   slipest_emu --pty --link slcan|cobs               open a pty pair, print "PTY <path>"
  *   slipest_emu --vectors vectors.bin [--verbose]     batch check of a bundle's vectors
+ *   --model model.img (any mode)                      serve / check the model of that image instead
+ *                                                     of the built-in bundle (no rebuild per bundle)
  *
  * Frames in, estimate and status frames out (host_tools/slipest.dbc). Non-blocking I/O
  * with an output queue: when the queue is full the loop stops reading input until it
@@ -23,7 +25,9 @@
 #include <termios.h>
 #include <unistd.h>
 
+#include "slipest_bundle.h"
 #include "slipest_codec.h"
+#include "slipest_image.h"
 #include "slipest_infer.h"
 #include "slipest_node.h"
 #include "slipest_vectors.h"
@@ -46,6 +50,40 @@ typedef struct {
 } emu_t;
 
 static volatile sig_atomic_t stop_requested = 0;
+
+/* the model served: the built-in bundle's, or one read from a model image (--model) */
+static const slipest_model_q_t *model_q;
+static const slipest_model_f32_t *model_f32;
+static char model_hex[9]; /* the model's hash32 as text */
+
+/* Read a model image file through the validating C reader into static storage (as a flight
+ * node would read a received image from its buffer). Returns 0, or 2 with a message. */
+static int load_model_image(const char *path)
+{
+    static uint8_t buf[SLIPEST_IMAGE_MAX_SIZE + 1u]; /* one byte more: a longer file is refused */
+    static slipest_image_q_storage_t qs;
+    static slipest_image_f32_storage_t fs;
+    static slipest_model_q_t mq;
+    static slipest_model_f32_t mf;
+    size_t n;
+    int st;
+    FILE *fp = fopen(path, "rb");
+    if (fp == NULL) {
+        fprintf(stderr, "slipest_emu: cannot open %s: %s\n", path, strerror(errno));
+        return 2;
+    }
+    n = fread(buf, 1, sizeof buf, fp);
+    fclose(fp);
+    st = slipest_image_read(buf, n, 0u, &mq, &qs, &mf, &fs);
+    if (st != SLIPEST_OK) {
+        fprintf(stderr, "slipest_emu: %s: model image rejected: %s (%d)\n", path, slipest_status_str(st), st);
+        return 2;
+    }
+    model_q = &mq;
+    model_f32 = &mf;
+    snprintf(model_hex, sizeof model_hex, "%08lx", (unsigned long)slipest_model_hash32(model_q));
+    return 0;
+}
 
 static void on_signal(int sig)
 {
@@ -229,8 +267,8 @@ static int run_vectors(const char *path, int verbose)
     for (i = 0; i < v.n; i++) {
         int32_t q[3];
         float f[3];
-        int fq = slipest_vectors_check_q(&v, i, q);
-        int ff = slipest_vectors_check_f32(&v, i, 1e-5f, f);
+        int fq = slipest_vectors_check_q(&v, model_q, i, q);
+        int ff = slipest_vectors_check_f32(&v, model_f32, i, 1e-5f, f);
         q_fail += fq != 0;
         f_fail += ff != 0;
         if (verbose)
@@ -240,7 +278,7 @@ static int run_vectors(const char *path, int verbose)
                    fq, ff, (fq | ff) ? "FAIL" : "ok");
     }
     printf("vectors=%lu q_exact=%lu f32_within_1e-5=%lu model_hash=%s %s\n", (unsigned long)v.n,
-           (unsigned long)(v.n - q_fail), (unsigned long)(v.n - f_fail), slipest_model_hash_hex(),
+           (unsigned long)(v.n - q_fail), (unsigned long)(v.n - f_fail), model_hex,
            (q_fail == 0 && f_fail == 0) ? "PASS" : "FAIL");
     free(buf);
     return (q_fail == 0 && f_fail == 0) ? 0 : 1;
@@ -255,6 +293,7 @@ static void usage(FILE *to)
             "  --stdio        serve stdin/stdout\n"
             "  --pty          create a pseudo-terminal and print 'PTY <slave path>' on stdout\n"
             "  --link KIND    slcan (ASCII tIIILDD..\\r, default) or cobs (COBS + CRC-16 packets)\n"
+            "  --model IMG    use the model of a model image (model.img) instead of the built-in bundle\n"
             "  --vectors F    check every test vector (fixed-point logits exact, float within 1e-5*max(1,|logit|))\n"
             "  --version      print library version and model hash\n");
 }
@@ -267,12 +306,18 @@ int main(int argc, char **argv)
     struct sigaction sa;
 
     e.link = LINK_SLCAN;
+    model_q = slipest_bundle_model_q();
+    model_f32 = slipest_bundle_model_f32();
+    snprintf(model_hex, sizeof model_hex, "%08lx", (unsigned long)slipest_model_hash32(model_q));
     for (i = 1; i < argc; i++) {
         if (strcmp(argv[i], "--port") == 0 && i + 1 < argc) port = argv[++i];
         else if (strcmp(argv[i], "--stdio") == 0) use_stdio = 1;
         else if (strcmp(argv[i], "--pty") == 0) use_pty = 1;
         else if (strcmp(argv[i], "--vectors") == 0 && i + 1 < argc) vectors = argv[++i];
         else if (strcmp(argv[i], "--verbose") == 0) verbose = 1;
+        else if (strcmp(argv[i], "--model") == 0 && i + 1 < argc) {
+            if (load_model_image(argv[++i]) != 0) return 2;
+        }
         else if (strcmp(argv[i], "--link") == 0 && i + 1 < argc) {
             const char *k = argv[++i];
             if (strcmp(k, "slcan") == 0) e.link = LINK_SLCAN;
@@ -282,8 +327,8 @@ int main(int argc, char **argv)
                 return 2;
             }
         } else if (strcmp(argv[i], "--version") == 0) {
-            printf("slipest %u.%u model %s\n", slipest_lib_version() >> 8, slipest_lib_version() & 0xFFu,
-                   slipest_model_hash_hex());
+            printf("slipest %u.%u model %s version %lu\n", slipest_lib_version() >> 8,
+                   slipest_lib_version() & 0xFFu, model_hex, (unsigned long)model_q->version);
             return 0;
         } else if (strcmp(argv[i], "--help") == 0 || strcmp(argv[i], "-h") == 0) {
             usage(stdout);
@@ -306,7 +351,11 @@ int main(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     signal(SIGPIPE, SIG_IGN);
 
-    slipest_node_init(&e.node);
+    rc = slipest_node_init(&e.node, model_q, model_f32);
+    if (rc != SLIPEST_OK) {
+        fprintf(stderr, "slipest_emu: model rejected: %s\n", slipest_status_str(rc));
+        return 2;
+    }
     slipest_slcan_rx_init(&e.slcan);
     slipest_cobs_rx_init(&e.cobs);
     if (use_stdio) {
@@ -349,7 +398,7 @@ int main(int argc, char **argv)
         e.in_fd = e.out_fd = fd;
     }
     fprintf(stderr, "slipest_emu: ready link=%s model=%s lib=%u.%u\n", e.link == LINK_SLCAN ? "slcan" : "cobs",
-            slipest_model_hash_hex(), slipest_lib_version() >> 8, slipest_lib_version() & 0xFFu);
+            model_hex, slipest_lib_version() >> 8, slipest_lib_version() & 0xFFu);
     rc = serve(&e);
     print_counters(&e);
     if (slave_keep >= 0) close(slave_keep);

@@ -10,6 +10,7 @@
 #include <stdint.h>
 
 #include "example_board.h"
+#include "slipest_bundle.h" /* slipest_bundle_model_q: the model built in from SLIPEST_BUNDLE */
 #include "slipest_dbc.h"  /* generated from the DBC: frame IDs and pack/unpack functions */
 #include "slipest_node.h" /* slipest_node_t, slipest_node_init, slipest_node_handle */
 
@@ -19,7 +20,7 @@ int main(void)
     slipest_frame_t rx;
     slipest_frame_t tx[SLIPEST_NODE_MAX_OUT];
 
-    if (slipest_node_init(&node) != SLIPEST_OK) return 1;
+    if (slipest_node_init(&node, slipest_bundle_model_q(), NULL) != SLIPEST_OK) return 1; /* fixed-point only */
     while (board_can_receive(&rx)) {
         int i, n = slipest_node_handle(&node, &rx, tx, SLIPEST_NODE_MAX_OUT);
         if (n < 0) continue; /* rejected (unknown ID, wrong DLC, late/duplicate): counted in STATUS_RX */

@@ -8,6 +8,7 @@
 
 #include "example_board.h"
 #include "slipest_features.h" /* extractor: slipest_extractor_push, slipest_window_features_q */
+#include "slipest_bundle.h"   /* slipest_bundle_model_q: the model built in from SLIPEST_BUNDLE */
 #include "slipest_infer.h"    /* slipest_infer_q */
 
 int main(void)
@@ -17,6 +18,9 @@ int main(void)
     int16_t sample[SLIPEST_N_CHANNELS];
     uint16_t counter;
 
+    const slipest_model_q_t *model = slipest_bundle_model_q();
+
+    if (slipest_model_q_check(model) != SLIPEST_OK) return 1; /* once, before the first inference */
     if (slipest_extractor_init(&ex) != SLIPEST_OK) return 1;
     while (board_read_sensors(&counter, sample)) {
         int i, n = slipest_extractor_push(&ex, counter, sample, closed);
@@ -30,7 +34,7 @@ int main(void)
             int slip_class = -1;
             if (!(flags & SLIPEST_FLAG_INVALID)) { /* fewer than 5 samples: no estimate */
                 int feat_sat = slipest_window_features_q(w, feat_q);
-                if (feat_sat >= 0) slip_class = slipest_infer_q(feat_q, logits, &infer_sat);
+                if (feat_sat >= 0) slip_class = slipest_infer_q(model, feat_q, logits, &infer_sat);
                 if (feat_sat > 0 || infer_sat > 0) flags |= SLIPEST_FLAG_SATURATION;
                 if (slip_class < 0) flags |= SLIPEST_FLAG_INVALID;
             }

@@ -4,6 +4,7 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "slipest_bundle.h"
 #include "slipest_node.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
@@ -17,7 +18,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     size_t i;
     int n, k, r2;
     slipest_cobs_rx_init(&rx);
-    slipest_node_init(&node);
+    if (slipest_node_init(&node, slipest_bundle_model_q(), slipest_bundle_model_f32()) != SLIPEST_OK) return 0;
     for (i = 0; i < size; i++) {
         int r = slipest_cobs_rx_feed(&rx, data[i], &f);
         if (r == 1) {

@@ -2,6 +2,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "slipest_bundle.h"
 #include "slipest_node.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
@@ -14,7 +15,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     char reply[SLIPEST_SLCAN_REPLY_MAX], line[40];
     size_t i, rl;
     slipest_slcan_rx_init(&rx);
-    slipest_node_init(&node);
+    if (slipest_node_init(&node, slipest_bundle_model_q(), slipest_bundle_model_f32()) != SLIPEST_OK) return 0;
     for (i = 0; i < size; i++) {
         int r = slipest_slcan_rx_feed(&rx, data[i], &f, reply, &rl);
         if (r == SLIPEST_SLCAN_FRAME) {

@@ -54,7 +54,7 @@ int slipest_cobs_decode(const uint8_t *in, size_t len, uint8_t *out, size_t cap)
     return (int)o;
 }
 
-int slipest_payload_parse(const uint8_t *p, size_t len, slipest_frame_t *f)
+slipest_status_t slipest_payload_parse(const uint8_t *p, size_t len, slipest_frame_t *f)
 {
     uint16_t crc;
     if (p == NULL || f == NULL) return SLIPEST_E_NULL;
@@ -92,7 +92,7 @@ int slipest_cobs_format(const slipest_frame_t *f, uint8_t *out, size_t cap)
     return enc + 1;
 }
 
-int slipest_cobs_rx_init(slipest_cobs_rx_t *rx)
+slipest_status_t slipest_cobs_rx_init(slipest_cobs_rx_t *rx)
 {
     if (rx == NULL) return SLIPEST_E_NULL;
     memset(rx, 0, sizeof *rx);

@@ -11,14 +11,14 @@ static const uint8_t feat_is_mean[SLIPEST_N_FEATURES] = {1, 0, 1, 0, 1, 0, 1, 0,
 size_t slipest_extractor_size(void) { return sizeof(slipest_extractor_t); }
 size_t slipest_window_size(void) { return sizeof(slipest_window_t); }
 
-int slipest_extractor_init(slipest_extractor_t *ex)
+slipest_status_t slipest_extractor_init(slipest_extractor_t *ex)
 {
     if (ex == NULL) return SLIPEST_E_NULL;
     memset(ex, 0, sizeof *ex);
     return SLIPEST_OK;
 }
 
-int slipest_extractor_reset_grid(slipest_extractor_t *ex)
+slipest_status_t slipest_extractor_reset_grid(slipest_extractor_t *ex)
 {
     if (ex == NULL) return SLIPEST_E_NULL;
     memset(&ex->open, 0, sizeof ex->open);
@@ -119,7 +119,7 @@ uint32_t slipest_isqrt_u64(uint64_t x)
     return (uint32_t)res;
 }
 
-int slipest_window_check(const slipest_window_t *w)
+slipest_status_t slipest_window_check(const slipest_window_t *w)
 {
     int c;
     int64_t n;

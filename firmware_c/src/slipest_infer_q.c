@@ -7,7 +7,6 @@
 
 #include <string.h>
 
-#include "slipest_model_q.h"
 #include "slipest_status.h"
 
 /* Small helpers of the hot loops are inlined (the compiler's size heuristics may not). */
@@ -26,24 +25,37 @@
 #define SLIPEST_DUAL_MAC 0
 #endif
 
-#define NI SLIPEST_Q_N_IN
-#define NH SLIPEST_Q_N_HIDDEN
-#define NO SLIPEST_Q_N_OUT
-#define GELU_SHIFT (SLIPEST_Q_FY - SLIPEST_Q_GELU_STEP_LOG2)
-#define U_SHIFT (SLIPEST_Q_FZ + SLIPEST_Q_FG - SLIPEST_Q_FY)
+/* The architecture is fixed (slipest_model.h), so the loops keep constant bounds; every scale
+ * and shift comes from the model, whose ranges slipest_model_q_check() has validated. */
+#define NI SLIPEST_N_FEATURES
+#define NH SLIPEST_N_HIDDEN
+#define NO SLIPEST_N_CLASSES
 
-#if NI != 12 || NO != 3 || NH % 2 != 0 || NI != SLIPEST_N_FEATURES || NO != SLIPEST_N_CLASSES
-#error "slipest_model_q.h does not match the 12-feature / 3-class interface"
-#endif
-#if GELU_SHIFT < 0 || U_SHIFT < 0
-#error "slipest_model_q.h: FY out of range for the scheme"
+#if NI != 12 || NO != 3 || NH % 2 != 0
+#error "the unrolled kernel assumes 12 features, 3 classes and an even hidden width"
 #endif
 
-/* floor(x / 2^k) for 1 <= k <= 31, defined for negative x (a plain >> of a negative int is
- * implementation-defined): bias x into the unsigned range, shift, remove the shifted bias. */
+/* floor(x / 2^k) for 0 <= k <= 31. A plain >> of a negative int is implementation-defined in
+ * C99; GCC and Clang define it as the arithmetic shift (floor division), one instruction with a
+ * shift count held in a register. Other compilers: bias x into the unsigned range, shift, remove
+ * the shifted bias. */
+#if defined(__GNUC__)
+HOT int32_t asr32(int32_t x, unsigned k)
+{
+    return x >> k;
+}
+#else
 HOT int32_t asr32(int32_t x, unsigned k)
 {
     return (int32_t)(((uint32_t)x + 0x80000000u) >> k) - (int32_t)(0x80000000u >> k);
+}
+#endif
+
+/* rsr(x, k) with half = floor(2^k / 2) computed once per inference (0 for k = 0, so no branch):
+ * the model's shifts are data, the rounding constant is hoisted out of the loops. */
+HOT int32_t rsr_h(int32_t x, int32_t half, unsigned k)
+{
+    return asr32(x + half, k);
 }
 
 /* rsr(x, k); needs x + 2^(k-1) <= INT32_MAX, which every call site's bound guarantees. */
@@ -69,7 +81,7 @@ static unsigned bitlen32(uint32_t m)
 
 /* M ~ sqrt(30) 2^28 / sqrt(v) for v > 0 (M = 0 for v = 0), so that z = rsr(e M, 16) is Q12:
  * seed table + 2 Newton steps on non-negative 64-bit values (UMULL on Cortex-M3/M4), no division. */
-static int32_t rsqrt_mult(uint32_t v)
+static int32_t rsqrt_mult(const slipest_model_q_t *m, uint32_t v)
 {
     unsigned a;
     uint32_t w;
@@ -81,7 +93,7 @@ static int32_t rsqrt_mult(uint32_t v)
     }
     a = (32u - bitlen32(v)) / 2u;
     w = v << (2u * a);                                  /* w in [2^30, 2^32) */
-    y = slipest_q_rsqrt_seed[(w >> 27) - 8u];           /* Q30 of 1/sqrt(w / 2^32), <= 2^31 */
+    y = m->rsqrt_seed[(w >> 27) - 8u];                  /* Q30 of 1/sqrt(w / 2^32), <= 2^31 */
     w30 = (uint64_t)(w >> 2);                           /* < 2^30 */
     for (it = 0; it < 2; ++it) {
         uint64_t y2 = (y * y) >> 30;                    /* y^2 <= 2^62 */
@@ -89,20 +101,25 @@ static int32_t rsqrt_mult(uint32_t v)
         y = (y * ((UINT64_C(3) << 30) - t)) >> 31;      /* t <= 3 2^30: y <= 1/sqrt(w) after a step */
     }
     /* y C30 < 2^48, << a (a <= 15) < 2^63; result <= sqrt(30) 2^28 < 2^31 */
-    return (int32_t)((((y * (uint64_t)SLIPEST_Q_C30) << a) + (UINT64_C(1) << 31)) >> 32);
+    return (int32_t)((((y * (uint64_t)m->c30) << a) + (UINT64_C(1) << 31)) >> 32);
 }
 
-/* GELU in Q(FY): max(u, 0) + GELU(-|u|), the latter from the table by linear interpolation. */
-HOT int32_t gelu_q(int32_t u)
+/* GELU in Q(FY): max(u, 0) + GELU(-|u|), the latter from the table by linear interpolation
+ * with step 2^gs (gs = FY - GELU_STEP_LOG2 <= 12). |u| is first scaled to Q15 steps,
+ * w = |u| 2^(15 - gs) <= 2^30, so that the index, the fraction and the rounding shift are the
+ * constants 15 whatever the model: k = w >> 15, f = w mod 2^15, and
+ * rsr((T1 - T0) f, 15) == rsr((T1 - T0) (|u| mod 2^gs), gs) (numerator and divisor scaled by the
+ * same power of two); |T1 - T0| f < 2^16 2^15 fits int32. One data-dependent shift instead of three. */
+HOT int32_t gelu_q(const int16_t *table, unsigned to_q15, int32_t u)
 {
     int32_t v = u < 0 ? -u : u;                         /* u >= -32768: no overflow */
-    int32_t k = v >> GELU_SHIFT;                        /* v >= 0: plain shift is defined */
+    int32_t w = v << to_q15;                            /* v >= 0, w <= 2^30 */
+    int32_t k = w >> 15;                                /* w >= 0: plain shift is defined */
     int32_t tneg = 0;
     if (k < SLIPEST_Q_GELU_N - 1) {
-        int32_t t0 = slipest_q_gelu[k];
-        int32_t t1 = slipest_q_gelu[k + 1];
-        int32_t f = v & ((1 << GELU_SHIFT) - 1);
-        tneg = t0 + rsr32((t1 - t0) * f, (unsigned)GELU_SHIFT);
+        int32_t t0 = table[k];
+        int32_t t1 = table[k + 1];
+        tneg = t0 + rsr32((t1 - t0) * (w & 0x7FFF), 15u);
     }
     return (u > 0 ? u : 0) + tneg;
 }
@@ -137,10 +154,11 @@ HOT int32_t layer1_row(const int16_t *w, int32_t b, const int16_t *x)
 /* One hidden unit after LayerNorm's centring: z = rsr(e M, 16) (Q12; |e M| <= sqrt(30) 2^28
  * (1 + 1e-5) because |e| <= sqrt(v), so |z| < 22500), u = rsr(gamma z, U_SHIFT) + beta saturated
  * to int16 (counted), then GELU. Returns g with |g| < 2^15. */
-HOT int32_t hidden_out(int32_t e, int32_t mult, int i, uint16_t *sat)
+HOT int32_t hidden_out(const slipest_model_q_t *m, unsigned u_shift, int32_t u_half, unsigned to_q15, int32_t e,
+                       int32_t mult, int i, uint16_t *sat)
 {
     int32_t z = rsr32(e * mult, 16u);
-    int32_t u = rsr32((int32_t)slipest_q_gamma[i] * z, (unsigned)U_SHIFT) + slipest_q_beta[i];
+    int32_t u = rsr_h((int32_t)m->gamma[i] * z, u_half, u_shift) + m->beta[i];
     if (u > 32767) {
         u = 32767;
         ++*sat;
@@ -148,27 +166,33 @@ HOT int32_t hidden_out(int32_t e, int32_t mult, int i, uint16_t *sat)
         u = -32768;
         ++*sat;
     }
-    return gelu_q(u);
+    return gelu_q(m->gelu, to_q15, u);
 }
 
-int slipest_infer_q(const int16_t feat_q[SLIPEST_N_FEATURES], int32_t logits[SLIPEST_N_CLASSES],
-                    uint16_t *saturations)
+int slipest_infer_q(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_FEATURES],
+                    int32_t logits[SLIPEST_N_CLASSES], uint16_t *saturations)
 {
     int32_t h[NH];
     int32_t hmax = INT32_MIN, hmin = INT32_MAX, sum, dmax, t, r, acc0, acc1, acc2;
-    uint32_t m, s, eps, v, usum = 0u;
+    const int16_t *w2;
+    uint32_t mx, s, eps, v, usum = 0u;
     unsigned k1, k2;
     uint16_t sat = 0u;
+    unsigned u_shift, to_q15;
+    int32_t u_half;
     int i, best;
 
-    if (feat_q == 0 || logits == 0) {
+    if (m == 0 || feat_q == 0 || logits == 0) {
         return SLIPEST_E_NULL;
     }
+    u_shift = (unsigned)m->fz + (unsigned)m->fg - (unsigned)m->fy;
+    to_q15 = 15u - ((unsigned)m->fy - (unsigned)m->gelu_step_log2);
+    u_half = (int32_t)(1u << u_shift) >> 1;
 
     /* Layer 1 (row-major weights). Every partial sum of row i is bounded by its worst case over
      * int16 inputs, 2^15 sum_j |w1_ij| + |b1_i| <= 2^31 - 2^8 (acc1_bound, checked at export). */
     for (i = 0; i < NH; ++i) {
-        int32_t y = layer1_row(&slipest_q_w1[i * NI], slipest_q_b1[i], feat_q);
+        int32_t y = layer1_row(&m->w1[i * NI], m->b1[i], feat_q);
         h[i] = y;
         usum += (uint32_t)y; /* wraps (defined for unsigned); exact when k1 = 0, see below */
         hmax = y > hmax ? y : hmax;
@@ -176,10 +200,10 @@ int slipest_infer_q(const int16_t feat_q[SLIPEST_N_FEATURES], int32_t logits[SLI
     }
 
     /* LayerNorm. Block shift k1 so that |h'| <= 2^24 (max|h| = max(|hmax|, |hmin|)). */
-    m = hmax < 0 ? 0u - (uint32_t)hmax : (uint32_t)hmax;
+    mx = hmax < 0 ? 0u - (uint32_t)hmax : (uint32_t)hmax;
     s = hmin < 0 ? 0u - (uint32_t)hmin : (uint32_t)hmin;
-    m = s > m ? s : m;
-    k1 = bitlen32(m) > SLIPEST_Q_H_BITS ? bitlen32(m) - SLIPEST_Q_H_BITS : 0u;
+    mx = s > mx ? s : mx;
+    k1 = bitlen32(mx) > m->h_bits ? bitlen32(mx) - m->h_bits : 0u;
     if (k1 == 0u) {
         /* h' = h and |sum| <= 30 2^24: the wrapped unsigned sum is the exact sum, and 0u - usum
          * is then < 2^31 when usum encodes a negative value */
@@ -195,7 +219,7 @@ int slipest_infer_q(const int16_t feat_q[SLIPEST_N_FEATURES], int32_t logits[SLI
     dmax = NH * rsr32(hmax, k1) - sum;
     t = sum - NH * rsr32(hmin, k1);
     dmax = t > dmax ? t : dmax;                         /* >= 0, < 2^30 */
-    k2 = bitlen32((uint32_t)dmax) > SLIPEST_Q_E_BITS ? bitlen32((uint32_t)dmax) - SLIPEST_Q_E_BITS : 0u;
+    k2 = bitlen32((uint32_t)dmax) > m->e_bits ? bitlen32((uint32_t)dmax) - m->e_bits : 0u;
     s = 0u;
     for (i = 0; i < NH; ++i) {
         int32_t e = rsr32(NH * h[i] - sum, k2);         /* |d| < 2^30, |e| <= 2^13 */
@@ -204,38 +228,39 @@ int slipest_infer_q(const int16_t feat_q[SLIPEST_N_FEATURES], int32_t logits[SLI
     }
 
     /* eps in the units of s: EPS_M 2^(EPS_E - 2(k1 + k2)), capped at 2^30 (a saturation). */
-    t = (int32_t)SLIPEST_Q_EPS_E - 2 * (int32_t)(k1 + k2);
-    if (SLIPEST_Q_EPS_M == 0 || t <= -16) {
+    t = m->eps_e - 2 * (int32_t)(k1 + k2);
+    if (m->eps_m == 0 || t <= -16) {
         eps = 0u;
     } else if (t >= 16) {
-        eps = (uint32_t)SLIPEST_Q_EPS_CAP;
+        eps = (uint32_t)m->eps_cap;
         ++sat;
     } else if (t >= 0) {
-        eps = (uint32_t)SLIPEST_Q_EPS_M << (unsigned)t;
+        eps = (uint32_t)m->eps_m << (unsigned)t;
     } else {
-        eps = (uint32_t)rsr32((int32_t)SLIPEST_Q_EPS_M, (unsigned)(-t));
+        eps = (uint32_t)rsr32(m->eps_m, (unsigned)(-t));
     }
     v = s + eps;                                        /* < 2^31 + 2^30 */
-    r = rsqrt_mult(v);
+    r = rsqrt_mult(m, v);
 
     /* Normalise, affine, GELU (hidden_out) and the head. */
-    acc0 = slipest_q_b2[0];
-    acc1 = slipest_q_b2[1];
-    acc2 = slipest_q_b2[2];
+    acc0 = m->b2[0];
+    acc1 = m->b2[1];
+    acc2 = m->b2[2];
     /* two hidden units per step; any partial sum of row c is bounded by
      * 2^15 sum_i |w2_ci| + |b2_c| <= 2^31 - 1 because |g| < 2^15 (acc2_bound, checked at export) */
+    w2 = m->w2;
     for (i = 0; i < NH; i += 2) {
-        int32_t g0 = hidden_out(h[i], r, i, &sat);
-        int32_t g1 = hidden_out(h[i + 1], r, i + 1, &sat);
+        int32_t g0 = hidden_out(m, u_shift, u_half, to_q15, h[i], r, i, &sat);
+        int32_t g1 = hidden_out(m, u_shift, u_half, to_q15, h[i + 1], r, i + 1, &sat);
 #if SLIPEST_DUAL_MAC
         uint32_t gp = (uint32_t)(uint16_t)g0 | ((uint32_t)(uint16_t)g1 << 16); /* |g| < 2^15 */
-        acc0 = __smlad(pair16(&slipest_q_w2[i]), gp, acc0);
-        acc1 = __smlad(pair16(&slipest_q_w2[NH + i]), gp, acc1);
-        acc2 = __smlad(pair16(&slipest_q_w2[2 * NH + i]), gp, acc2);
+        acc0 = __smlad(pair16(&w2[i]), gp, acc0);
+        acc1 = __smlad(pair16(&w2[NH + i]), gp, acc1);
+        acc2 = __smlad(pair16(&w2[2 * NH + i]), gp, acc2);
 #else
-        acc0 += slipest_q_w2[i] * g0 + slipest_q_w2[i + 1] * g1;
-        acc1 += slipest_q_w2[NH + i] * g0 + slipest_q_w2[NH + i + 1] * g1;
-        acc2 += slipest_q_w2[2 * NH + i] * g0 + slipest_q_w2[2 * NH + i + 1] * g1;
+        acc0 += w2[i] * g0 + w2[i + 1] * g1;
+        acc1 += w2[NH + i] * g0 + w2[NH + i + 1] * g1;
+        acc2 += w2[2 * NH + i] * g0 + w2[2 * NH + i + 1] * g1;
 #endif
     }
 
@@ -250,14 +275,4 @@ int slipest_infer_q(const int16_t feat_q[SLIPEST_N_FEATURES], int32_t logits[SLI
         *saturations = sat;
     }
     return best;
-}
-
-uint32_t slipest_model_hash32(void)
-{
-    return (uint32_t)SLIPEST_MODEL_HASH32;
-}
-
-const char *slipest_model_hash_hex(void)
-{
-    return SLIPEST_MODEL_HASH;
 }

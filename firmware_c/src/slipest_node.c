@@ -5,21 +5,25 @@
 
 #include "slipest_dbc.h"
 #include "slipest_infer.h"
+#include "slipest_node_internal.h"
 
 #define TELEM_ALL 0x07u
 #define FEATURES_ALL 0x0Fu
 #define CLASS_NONE 255u
 
-int slipest_node_init(slipest_node_t *node)
+slipest_status_t slipest_node_init(slipest_node_t *node, const slipest_model_q_t *mq, const slipest_model_f32_t *mf)
 {
+    slipest_status_t st;
     if (node == NULL) return SLIPEST_E_NULL;
+    st = slipest_node_check_models(mq, mf);
+    if (st != SLIPEST_OK) return st;
     memset(node, 0, sizeof *node);
+    node->mq = mq;
+    node->mf = mf;
     return slipest_extractor_init(&node->ex);
 }
 
 uint16_t slipest_lib_version(void) { return SLIPEST_LIB_VERSION; }
-uint32_t slipest_node_model_hash32(void) { return slipest_model_hash32(); }
-const char *slipest_node_model_hash_hex(void) { return slipest_model_hash_hex(); }
 size_t slipest_node_size(void) { return sizeof(slipest_node_t); }
 size_t slipest_frame_size(void) { return sizeof(slipest_frame_t); }
 
@@ -32,7 +36,7 @@ static int reject(slipest_node_t *node, int status)
     return status;
 }
 
-int slipest_node_link_error(slipest_node_t *node)
+slipest_status_t slipest_node_link_error(slipest_node_t *node)
 {
     if (node == NULL) return SLIPEST_E_NULL;
     node->c.frames_received++;
@@ -47,7 +51,7 @@ static void sync_counters(slipest_node_t *node)
     node->c.windows_flagged = node->ex.windows_flagged;
 }
 
-int slipest_node_counters(const slipest_node_t *node, slipest_counters_t *out)
+slipest_status_t slipest_node_counters(const slipest_node_t *node, slipest_counters_t *out)
 {
     if (node == NULL || out == NULL) return SLIPEST_E_NULL;
     *out = node->c;
@@ -63,7 +67,7 @@ int slipest_node_status(const slipest_node_t *node, slipest_frame_t *out, size_t
     struct slipest_dbc_status_loss_t loss;
     if (node == NULL || out == NULL) return SLIPEST_E_NULL;
     if (cap < 3u) return SLIPEST_E_OVERFLOW;
-    m.model_hash = slipest_model_hash32();
+    m.model_hash = slipest_model_hash32(node->mq); /* 0 before init */
     m.lib_version = SLIPEST_LIB_VERSION;
     m.windows_done = (uint16_t)node->c.windows_done;
     rx.frames_received = node->c.frames_received;
@@ -98,7 +102,7 @@ static int emit_estimate(slipest_node_t *node, uint16_t window_counter, const in
 
     if (!(flags & SLIPEST_FLAG_INVALID)) {
         uint16_t infer_sat = 0;
-        int r = slipest_infer_q(feat_q, logits, &infer_sat);
+        int r = slipest_infer_q(node->mq, feat_q, logits, &infer_sat); /* SLIPEST_E_NULL if never initialised */
         if (r >= 0) {
             cls_q = (uint8_t)r;
             sat += infer_sat;
@@ -120,7 +124,8 @@ static int emit_estimate(slipest_node_t *node, uint16_t window_counter, const in
                 for (i = 0; i < SLIPEST_N_FEATURES; i++) feat_f[i] = (float)feat_q[i] * lsb[i];
                 rf = SLIPEST_OK;
             }
-            if (rf >= 0) rf = slipest_infer_f32(feat_f, logits_f);
+            if (rf >= 0 && node->mf != NULL) rf = slipest_infer_f32(node->mf, feat_f, logits_f);
+            else if (rf >= 0) rf = SLIPEST_E_STATE; /* no float model: no float class */
             if (rf >= 0) cls_f = (uint8_t)rf;
         }
 #else

@@ -115,7 +115,7 @@ static int handle_line(const char *s, size_t len, slipest_frame_t *f, char *repl
     return SLIPEST_E_FORMAT;
 }
 
-int slipest_slcan_rx_init(slipest_slcan_rx_t *rx)
+slipest_status_t slipest_slcan_rx_init(slipest_slcan_rx_t *rx)
 {
     if (rx == NULL) return SLIPEST_E_NULL;
     memset(rx, 0, sizeof *rx);

@@ -1,3 +1,4 @@
+/* Names of the status codes (slipest_status.h). */
 #include "slipest_status.h"
 
 const char *slipest_status_str(int status)
@@ -13,6 +14,10 @@ const char *slipest_status_str(int status)
     case SLIPEST_E_FORMAT: return "malformed input";
     case SLIPEST_E_OVERFLOW: return "input too long or buffer too small";
     case SLIPEST_E_STATE: return "invalid state";
+    case SLIPEST_E_ARCH: return "model architecture mismatch";
+    case SLIPEST_E_VERSION: return "unsupported image format version";
+    case SLIPEST_E_HASH: return "model hash mismatch";
+    case SLIPEST_OK: return "ok";
     default: return status >= 0 ? "ok" : "unknown error";
     }
 }

@@ -5,6 +5,7 @@
 #include <stdint.h>
 
 #include "semihost.h"
+#include "slipest_bundle.h"
 #include "slipest_dbc.h"
 #include "slipest_infer.h"
 #include "slipest_node.h"
@@ -21,6 +22,10 @@ static uint8_t file_buf[1024u * 1024u];
 static int16_t q_in[N_BENCH][12];
 static float f_in[N_BENCH][12];
 static volatile int32_t sink;
+static const slipest_model_q_t *model_q; /* the built-in bundle, set once in main */
+#ifndef SLIPEST_Q_ONLY
+static const slipest_model_f32_t *model_f32;
+#endif
 static slipest_node_t node;
 static slipest_slcan_rx_t slcan;
 static uint32_t node_out_bytes;
@@ -38,14 +43,14 @@ __attribute__((noinline)) static void one_q(uint32_t i)
 {
     int32_t logits[3];
     uint16_t sat;
-    sink += slipest_infer_q(q_in[i], logits, &sat) + logits[0];
+    sink += slipest_infer_q(model_q, q_in[i], logits, &sat) + logits[0];
 }
 
 #ifndef SLIPEST_Q_ONLY
 __attribute__((noinline)) static void one_f32(uint32_t i)
 {
     float logits[3];
-    sink += slipest_infer_f32(f_in[i], logits) + (logits[0] > 0.0f);
+    sink += slipest_infer_f32(model_f32, f_in[i], logits) + (logits[0] > 0.0f);
 }
 #endif
 
@@ -131,6 +136,10 @@ int main(void)
     const char *why = "";
     size_t len = 0;
     uint32_t i, r, t;
+    model_q = slipest_bundle_model_q();
+#ifndef SLIPEST_Q_ONLY
+    model_f32 = slipest_bundle_model_f32();
+#endif
     if (semihost_read_file(SLIPEST_VECTORS_PATH, file_buf, sizeof file_buf, &len) != 0 ||
         slipest_vectors_parse(file_buf, len, &v, &why) != 0) {
         semihost_puts("cannot load vectors\n");
@@ -167,7 +176,11 @@ int main(void)
 #endif
     put_kv("inferences", REPS * N_BENCH);
 
-    slipest_node_init(&node);
+#ifndef SLIPEST_Q_ONLY
+    if (slipest_node_init(&node, model_q, model_f32) != SLIPEST_OK) return 1;
+#else
+    if (slipest_node_init(&node, model_q, NULL) != SLIPEST_OK) return 1;
+#endif
     slipest_slcan_rx_init(&slcan);
     t = ticks_now();
     for (i = 0; i < 99u; i++) node_sample(i); /* one window minus its last sample */

@@ -4,6 +4,7 @@
 #include <stdint.h>
 
 #include "semihost.h"
+#include "slipest_bundle.h"
 #include "slipest_features.h"
 #include "slipest_infer.h"
 #include "slipest_vectors.h"
@@ -52,7 +53,7 @@ int main(void)
     }
     for (i = 0; i < v.n; i++) {
         int32_t q[3];
-        if (slipest_vectors_check_q(&v, i, q) != 0) {
+        if (slipest_vectors_check_q(&v, slipest_bundle_model_q(), i, q) != 0) {
             if (q_fail < 5) {
                 semihost_puts("q mismatch at vector ");
                 semihost_put_uint(i);
@@ -63,7 +64,7 @@ int main(void)
 #ifndef SLIPEST_Q_ONLY
         {
             float f[3];
-            if (slipest_vectors_check_f32(&v, i, 1e-5f, f) != 0) {
+            if (slipest_vectors_check_f32(&v, slipest_bundle_model_f32(), i, 1e-5f, f) != 0) {
                 if (f_fail < 5) {
                     semihost_puts("f32 mismatch at vector ");
                     semihost_put_uint(i);
@@ -84,7 +85,16 @@ int main(void)
     semihost_puts(" extractor_fail=");
     semihost_put_uint((uint32_t)ex_fail);
     semihost_puts(" model=");
-    semihost_puts(slipest_model_hash_hex());
+    {
+        /* the active model's hash32 as 8 hex digits, as manifest.json content_hash32 */
+        static const char digits[] = "0123456789abcdef";
+        char hex[9];
+        uint32_t h = slipest_model_hash32(slipest_bundle_model_q());
+        int k;
+        for (k = 0; k < 8; k++) hex[k] = digits[(h >> (28 - 4 * k)) & 0xFu];
+        hex[8] = '\0';
+        semihost_puts(hex);
+    }
     semihost_puts((q_fail || f_fail || ex_fail) ? " FAIL\n" : " PASS\n");
     return (q_fail || f_fail || ex_fail) ? 1 : 0;
 }

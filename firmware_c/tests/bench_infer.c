@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <time.h>
 
+#include "slipest_bundle.h"
 #include "slipest_infer.h"
 #include "slipest_vectors.h"
 
@@ -27,6 +28,8 @@ int main(int argc, char **argv)
     uint32_t i, n, reps, r;
     volatile int32_t sink = 0;
     double t0, best_q = 1e30, best_f = 1e30;
+    const slipest_model_q_t *mq = slipest_bundle_model_q();
+    const slipest_model_f32_t *mf = slipest_bundle_model_f32();
     if (argc < 2) {
         fprintf(stderr, "usage: slipest_bench vectors.bin [total_inferences]\n");
         return 2;
@@ -61,7 +64,7 @@ int main(int argc, char **argv)
             for (i = 0; i < n; i++) {
                 int32_t logits[3];
                 uint16_t sat;
-                sink += slipest_infer_q(q[i], logits, &sat) + logits[0];
+                sink += slipest_infer_q(mq, q[i], logits, &sat) + logits[0];
             }
         t0 = (now_ns() - t0) / ((double)reps * n);
         if (t0 < best_q) best_q = t0;
@@ -69,7 +72,7 @@ int main(int argc, char **argv)
         for (k = 0; k < reps; k++)
             for (i = 0; i < n; i++) {
                 float logits[3];
-                sink += slipest_infer_f32(x[i], logits) + (logits[0] > 0.0f);
+                sink += slipest_infer_f32(mf, x[i], logits) + (logits[0] > 0.0f);
             }
         t0 = (now_ns() - t0) / ((double)reps * n);
         if (t0 < best_f) best_f = t0;

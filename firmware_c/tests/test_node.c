@@ -2,6 +2,7 @@
 #include <string.h>
 
 #include "check.h"
+#include "slipest_bundle.h"
 #include "slipest_dbc.h"
 #include "slipest_node.h"
 
@@ -55,7 +56,7 @@ static void test_stream(void)
     struct slipest_dbc_status_loss_t loss;
     uint8_t d[8];
     int i, o = 0, windows = 0;
-    slipest_node_init(&node);
+    CHECK(slipest_node_init(&node, slipest_bundle_model_q(), slipest_bundle_model_f32()) == SLIPEST_OK);
     for (i = 0; i < 1000; i++) {
         CHECK(send_sample(&node, (uint16_t)i, i == 150 ? 1 : -1, &o) == 0);
         if (o > 0) {
@@ -125,7 +126,7 @@ static void test_features_input(void)
     struct slipest_dbc_slip_estimate_t est;
     slipest_counters_t c;
     uint8_t d[8];
-    slipest_node_init(&node);
+    CHECK(slipest_node_init(&node, slipest_bundle_model_q(), slipest_bundle_model_f32()) == SLIPEST_OK);
     slipest_dbc_features_0_pack(d, &f0, 8);
     CHECK(send(&node, SLIPEST_DBC_FEATURES_0_FRAME_ID, d, 8) == 0);
     slipest_dbc_features_1_pack(d, &f1, 8);
@@ -154,7 +155,7 @@ static void test_invalid_window(void)
     struct slipest_dbc_slip_logits_01_t l01;
     slipest_counters_t c;
     int i, o = 0;
-    slipest_node_init(&node);
+    CHECK(slipest_node_init(&node, slipest_bundle_model_q(), slipest_bundle_model_f32()) == SLIPEST_OK);
     for (i = 0; i < 3; i++) CHECK(send_sample(&node, (uint16_t)i, -1, &o) == 0 && o == 0);
     /* jump to window 2: window 0 (3 samples) is invalid, window 1 is skipped */
     CHECK(send_sample(&node, 250, -1, &o) == 0 && o == 3);
@@ -167,8 +168,44 @@ static void test_invalid_window(void)
     CHECK(c.samples_dropped == 247 && c.windows_flagged == 2 && c.windows_done == 1);
 }
 
+/* A second model (a copy with another hash and another class-0 bias) switched in at run time:
+ * the status frame reports the active model, NULL is refused, full validation catches bad data. */
+static void test_model_switch(void)
+{
+    static slipest_node_t node;
+    static int32_t b2[SLIPEST_N_CLASSES];
+    slipest_model_q_t other = *slipest_bundle_model_q();
+    struct slipest_dbc_status_model_t st;
+    slipest_frame_t ctl;
+    int i, n;
+    for (i = 0; i < SLIPEST_N_CLASSES; i++) b2[i] = other.b2[i];
+    b2[0] = 0; /* other data, same accumulator bound (|0| <= |b2[0]|) */
+    other.b2 = b2;
+    other.hash32 ^= 0xFFFFFFFFu;
+    other.version += 1u;
+    CHECK(slipest_model_q_check(&other) == SLIPEST_OK);
+    CHECK(slipest_node_init(&node, slipest_bundle_model_q(), NULL) == SLIPEST_OK);
+    CHECK(slipest_node_set_model(&node, NULL, NULL) == SLIPEST_E_NULL);
+    CHECK(slipest_node_model_q(&node) == slipest_bundle_model_q());
+    CHECK(slipest_node_set_model(&node, &other, NULL) == SLIPEST_OK && slipest_node_model_q(&node) == &other);
+    ctl.id = SLIPEST_DBC_CONTROL_FRAME_ID;
+    ctl.dlc = SLIPEST_DBC_CONTROL_LENGTH;
+    memset(ctl.data, 0, sizeof ctl.data);
+    ctl.data[0] = SLIPEST_CMD_STATUS;
+    n = slipest_node_handle(&node, &ctl, out, SLIPEST_NODE_MAX_OUT);
+    CHECK(n == 3 && out[0].id == SLIPEST_DBC_STATUS_MODEL_FRAME_ID);
+    slipest_dbc_status_model_unpack(&st, out[0].data, 8);
+    CHECK(st.model_hash == (slipest_bundle_model_q()->hash32 ^ 0xFFFFFFFFu));
+    /* a model that breaks the scheme's bounds is refused by the full validation */
+    b2[0] = 2147483647;
+    CHECK(slipest_model_q_check(&other) == SLIPEST_E_RANGE);
+    other.n_hidden = 29;
+    CHECK(slipest_model_q_check(&other) == SLIPEST_E_ARCH);
+}
+
 int main(void)
 {
+    test_model_switch();
     test_stream();
     test_invalid_window();
     test_features_input();

@@ -31,6 +31,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--check", action="store_true", help="after exporting, re-run every bundle check")
     p.add_argument("--check-only", type=Path, metavar="BUNDLE",
                    help="only check an existing bundle (hashes, ONNX parity, integer reference); no export")
+    p.add_argument("--model-version", type=int, default=1, metavar="N",
+                   help="model version written into model.img and the C model structs (monotonically increasing "
+                   "per deployment; default 1)")
+    p.add_argument("--c-name", default="main", metavar="NAME",
+                   help="C name of the bundle's models: slipest_NAME_q / slipest_NAME_f32 (default main); give "
+                   "two bundles different names to include both in one image")
     p.add_argument("--onnx-only", action="store_true",
                    help="write model.onnx and the manifest only (the way to export an SN-D)")
 
@@ -80,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
     inputs = draw_inputs(args.vectors, windows, args.seed)
     sources = {"data": [str(d) for d in args.data], "seed": args.seed, "kind": kind}
     b = export_bundle(model, args.out, inputs=inputs, meta=meta, model_path=args.model, data_dirs=args.data,
-                      onnx_only=args.onnx_only, vector_sources=sources)
+                      onnx_only=args.onnx_only, vector_sources=sources, c_name=args.c_name,
+                      model_version=args.model_version)
     print(f"wrote {b.path} ({meta['arch']}, content hash {b.content_hash[:16]}...)")
     for name, entry in b.manifest["files"].items():
         print(f"  {name:24s} {entry['bytes']:>9d} bytes")

@@ -1,0 +1,187 @@
+/* Validating model-image reader (layout: docs/fixed_point.md "Model image", writer:
+ * export/model_image.py). Every integer is assembled from little-endian bytes, every offset is
+ * checked against len before use, and the length fields are compared with the only layout SN-S
+ * allows, never used to size a read. */
+#include "slipest_image.h"
+
+#include <string.h>
+
+#define Q_PAYLOAD (2u * 360u + 4u * 30u + 2u * 30u + 4u * 30u + 2u * 90u + 4u * 3u + 2u * 129u + 4u * 24u)
+#define F32_PAYLOAD (4u + 4u * (360u + 30u + 30u + 30u + 90u + 3u))
+
+#if SLIPEST_N_FEATURES != 12 || SLIPEST_N_HIDDEN != 30 || SLIPEST_N_CLASSES != 3 || SLIPEST_Q_GELU_N != 129 || \
+    SLIPEST_Q_RSQRT_SEED_N != 24
+#error "slipest_image.c: the image layout is that of SN-S"
+#endif
+#if SLIPEST_IMAGE_HEADER_SIZE + Q_PAYLOAD + F32_PAYLOAD + SLIPEST_IMAGE_TRAILER_SIZE != SLIPEST_IMAGE_MAX_SIZE
+#error "slipest_image.c: SLIPEST_IMAGE_MAX_SIZE disagrees with the layout"
+#endif
+
+static uint16_t le16(const uint8_t *p) { return (uint16_t)((unsigned)p[0] | ((unsigned)p[1] << 8)); }
+
+static uint32_t le32(const uint8_t *p)
+{
+    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
+}
+
+/* two's complement from the unsigned bit pattern without implementation-defined conversions */
+static int32_t s32(uint32_t u) { return u > 0x7FFFFFFFu ? -(int32_t)(~u) - 1 : (int32_t)u; }
+static int16_t s16(uint16_t u) { return u > 0x7FFFu ? (int16_t)(-(int32_t)(uint16_t)~u - 1) : (int16_t)u; }
+
+uint32_t slipest_crc32(const uint8_t *data, size_t len)
+{
+    uint32_t crc = 0xFFFFFFFFu;
+    size_t i;
+    int b;
+    if (data == NULL) {
+        return 0u;
+    }
+    for (i = 0; i < len; ++i) {
+        crc ^= data[i];
+        for (b = 0; b < 8; ++b) {
+            crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+        }
+    }
+    return crc ^ 0xFFFFFFFFu;
+}
+
+/* Readers of n consecutive little-endian elements at *off (advanced); the caller has checked
+ * that the whole payload lies inside the image. */
+static void get_i16(const uint8_t *img, size_t *off, int16_t *dst, size_t n)
+{
+    size_t i;
+    for (i = 0; i < n; ++i, *off += 2u) dst[i] = s16(le16(img + *off));
+}
+
+static void get_i32(const uint8_t *img, size_t *off, int32_t *dst, size_t n)
+{
+    size_t i;
+    for (i = 0; i < n; ++i, *off += 4u) dst[i] = s32(le32(img + *off));
+}
+
+static void get_u32(const uint8_t *img, size_t *off, uint32_t *dst, size_t n)
+{
+    size_t i;
+    for (i = 0; i < n; ++i, *off += 4u) dst[i] = le32(img + *off);
+}
+
+#ifndef SLIPEST_Q_ONLY
+/* IEEE-754 binary32 from its bit pattern (the pattern is assembled byte-order-independently) */
+static float f32_of(uint32_t bits)
+{
+    float f;
+    memcpy(&f, &bits, sizeof f);
+    return f;
+}
+
+static void get_f32(const uint8_t *img, size_t *off, float *dst, size_t n)
+{
+    size_t i;
+    for (i = 0; i < n; ++i, *off += 4u) dst[i] = f32_of(le32(img + *off));
+}
+#endif
+
+slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t expect32, slipest_model_q_t *mq,
+                                    slipest_image_q_storage_t *qs, slipest_model_f32_t *mf,
+                                    slipest_image_f32_storage_t *fs)
+{
+    slipest_model_q_t q;
+    uint16_t flags;
+    uint32_t payload, hash32, trailer_hash32;
+    size_t body, off, i;
+    slipest_status_t st;
+
+    if (img == NULL || mq == NULL || qs == NULL || (mf != NULL && fs == NULL)) return SLIPEST_E_NULL;
+    if (len < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE) return SLIPEST_E_LENGTH;
+    if (memcmp(img, SLIPEST_IMAGE_MAGIC, 4) != 0) return SLIPEST_E_FORMAT;
+    if (le16(img + 4) != SLIPEST_IMAGE_FORMAT) return SLIPEST_E_VERSION;
+    if (le16(img + 6) != SLIPEST_IMAGE_ARCH_SN_S || le16(img + 8) != SLIPEST_IMAGE_HEADER_SIZE) return SLIPEST_E_ARCH;
+    flags = le16(img + 10);
+    if ((flags & ~SLIPEST_IMAGE_FLAG_F32) != 0u) return SLIPEST_E_FORMAT;
+    for (i = 46u; i < SLIPEST_IMAGE_HEADER_SIZE; ++i) {
+        if (img[i] != 0u) return SLIPEST_E_FORMAT; /* reserved bytes */
+    }
+    /* the payload size must be the one SN-S layout with or without the float model */
+    payload = le32(img + 42);
+    if (payload != Q_PAYLOAD + ((flags & SLIPEST_IMAGE_FLAG_F32) ? F32_PAYLOAD : 0u)) return SLIPEST_E_LENGTH;
+    body = SLIPEST_IMAGE_HEADER_SIZE + (size_t)payload;
+    if (len != body + SLIPEST_IMAGE_TRAILER_SIZE) return SLIPEST_E_LENGTH;
+    if (le32(img + body) != slipest_crc32(img, body)) return SLIPEST_E_CRC;
+    hash32 = le32(img + 38);
+    trailer_hash32 = ((uint32_t)img[body + 4] << 24) | ((uint32_t)img[body + 5] << 16) |
+                     ((uint32_t)img[body + 6] << 8) | (uint32_t)img[body + 7]; /* sha256 bytes, big-endian */
+    if (hash32 != trailer_hash32 || (expect32 != 0u && hash32 != expect32)) return SLIPEST_E_HASH;
+    if (mf != NULL && !(flags & SLIPEST_IMAGE_FLAG_F32)) return SLIPEST_E_STATE;
+#ifdef SLIPEST_Q_ONLY
+    if (mf != NULL) return SLIPEST_E_STATE;
+#endif
+
+    memset(&q, 0, sizeof q);
+    q.n_in = img[12];
+    q.n_hidden = img[13];
+    q.n_out = img[14];
+    q.gelu_n = img[15];
+    q.rsqrt_seed_n = img[16];
+    q.h_bits = img[17];
+    q.e_bits = img[18];
+    q.fz = img[19];
+    q.fg = img[20];
+    q.fy = img[21];
+    q.gelu_step_log2 = img[22];
+    q.eps_e = (int8_t)(img[23] > 127u ? (int)img[23] - 256 : (int)img[23]);
+    q.eps_m = s16(le16(img + 24));
+    q.c30 = s32(le32(img + 26));
+    q.eps_cap = s32(le32(img + 30));
+    q.version = le32(img + 34);
+    q.hash32 = hash32;
+    off = SLIPEST_IMAGE_HEADER_SIZE;
+    get_i16(img, &off, qs->w1, SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES);
+    get_i32(img, &off, qs->b1, SLIPEST_N_HIDDEN);
+    get_i16(img, &off, qs->gamma, SLIPEST_N_HIDDEN);
+    get_i32(img, &off, qs->beta, SLIPEST_N_HIDDEN);
+    get_i16(img, &off, qs->w2, SLIPEST_N_CLASSES * SLIPEST_N_HIDDEN);
+    get_i32(img, &off, qs->b2, SLIPEST_N_CLASSES);
+    get_i16(img, &off, qs->gelu, SLIPEST_Q_GELU_N);
+    get_u32(img, &off, qs->rsqrt_seed, SLIPEST_Q_RSQRT_SEED_N);
+    q.w1 = qs->w1;
+    q.b1 = qs->b1;
+    q.gamma = qs->gamma;
+    q.beta = qs->beta;
+    q.w2 = qs->w2;
+    q.b2 = qs->b2;
+    q.gelu = qs->gelu;
+    q.rsqrt_seed = qs->rsqrt_seed;
+    st = slipest_model_q_check(&q); /* architecture, every shift range, the accumulator bounds */
+    if (st != SLIPEST_OK) return st;
+
+#ifndef SLIPEST_Q_ONLY
+    if (mf != NULL) {
+        slipest_model_f32_t f;
+        memset(&f, 0, sizeof f);
+        f.ln_eps = f32_of(le32(img + off));
+        off += 4u;
+        get_f32(img, &off, fs->w1, SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES);
+        get_f32(img, &off, fs->b1, SLIPEST_N_HIDDEN);
+        get_f32(img, &off, fs->gamma, SLIPEST_N_HIDDEN);
+        get_f32(img, &off, fs->beta, SLIPEST_N_HIDDEN);
+        get_f32(img, &off, fs->w2, SLIPEST_N_CLASSES * SLIPEST_N_HIDDEN);
+        get_f32(img, &off, fs->b2, SLIPEST_N_CLASSES);
+        f.w1 = fs->w1;
+        f.b1 = fs->b1;
+        f.gamma = fs->gamma;
+        f.beta = fs->beta;
+        f.w2 = fs->w2;
+        f.b2 = fs->b2;
+        f.n_in = q.n_in;
+        f.n_hidden = q.n_hidden;
+        f.n_out = q.n_out;
+        f.version = q.version;
+        f.hash32 = hash32;
+        st = slipest_model_f32_check(&f);
+        if (st != SLIPEST_OK) return st;
+        *mf = f;
+    }
+#endif
+    *mq = q;
+    return SLIPEST_OK;
+}

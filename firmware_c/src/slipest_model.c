@@ -1,0 +1,67 @@
+/* Validation of a fixed-point model struct and the content-hash helpers (integer code only).
+ *
+ * A model may come from a run-time image, so nothing in it is trusted: the checks below are the
+ * preconditions of the overflow proof of slipest_infer_q.c (docs/fixed_point.md), the same ones
+ * export/quant.py's check_bounds() enforces at export. */
+#include "slipest_model.h"
+
+#include <stddef.h>
+
+/* Bound of every partial sum of a row: 2^15 sum_j |w_ij| + |b_i| (a row of int16 weights
+ * against inputs of magnitude <= 2^15). Computed in 64 bits: cannot overflow for <= 30 terms. */
+static int64_t row_bound(const int16_t *w, int32_t b, int n)
+{
+    int64_t s = 0;
+    int j;
+    for (j = 0; j < n; ++j) {
+        s += w[j] < 0 ? -(int64_t)w[j] : (int64_t)w[j];
+    }
+    return s * 32768 + (b < 0 ? -(int64_t)b : (int64_t)b);
+}
+
+slipest_status_t slipest_model_q_check(const slipest_model_q_t *m)
+{
+    int i;
+    int32_t u_shift, gelu_shift;
+
+    if (m == NULL || m->w1 == NULL || m->b1 == NULL || m->gamma == NULL || m->beta == NULL || m->w2 == NULL ||
+        m->b2 == NULL || m->gelu == NULL || m->rsqrt_seed == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (m->n_in != SLIPEST_N_FEATURES || m->n_hidden != SLIPEST_N_HIDDEN || m->n_out != SLIPEST_N_CLASSES ||
+        m->gelu_n != SLIPEST_Q_GELU_N || m->rsqrt_seed_n != SLIPEST_Q_RSQRT_SEED_N) {
+        return SLIPEST_E_ARCH;
+    }
+    /* shifts of the scheme: h' and e keep <= 24 / 13 bits (their products stay in int32), the
+     * GELU interpolation (T1 - T0) f stays below 2^31, rsr(gamma z, U_SHIFT) is a real shift */
+    gelu_shift = (int32_t)m->fy - (int32_t)m->gelu_step_log2;
+    u_shift = (int32_t)m->fz + (int32_t)m->fg - (int32_t)m->fy;
+    if (m->h_bits < 1u || m->h_bits > 24u || m->e_bits < 1u || m->e_bits > 13u || m->fz != 12u ||
+        gelu_shift < 0 || gelu_shift > 12 || u_shift < 1 || u_shift > 30 || m->fy > 14u) {
+        return SLIPEST_E_RANGE;
+    }
+    /* eps: eps_m << t for t < 16 must stay below 2^31; the cap is the scheme's 2^30 */
+    if (m->eps_m < 0 || m->eps_e < -64 || m->eps_e > 64 || m->eps_cap != 1073741824 ||
+        m->c30 <= 0 || m->c30 >= (1 << 17)) {
+        return SLIPEST_E_RANGE;
+    }
+    for (i = 0; i < SLIPEST_Q_RSQRT_SEED_N; ++i) {
+        if (m->rsqrt_seed[i] > 0x80000000u) { /* Q30 seeds of 1/sqrt(w), w >= 1/4: <= 2^31 */
+            return SLIPEST_E_RANGE;
+        }
+    }
+    for (i = 0; i < SLIPEST_N_HIDDEN; ++i) {
+        /* layer-1 accumulator bound (acc1_bound <= 2^31 - 2^8), int16 LayerNorm bias */
+        if (row_bound(&m->w1[i * SLIPEST_N_FEATURES], m->b1[i], SLIPEST_N_FEATURES) > 2147483392 ||
+            m->beta[i] < -32768 || m->beta[i] > 32767) {
+            return SLIPEST_E_RANGE;
+        }
+    }
+    for (i = 0; i < SLIPEST_N_CLASSES; ++i) {
+        /* head accumulator bound (acc2_bound <= INT32_MAX): |g| < 2^15 */
+        if (row_bound(&m->w2[i * SLIPEST_N_HIDDEN], m->b2[i], SLIPEST_N_HIDDEN) > 2147483647) {
+            return SLIPEST_E_RANGE;
+        }
+    }
+    return SLIPEST_OK;
+}

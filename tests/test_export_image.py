@@ -1,0 +1,56 @@
+"""model.img written by `fleetlab export`: the Python writer and reader round-trip, and the reader
+refuses what the C reader refuses (the C reader itself: tests/test_firmware.py)."""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fleetlab.export import model_image
+from fleetlab.export.bundle import load_bundle
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "firmware_c" / "bundles" / "example"
+
+
+def test_writer_reader_roundtrip() -> None:
+    b = load_bundle(EXAMPLE)
+    data = model_image.image_bytes(b.qparams, b.fparams, b.content_hash, model_version=5)
+    assert len(data) == 3842 and data[:4] == b"SLPM"
+    img = model_image.read_image(data)
+    assert img.model_version == 5 and img.content_hash == b.content_hash
+    for name, _, _ in model_image.Q_LAYOUT:
+        assert np.array_equal(img.qparams_arrays[name], np.asarray(getattr(b.qparams, name))), name
+    for name in ("w1", "b1", "gamma", "beta", "w2", "b2"):
+        assert np.array_equal(getattr(img.fparams, name), getattr(b.fparams, name)), name
+    assert img.scalars["fy"] == b.qparams.fy and img.scalars["eps_m"] == b.qparams.eps_m
+    # explicit little-endian: w1[0][0] sits at byte 64 low byte first, whatever the host's order
+    assert struct.unpack_from("<h", data, 64)[0] == int(b.qparams.w1[0, 0])
+
+
+def test_bundle_image_is_the_bundles_model() -> None:
+    b = load_bundle(EXAMPLE)
+    data = (EXAMPLE / "model.img").read_bytes()
+    assert data == model_image.image_bytes(b.qparams, b.fparams, b.content_hash, b.manifest["model_version"])
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda d: d[:-1], "disagree"), (lambda d: d[:10], "shorter"), (lambda d: b"XXXX" + d[4:], "magic"),
+    (lambda d: d[:100] + bytes([d[100] ^ 1]) + d[101:], "CRC"),
+])
+def test_reader_refuses_corrupt_images(edit, match) -> None:
+    data = (EXAMPLE / "model.img").read_bytes()
+    with pytest.raises(ValueError, match=match):
+        model_image.read_image(edit(data))
+
+
+def test_reader_refuses_a_hash32_that_is_not_the_trailers() -> None:
+    d = bytearray((EXAMPLE / "model.img").read_bytes())
+    d[38] ^= 1
+    body = bytes(d[:-36])
+    d[-36:-32] = zlib.crc32(body).to_bytes(4, "little")
+    with pytest.raises(ValueError, match="hash32"):
+        model_image.read_image(bytes(d))

@@ -9,6 +9,7 @@
 #include "slipest_infer.h"
 #include "slipest_node.h"
 #include "slipest_vectors.h"
+#include "target_vectors.h"
 
 #define SYST_CSR (*(volatile uint32_t *)0xE000E010u)
 #define SYST_RVR (*(volatile uint32_t *)0xE000E014u)
@@ -17,7 +18,6 @@
 #define REPS 16u
 #define PAINT 0xC5C5C5C5u
 
-static uint8_t file_buf[1024u * 1024u];
 static int16_t q_in[N_BENCH][12];
 static float f_in[N_BENCH][12];
 static volatile int32_t sink;
@@ -31,7 +31,12 @@ static uint32_t ticks_since(uint32_t start) { return (start - SYST_CVR) & 0xFFFF
 __attribute__((noinline)) static void calibration_loop(uint32_t n)
 {
     /* exactly 2 instructions per iteration */
+#if defined(__ARM_ARCH_6M__)
+    /* GCC hands Thumb-1 inline asm to the assembler in divided syntax */
+    __asm volatile(".syntax unified\n1: subs %0, %0, #1\n\tbne 1b\n\t.syntax divided" : "+r"(n) : : "cc");
+#else
     __asm volatile("1: subs %0, %0, #1\n\tbne 1b" : "+r"(n) : : "cc");
+#endif
 }
 
 __attribute__((noinline)) static void one_q(uint32_t i)
@@ -129,10 +134,10 @@ int main(void)
 {
     slipest_vectors_t v;
     const char *why = "";
+    const uint8_t *file = 0;
     size_t len = 0;
     uint32_t i, r, t;
-    if (semihost_read_file(SLIPEST_VECTORS_PATH, file_buf, sizeof file_buf, &len) != 0 ||
-        slipest_vectors_parse(file_buf, len, &v, &why) != 0) {
+    if (target_vectors(&file, &len) != 0 || slipest_vectors_parse(file, len, &v, &why) != 0) {
         semihost_puts("cannot load vectors\n");
         return 2;
     }

@@ -1,7 +1,7 @@
 # Shared part of the Cortex-M toolchain files: arm-none-eabi-gcc + newlib (nano), bare metal.
 set(CMAKE_SYSTEM_NAME Generic)
 set(CMAKE_SYSTEM_PROCESSOR arm)
-set(CMAKE_C_COMPILER arm-none-eabi-gcc)
+set(CMAKE_C_COMPILER ${SLIPEST_TARGET_COMPILER})
 set(CMAKE_TRY_COMPILE_TARGET_TYPE STATIC_LIBRARY)
 find_program(SLIPEST_TARGET_NM_PATH arm-none-eabi-nm REQUIRED)
 find_program(SLIPEST_TARGET_SIZE_PATH arm-none-eabi-size REQUIRED)

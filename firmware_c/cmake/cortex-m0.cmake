@@ -3,6 +3,7 @@
 # read it in). Record format: see cortex-m3.cmake.
 set(SLIPEST_TARGET_NAME cortex-m0)
 set(SLIPEST_TARGET_DESCRIPTION "Cortex-M0 (ARMv6-M, no FPU, integer-only)")
+set(SLIPEST_TARGET_COMPILER arm-none-eabi-gcc)
 set(SLIPEST_TARGET_ENDIAN little)
 set(SLIPEST_TARGET_FPU OFF)
 set(SLIPEST_TARGET_INTEGER_ONLY ON)

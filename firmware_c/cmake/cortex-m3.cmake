@@ -3,6 +3,7 @@
 # parses them (one `set(NAME value)` per line, value without spaces unless quoted).
 set(SLIPEST_TARGET_NAME cortex-m3)
 set(SLIPEST_TARGET_DESCRIPTION "Cortex-M3 (ARMv7-M, no FPU)")
+set(SLIPEST_TARGET_COMPILER arm-none-eabi-gcc)
 set(SLIPEST_TARGET_ENDIAN little)
 set(SLIPEST_TARGET_FPU OFF)
 set(SLIPEST_TARGET_INTEGER_ONLY OFF)

@@ -1,6 +1,7 @@
 # fleetlab CPU target: Cortex-M4F (single-precision FPU), run under QEMU as the MPS2 AN386 board.
 set(SLIPEST_TARGET_NAME cortex-m4)
 set(SLIPEST_TARGET_DESCRIPTION "Cortex-M4F (ARMv7E-M, single-precision FPU)")
+set(SLIPEST_TARGET_COMPILER arm-none-eabi-gcc)
 set(SLIPEST_TARGET_ENDIAN little)
 set(SLIPEST_TARGET_FPU ON)
 set(SLIPEST_TARGET_INTEGER_ONLY OFF)
@@ -8,6 +9,7 @@ set(SLIPEST_TARGET_QEMU qemu-system-arm)
 set(SLIPEST_TARGET_QEMU_MODE system)
 set(SLIPEST_TARGET_QEMU_MACHINE mps2-an386)
 set(SLIPEST_TARGET_QEMU_CPU cortex-m4)
+set(SLIPEST_TARGET_REFERENCE ON)  # the target whose figures bench c, the demo and the report quote first
 set(SLIPEST_TARGET_REPORT semihosting)
 set(SLIPEST_TARGET_VECTORS semihosting)
 set(SLIPEST_TARGET_COUNTER systick)

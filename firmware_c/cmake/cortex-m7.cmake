@@ -1,6 +1,7 @@
 # fleetlab CPU target: Cortex-M7 with FPU (SAMV71 / SAMRH71 class), QEMU MPS2 AN500 board.
 set(SLIPEST_TARGET_NAME cortex-m7)
 set(SLIPEST_TARGET_DESCRIPTION "Cortex-M7 (ARMv7E-M, double-precision FPU)")
+set(SLIPEST_TARGET_COMPILER arm-none-eabi-gcc)
 set(SLIPEST_TARGET_ENDIAN little)
 set(SLIPEST_TARGET_FPU ON)
 set(SLIPEST_TARGET_INTEGER_ONLY OFF)

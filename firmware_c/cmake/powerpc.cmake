@@ -2,6 +2,7 @@
 # image under qemu-ppc user mode (QEMU CPU 750). Record format: see cortex-m3.cmake.
 set(SLIPEST_TARGET_NAME powerpc)
 set(SLIPEST_TARGET_DESCRIPTION "PowerPC 750 (32-bit, big-endian, FPU)")
+set(SLIPEST_TARGET_COMPILER powerpc-linux-gnu-gcc)
 set(SLIPEST_TARGET_ENDIAN big)
 set(SLIPEST_TARGET_FPU ON)
 set(SLIPEST_TARGET_INTEGER_ONLY OFF)

@@ -3,6 +3,7 @@
 # APBUART startup yet). Record format: see cortex-m3.cmake.
 set(SLIPEST_TARGET_NAME sparc-leon3)
 set(SLIPEST_TARGET_DESCRIPTION "SPARC V8 LEON3 (big-endian, FPU; user-mode QEMU)")
+set(SLIPEST_TARGET_COMPILER sparc64-linux-gnu-gcc)
 set(SLIPEST_TARGET_ENDIAN big)
 set(SLIPEST_TARGET_FPU ON)
 set(SLIPEST_TARGET_INTEGER_ONLY OFF)

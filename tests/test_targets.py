@@ -133,9 +133,35 @@ def test_golden_comparison_can_fail(cross_builds, tmp_path):
     assert res.returncode != 0 and "output differs from" in msg and "at line 5:" in msg, msg
 
 
-def test_integer_only_check_finds_soft_float_when_present(cross_builds):
-    """On the M3 rules: the same nm check flags the float image of a core without FPU (it can fail)."""
-    t, bdir = _built(cross_builds, "cortex-m0")
+def test_big_endian_arm_compiles_and_links(cross_builds):
+    """Big-endian ARM has no emulator here: the library, vectors reader, node and test images must
+    build and link as big-endian code, and the archive/image soft-float checks pass."""
+    t, bdir = _built(cross_builds, "cortex-r5-be")
+    assert t.endian == "big" and not t.runs
     rec = build.run_record(bdir)
-    nm = subprocess.run([rec["nm"], str(bdir / "slipest_test_q.elf")], capture_output=True, text=True).stdout
-    assert "slipest_infer_q" in nm and not re.search(r"__aeabi_[fd]|__[a-z]+[sd]f[0-9]", nm)
+    readelf = rec["nm"].replace("-nm", "-readelf")
+    for image in ("slipest_test_q.elf", "slipest_node_frames.elf"):
+        head = subprocess.run([readelf, "-h", str(bdir / image)], capture_output=True, text=True).stdout
+        assert "big endian" in head, head
+    out = build.ctest(bdir)
+    assert "slipest_test_q.elf: 0 soft-float helper symbols (expected absent)" in out
+
+
+def test_soft_float_check_catches_rv32_float_code(cross_builds, tmp_path):
+    """The archive/image check that guards the integer-only RISC-V build flags float code compiled for
+    the same rv32imc core (RISC-V's helpers are __addsf3/__mulsf3..., not __aeabi_*): it can fail."""
+    t, bdir = _built(cross_builds, "riscv32")
+    src = tmp_path / "f.c"
+    src.write_text("float scale(float a, float b) { return a * b + 1.0f; }\n")
+    obj = tmp_path / "f.o"
+    subprocess.run([t.compiler, "-march=rv32imc", "-mabi=ilp32", "-O2", "-c", str(src), "-o", str(obj)], check=True)
+    check = REPO / "firmware_c" / "cmake" / "check_softfloat.cmake"
+    nm = build.run_record(bdir)["nm"]
+
+    def verdict(expect: str) -> subprocess.CompletedProcess:
+        return subprocess.run(["cmake", f"-DNM={nm}", f"-DIMAGE={obj}", f"-DEXPECT={expect}", "-P", str(check)],
+                              capture_output=True, text=True)
+
+    bad = verdict("absent")
+    assert bad.returncode != 0 and "__mulsf3" in bad.stderr and "__addsf3" in bad.stderr
+    assert verdict("present").returncode == 0

@@ -217,7 +217,9 @@ def run(args: argparse.Namespace) -> int:
         return _list_targets(args.json)
     found = target_registry.discover()
     ref = target_registry.reference().name
-    names = list(found) if args.target == "all" else [target_registry.get(args.target or ref).name]
+    names = [n for n, t in found.items() if t.runs] if args.target == "all" else [target_registry.get(args.target or ref).name]
+    if not found[names[-1]].runs:
+        raise ValueError(f"target {names[-1]} is link-only (no emulator): nothing to measure")
     if ref not in names:
         names.insert(0, ref)  # the m4_* keys (and the figures) are always measured
     bundle = Path(args.bundle)

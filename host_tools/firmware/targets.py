@@ -55,13 +55,20 @@ class Target:
         return self.file
 
     @property
-    def tools(self) -> tuple[str, str]:
+    def runs(self) -> bool:
+        """False for a link-only target (SLIPEST_TARGET_QEMU none): built, never run."""
+        return self.qemu != "none"
+
+    @property
+    def tools(self) -> tuple[str, ...]:
         """Executables a build and run of this target need (compiler, emulator)."""
-        return (self.compiler, self.qemu)
+        return (self.compiler, self.qemu) if self.runs else (self.compiler,)
 
     @property
     def emulator(self) -> str:
         """How the target runs, for reports: "QEMU mps2-an386" or "qemu-ppc user mode"."""
+        if not self.runs:
+            return "no emulator (link only)"
         if self.qemu_mode == "system":
             return f"QEMU {self.qemu_machine}"
         return f"{self.qemu} user mode"

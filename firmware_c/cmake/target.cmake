@@ -127,8 +127,8 @@ if(SLIPEST_QEMU AND EXISTS "${NODE_GOLDEN}"
   set_tests_properties(node_frames_golden_${SLIPEST_CPU} PROPERTIES TIMEOUT 120)
 endif()
 
-# --- cost image: only where a cycle counter is known (SysTick under -icount) ---
-if(SLIPEST_TARGET_COUNTER STREQUAL "systick")
+# --- cost image: only where an instruction counter is known (SysTick or minstret under -icount) ---
+if(SLIPEST_TARGET_COUNTER STREQUAL "systick" OR SLIPEST_TARGET_COUNTER STREQUAL "instret")
   if(NOT SLIPEST_TARGET_INTEGER_ONLY)
     slipest_image(slipest_bench_target slipest ${TGT}/bench_target.c)
     slipest_qemu_test(bench_image_${SLIPEST_CPU} slipest_bench_target ${SLIPEST_RUN_ICOUNT})

@@ -1,5 +1,5 @@
-/* Cortex-M cost image, run with qemu -icount shift=0 (1 instruction = 1 ns of virtual time):
- * SysTick ticks for a calibration loop of known length and for many inferences; host side
+/* Cost image (Cortex-M, RISC-V), run with qemu -icount shift=0 (1 instruction = 1 ns of virtual time):
+ * counter ticks (SysTick, or minstret on RISC-V) for a calibration loop of known length and for many inferences; host side
  * (fleetlab bench c) turns ticks into instructions. Also paints the stack to measure the
  * peak stack use of one fixed-point inference. Prints key=value lines. */
 #include <stdint.h>
@@ -11,9 +11,6 @@
 #include "slipest_vectors.h"
 #include "target_vectors.h"
 
-#define SYST_CSR (*(volatile uint32_t *)0xE000E010u)
-#define SYST_RVR (*(volatile uint32_t *)0xE000E014u)
-#define SYST_CVR (*(volatile uint32_t *)0xE000E018u)
 #define N_BENCH 64u
 #define REPS 16u
 #define PAINT 0xC5C5C5C5u
@@ -25,13 +22,35 @@ static slipest_node_t node;
 static slipest_slcan_rx_t slcan;
 static uint32_t node_out_bytes;
 
+#if defined(__riscv)
+/* RISC-V: minstret, which QEMU derives from the instruction count under -icount */
+static uint32_t ticks_now(void)
+{
+    uint32_t v;
+    __asm volatile(".option push\n\t.option arch, +zicsr\n\tcsrr %0, minstret\n\t.option pop" : "=r"(v));
+    return v;
+}
+static uint32_t ticks_since(uint32_t start) { return ticks_now() - start; }
+static void counter_start(void) {}
+#else
+/* Cortex-M: SysTick, a 24-bit down-counter on the processor clock */
+#define SYST_CSR (*(volatile uint32_t *)0xE000E010u)
+#define SYST_RVR (*(volatile uint32_t *)0xE000E014u)
+#define SYST_CVR (*(volatile uint32_t *)0xE000E018u)
 static uint32_t ticks_now(void) { return SYST_CVR; }
 static uint32_t ticks_since(uint32_t start) { return (start - SYST_CVR) & 0xFFFFFFu; }
+static void counter_start(void)
+{
+    counter_start();
+}
+#endif
 
 __attribute__((noinline)) static void calibration_loop(uint32_t n)
 {
     /* exactly 2 instructions per iteration */
-#if defined(__ARM_ARCH_6M__)
+#if defined(__riscv)
+    __asm volatile("1: addi %0, %0, -1\n\tbnez %0, 1b" : "+r"(n));
+#elif defined(__ARM_ARCH_6M__)
     /* GCC hands Thumb-1 inline asm to the assembler in divided syntax */
     __asm volatile(".syntax unified\n1: subs %0, %0, #1\n\tbne 1b\n\t.syntax divided" : "+r"(n) : : "cc");
 #else
@@ -69,7 +88,11 @@ __attribute__((noinline)) static uint32_t stack_use(void (*fn)(uint32_t))
 {
     uint32_t sp;
     volatile uint32_t *p, *lo; /* volatile: no memset call, which would use the painted stack */
+#if defined(__riscv)
+    __asm volatile("mv %0, sp" : "=r"(sp));
+#else
     __asm volatile("mov %0, sp" : "=r"(sp));
+#endif
     lo = (volatile uint32_t *)(sp - 4096u);
     for (p = lo; p < (volatile uint32_t *)sp; p++) *p = PAINT; /* nothing lives below sp */
     fn(0);
@@ -145,9 +168,7 @@ int main(void)
         slipest_vectors_q_input(&v, i % v.n, q_in[i]);
         slipest_vectors_input(&v, i % v.n, f_in[i]);
     }
-    SYST_RVR = 0xFFFFFFu;
-    SYST_CVR = 0;
-    SYST_CSR = 5u; /* enable, processor clock, no interrupt */
+    counter_start();
 
     t = ticks_now();
     calibration_loop(1000000u);

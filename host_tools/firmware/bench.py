@@ -50,7 +50,7 @@ def parse_kv(text: str) -> dict[str, int]:
 
 
 def target_costs(target: Target | str, build_dir: Path) -> dict[str, float | None]:
-    """Instructions per inference and node costs from the QEMU cost images (SysTick under -icount);
+    """Instructions per inference and node costs from the QEMU cost images (SysTick or minstret under -icount);
     on an integer-only target there is no float image and the float figures are None."""
     t = target_registry.get(target) if isinstance(target, str) else target
     qonly = parse_kv(run_image(build_dir, "slipest_bench_target_q.elf", icount=True))
@@ -168,14 +168,15 @@ def target_figures(t: Target, build_dir: Path) -> dict:
         "flash_bytes_can_node": sum(o["flash"] for o in node.values()),
         "can_node_image": node_image,
     }
-    if t.counter == "systick":
+    if t.counter != "none":
         cost = target_costs(t, build_dir)
         row.update({
             "instructions_per_inference_q": round(cost["q"], 1),
             "instructions_per_inference_f32": None if cost["f32"] is None else round(cost["f32"], 1),
             "instructions_per_sample_node_slcan": round(cost["node_instructions_per_sample"], 1),
             "stack_bytes_q": cost["stack_q"], "stack_bytes_f32": cost["stack_f32"],
-            "stack_bytes_node_window": cost["stack_node_window"], "counted_by": "SysTick under qemu -icount shift=0",
+            "stack_bytes_node_window": cost["stack_node_window"],
+            "counted_by": f"{'SysTick' if t.counter == 'systick' else 'minstret'} under qemu -icount shift=0",
         })
     else:
         row.update({k: None for k in ("instructions_per_inference_q", "instructions_per_inference_f32",

@@ -31,6 +31,7 @@ import re
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Callable
@@ -49,12 +50,49 @@ def parse_kv(text: str) -> dict[str, int]:
     return {k: int(v) for k, v in re.findall(r"^(\w+)=(\d+)\s*$", text, flags=re.M)}
 
 
+MARK = "] slipest_count_mark"
+
+
+def instructions_between_marks(trace: Path) -> list[int]:
+    """Executed instructions between consecutive (start, end) calls of slipest_count_mark in a QEMU
+    exec trace taken with -singlestep -d exec,nochain: every "Trace" line is one guest instruction."""
+    entries, n, in_mark = [], 0, False
+    with open(trace, errors="replace") as fh:
+        for line in fh:
+            if not line.startswith("Trace "):
+                continue
+            here = MARK in line
+            if here and not in_mark:
+                entries.append(n)
+            in_mark = here
+            n += 1
+    if len(entries) % 2:
+        raise ValueError(f"{trace}: odd number of count marks ({len(entries)})")
+    return [entries[k + 1] - entries[k] for k in range(0, len(entries), 2)]
+
+
+def _counted_kv(t: Target, build_dir: Path, image: str) -> dict[str, int]:
+    """key=value output of a cost image; on exec-trace targets the *_ticks placeholders (all but the
+    calibration) are replaced, in output order, by the instructions counted in the trace."""
+    if t.counter != "trace":
+        return parse_kv(run_image(build_dir, image, icount=True))
+    with tempfile.TemporaryDirectory(dir=build_dir) as d:
+        log = Path(d) / "exec.log"
+        kv = parse_kv(run_image(build_dir, image, icount=True, trace=log, timeout=900))
+        phases = instructions_between_marks(log)
+    keys = [k for k in kv if k.endswith("_ticks") and k != "calib_ticks"]
+    if len(keys) != len(phases):
+        raise ValueError(f"{image}: {len(keys)} counted phases printed, {len(phases)} marked in the trace")
+    kv.update(zip(keys, phases))
+    return kv
+
+
 def target_costs(target: Target | str, build_dir: Path) -> dict[str, float | None]:
     """Instructions per inference and node costs from the QEMU cost images (SysTick or minstret under -icount);
     on an integer-only target there is no float image and the float figures are None."""
     t = target_registry.get(target) if isinstance(target, str) else target
-    qonly = parse_kv(run_image(build_dir, "slipest_bench_target_q.elf", icount=True))
-    full = None if t.integer_only else parse_kv(run_image(build_dir, "slipest_bench_target.elf", icount=True))
+    qonly = _counted_kv(t, build_dir, "slipest_bench_target_q.elf")
+    full = None if t.integer_only else _counted_kv(t, build_dir, "slipest_bench_target.elf")
     ref = full or qonly
     per_tick = ref["calib_instructions"] / ref["calib_ticks"]
     n = ref["inferences"]
@@ -176,7 +214,9 @@ def target_figures(t: Target, build_dir: Path) -> dict:
             "instructions_per_sample_node_slcan": round(cost["node_instructions_per_sample"], 1),
             "stack_bytes_q": cost["stack_q"], "stack_bytes_f32": cost["stack_f32"],
             "stack_bytes_node_window": cost["stack_node_window"],
-            "counted_by": f"{'SysTick' if t.counter == 'systick' else 'minstret'} under qemu -icount shift=0",
+            "counted_by": {"systick": "SysTick under qemu -icount shift=0",
+                           "instret": "minstret under qemu -icount shift=0",
+                           "trace": "qemu user-mode exec trace, one instruction per block"}[t.counter],
         })
     else:
         row.update({k: None for k in ("instructions_per_inference_q", "instructions_per_inference_f32",

@@ -69,7 +69,9 @@ def run_record(build_dir: Path) -> dict:
     return json.loads(path.read_text())
 
 
-def qemu_command(build_dir: Path, image: Path, *, icount: bool = False) -> list[str]:
+def qemu_command(build_dir: Path, image: Path, *, icount: bool = False, trace: Path | None = None) -> list[str]:
+    """QEMU argv for `image`; icount adds the target's counting options (system mode: -icount; user
+    mode: a one-instruction-per-block exec trace written to `trace`)."""
     rec = run_record(build_dir)
     if not rec["run"] or not Path(rec["run"][0]).is_absolute():
         raise OSError(f"{build_dir}: QEMU for target {rec['name']} was not found at configure time")
@@ -77,14 +79,19 @@ def qemu_command(build_dir: Path, image: Path, *, icount: bool = False) -> list[
     if icount:
         if not rec["icount"]:
             raise OSError(f"target {rec['name']}: no instruction counting mode (user-mode QEMU)")
-        cmd = cmd[:1] + rec["icount"] + cmd[1:]
+        extra = [str(trace) if a == "@TRACE@" else a for a in rec["icount"]]
+        if "@TRACE@" in rec["icount"] and trace is None:
+            raise ValueError(f"target {rec['name']} counts by exec trace: pass trace=<log file>")
+        cmd = cmd[:1] + extra + cmd[1:]
     return cmd
 
 
-def run_image(build_dir: Path, image: str | Path, *, icount: bool = False, timeout: float = 300) -> str:
+def run_image(build_dir: Path, image: str | Path, *, icount: bool = False, trace: Path | None = None,
+              timeout: float = 300) -> str:
     """Run one image of a cross build under QEMU; stdout and stderr (semihosting console) together."""
     image = Path(build_dir) / image if not Path(image).is_absolute() else Path(image)
-    return run(qemu_command(build_dir, image, icount=icount), timeout=timeout, merge_stderr=True, what="QEMU run")
+    return run(qemu_command(build_dir, image, icount=icount, trace=trace), timeout=timeout, merge_stderr=True,
+               what="QEMU run")
 
 
 def ctest(build_dir: Path, regex: str | None = None, timeout: float = 900) -> str:

@@ -165,3 +165,16 @@ def test_soft_float_check_catches_rv32_float_code(cross_builds, tmp_path):
     bad = verdict("absent")
     assert bad.returncode != 0 and "__mulsf3" in bad.stderr and "__addsf3" in bad.stderr
     assert verdict("present").returncode == 0
+
+
+@pytest.mark.parametrize("name", ["powerpc", "riscv32"])
+def test_bench_counts_instructions_without_systick(cross_builds, name):
+    """`bench c --target` figures where there is no SysTick: the user-mode exec trace (PowerPC) and
+    minstret under -icount (RISC-V); integer-only targets have no float figure."""
+    t, bdir = _built(cross_builds, name)
+    row = bench.target_figures(t, bdir)
+    assert 1_000 < row["instructions_per_inference_q"] < 20_000, row
+    assert 1_000 < row["instructions_per_sample_node_slcan"] < 50_000, row
+    assert (row["instructions_per_inference_f32"] is None) == t.integer_only
+    assert 0 < row["stack_bytes_q"] <= row["stack_bytes_node_window"] < 4096
+    assert 1_000 < row["flash_bytes_kernel_and_model"] < row["flash_bytes_can_node"]

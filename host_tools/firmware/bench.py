@@ -190,21 +190,31 @@ def host_timings(host_build: Path, bundle: Path, n: int, rounds: int = 3) -> dic
     return best
 
 
+SERIAL_LINK_OBJECTS = ("slipest_slcan", "slipest_cobs", "slipest_crc")
+
+
+def _by_source(footprint: dict[str, dict[str, int]]) -> dict[str, dict[str, int]]:
+    """Objects keyed by source stem: CMake names them x.c.obj on bare metal and x.c.o on Linux."""
+    return {re.sub(r"\.c\.o(bj)?$", "", k): v for k, v in footprint.items()}
+
+
 def target_figures(t: Target, build_dir: Path) -> dict:
-    """One row of the targets table: instruction counts (where counted), flash and peak stack."""
-    maps = {name: build_dir / f"{name}.elf.map" for name in ("slipest_test_q", "slipest_node_frames",
-                                                              "slipest_bench_target_q", "example_minimal_can_loop")}
-    lib = library_footprint(maps["slipest_test_q"], "libslipest_q.a")
-    # the whole CAN node: the integration guide's CAN main loop where it is built (MPS2 boards), else the
-    # node-frames image (node + CAN codec + both serial encoders + kernel); library objects only
-    node_image = "example_minimal_can_loop" if maps["example_minimal_can_loop"].is_file() else "slipest_node_frames"
-    node = library_footprint(maps[node_image], "libslipest_q.a")
+    """One row of the targets table: instruction counts (where counted), flash and peak stack.
+
+    Flash is counted the same way on every target, from linker maps (library objects kept by
+    --gc-sections): kernel + model in the fixed-point cost image; the CAN node (node, generated CAN
+    codec, extractor, kernel + model, status) in the node-frames image, without the serial-link
+    codecs (SLCAN, COBS, CRC) that image also links."""
+    bench_map = build_dir / "slipest_bench_target_q.elf.map"
+    kernel_map = bench_map if bench_map.is_file() else build_dir / "slipest_test_q.elf.map"
+    lib = _by_source(library_footprint(kernel_map, "libslipest_q.a"))
+    node = _by_source(library_footprint(build_dir / "slipest_node_frames.elf.map", "libslipest_q.a"))
     row: dict = {
         "description": t.description, "emulator": t.emulator, "endian": t.endian, "fpu": t.fpu,
         "integer_only": t.integer_only,
-        "flash_bytes_kernel_and_model": lib.get("slipest_infer_q.c.obj", {"flash": 0})["flash"],
-        "flash_bytes_can_node": sum(o["flash"] for o in node.values()),
-        "can_node_image": node_image,
+        "flash_bytes_kernel_and_model": lib.get("slipest_infer_q", {"flash": 0})["flash"],
+        "flash_bytes_can_node": sum(o["flash"] for k, o in node.items() if k not in SERIAL_LINK_OBJECTS),
+        "flash_bytes_by_object_can_node": {k: o["flash"] for k, o in sorted(node.items())},
     }
     if t.counter != "none":
         cost = target_costs(t, build_dir)

@@ -16,13 +16,13 @@ import re
 import shutil
 import signal
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
 
 from ..paths import build_root, default_bundle, repo_root
 from .wire.dbc import DBC_PATH, dbc_path
+from .firmware.build import build_command, configure_command
 
 EMULATOR_TARGET = "slipest_emu"
 HOST_LIBRARY_TARGET = "slipest_host"
@@ -79,14 +79,13 @@ def build(bundle: Path | str | None = None, targets: tuple[str, ...] = (EMULATOR
         fcntl.flock(lock, fcntl.LOCK_EX)
         stamp_file = bdir / ".fleetlab-bundle-stamp"
         if not (bdir / "CMakeCache.txt").is_file() or not stamp_file.is_file() or stamp_file.read_text() != stamp:
-            cmd = ["cmake", "-S", str(repo_root()), "-B", str(bdir), f"-DSLIPEST_BUNDLE={bundle.resolve()}",
-                   f"-DSLIPEST_DBC={dbc}", "-DCMAKE_BUILD_TYPE=Release", "-DSLIPEST_SANITIZE=OFF", "-DSLIPEST_FUZZ=OFF",
-                   f"-DPython3_EXECUTABLE={sys.executable}"]
+            cmd = configure_command(bdir, bundle, options={"SLIPEST_DBC": str(dbc), "SLIPEST_SANITIZE": "OFF",
+                                                           "SLIPEST_FUZZ": "OFF"})
             r = subprocess.run(cmd, stdout=out, stderr=subprocess.PIPE, text=True)
             if r.returncode:
                 raise OSError(f"cmake configure failed for bundle {bundle}:\n{r.stderr[-2000:]}")
-        r = subprocess.run(["cmake", "--build", str(bdir), "--parallel", str(os.cpu_count() or 2),
-                            "--target", *targets], stdout=out, stderr=subprocess.PIPE, text=True)
+        r = subprocess.run(build_command(bdir, os.cpu_count() or 2, tuple(targets)),
+                           stdout=out, stderr=subprocess.PIPE, text=True)
         if r.returncode:
             raise OSError(f"cmake build failed ({', '.join(targets)}):\n{r.stderr[-2000:]}")
         stamp_file.write_text(stamp)

@@ -25,7 +25,8 @@ from cobs import cobs
 
 from fleetlab.data.features import featurise
 from fleetlab.data.features_int import CHANNEL_LSB, FLAG_GAP, FLAG_INVALID, featurise_int
-from fleetlab.host_tools.bench_c import REPO, cmake_build, library_footprint, target_costs
+from fleetlab.host_tools.firmware.bench import REPO, library_footprint, target_costs
+from fleetlab.host_tools.firmware.build import cmake_build
 
 BUNDLE = REPO / "firmware_c" / "bundles" / "example"
 DBC = cantools.database.load_file(str(REPO / "dbc" / "slipest.dbc"))
@@ -39,8 +40,8 @@ def builds(tmp_path_factory):
     jobs = {
         "host": lambda: cmake_build(root / "host", BUNDLE, jobs=1),
         "asan": lambda: cmake_build(root / "asan", BUNDLE, options={"SLIPEST_SANITIZE": "ON"}, jobs=1),
-        "cortex-m4": lambda: cmake_build(root / "cortex-m4", BUNDLE, cpu="cortex-m4", jobs=1),
-        "cortex-m3": lambda: cmake_build(root / "m3", BUNDLE, cpu="cortex-m3", jobs=1),
+        "cortex-m4": lambda: cmake_build(root / "cortex-m4", BUNDLE, target="cortex-m4", jobs=1),
+        "cortex-m3": lambda: cmake_build(root / "m3", BUNDLE, target="cortex-m3", jobs=1),
     }
     with ThreadPoolExecutor(max_workers=2) as pool:
         futures = {name: pool.submit(fn) for name, fn in jobs.items()}
@@ -115,7 +116,7 @@ def test_bench_c_prints_one_json_object(builds, capsys):
     import argparse
     import json
 
-    from fleetlab.host_tools import bench_c
+    from fleetlab.host_tools.firmware import bench as bench_c
 
     parser = argparse.ArgumentParser()
     bench_c.add_arguments(parser)

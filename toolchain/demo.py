@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .fusion.acomerge import AcoMergeConfig
+from .host_tools.firmware import build as fw_build
+from .host_tools.firmware import targets as cpu_targets
 from .models.train import EXPERT_EPOCHS
 from .paths import repo_root
 
@@ -62,13 +64,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = (
         "Run the whole fleetlab pipeline on built-in defaults: simulate the fleet scenario, train the experts, "
         "fuse them with AcoMerge, compare with Earth+FullFinetune and Model Base by Monte Carlo cross-validation, "
-        "export the bundle, build the C estimator (host, and Cortex-M4 under QEMU when the cross tools are "
+        "export the bundle, build the C estimator (host, and the reference CPU target under QEMU when the cross tools are "
         "present), run the host emulation loop over SLCAN and write DIR/report.md and DIR/report.html."
     )
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder (default: demo_out)")
     p.add_argument("--seed", type=int, default=1, help="seed of every stage (default: 1)")
     p.add_argument("--quick", action="store_true", help="small budgets for a smoke test (about 2 minutes)")
-    p.add_argument("--no-cortex-m", action="store_true", help="skip the Cortex-M4 cross build and QEMU run")
+    p.add_argument("--no-cortex-m", action="store_true", help="skip the CPU target cross build and QEMU run")
 
 
 def _fleetlab(*args: object) -> list[str]:
@@ -76,14 +78,14 @@ def _fleetlab(*args: object) -> list[str]:
 
 
 def _cross_tools_present() -> list[str]:
-    """Names of the missing cross tools (empty when the Cortex-M4 stage can run)."""
-    return [t for t in ("arm-none-eabi-gcc", "qemu-system-arm") if shutil.which(t) is None]
+    """Names of the missing cross tools (empty when the reference CPU target's stage can run)."""
+    return [t for t in cpu_targets.reference().tools if shutil.which(t) is None]
 
 
 def plan(out: Path, seed: int, prof: Profile, cortex_m: bool) -> list[Stage]:
     data, fuse, ev, bundle = out / "data", out / "fuse", out / "evaluate", out / "bundle"
-    build_host, build_m4 = out / "build" / "host", out / "build" / "cortex-m4"
-    cmake_bundle = f"-DSLIPEST_BUNDLE={bundle.resolve()}"
+    cpu = cpu_targets.reference()  # the CPU target whose cross build and cost figures the demo shows
+    build_host, build_m4 = out / "build" / "host", out / "build" / cpu.name
     stages = [
         Stage("simulate", "Simulate the fleet scenario",
               [_fleetlab("simulate", "--out", data, "--seed", seed, "--scale", prof.scale)]),
@@ -99,23 +101,18 @@ def plan(out: Path, seed: int, prof: Profile, cortex_m: bool) -> list[Stage]:
         Stage("export", "Export ONNX, C headers and test vectors",
               [_fleetlab("export", fuse / "fused.pt", "--out", bundle, "--data", data, "--check")]),
         Stage("build_host", "Build the C estimator for the host and run ctest",
-              [["cmake", "-S", str(REPO_ROOT), "-B", str(build_host), cmake_bundle, "-DCMAKE_BUILD_TYPE=Release",
-                f"-DPython3_EXECUTABLE={sys.executable}"],
-               ["cmake", "--build", str(build_host), "-j2"],
+              [fw_build.configure_command(build_host, bundle), fw_build.build_command(build_host),
                ["ctest", "--test-dir", str(build_host), "--output-on-failure"]]),
     ]
     if cortex_m:
-        stages.append(Stage("build_m4", "Cross-build for Cortex-M4 and check every vector under QEMU",
-                            [["cmake", "-S", str(REPO_ROOT), "-B", str(build_m4), cmake_bundle,
-                              f"-DCMAKE_TOOLCHAIN_FILE={REPO_ROOT / 'firmware_c/cmake/cortex-m4.cmake'}",
-                              f"-DPython3_EXECUTABLE={sys.executable}"],
-                             ["cmake", "--build", str(build_m4), "-j2"],
+        stages.append(Stage("build_m4", f"Cross-build for {cpu.description} and check every vector under {cpu.emulator}",
+                            [fw_build.configure_command(build_m4, bundle, target=cpu), fw_build.build_command(build_m4),
                              ["ctest", "--test-dir", str(build_m4), "--output-on-failure"]]))
     stages.append(Stage("emulate", "Host emulation loop over SLCAN, bit for bit against the torch reference",
                         [_fleetlab("emulate", "--bundle", bundle, "--source", "sim", "--link", "slcan", "--seed", seed,
                                    "--scale", prof.emulate_scale, "--json", out / "emulate.json")]))
-    if cortex_m:  # the cost figures are counted on the Cortex-M4 image under QEMU
-        stages.append(Stage("bench_c", "C estimator cost: host timing, Cortex-M4 instructions and size",
+    if cortex_m:  # the cost figures are counted on the reference target's image under QEMU
+        stages.append(Stage("bench_c", f"C estimator cost: host timing, {cpu.description} instructions and size",
                             [_fleetlab("bench", "c", "--bundle", bundle, "--build-dir", out / "build",
                                        "--iterations", prof.bench_iterations, "--json")]))
     return stages

@@ -1,5 +1,19 @@
-# Cortex-M4F (single-precision FPU), run under QEMU as the MPS2 AN386 board.
-set(SLIPEST_CPU cortex-m4)
+# fleetlab CPU target: Cortex-M4F (single-precision FPU), run under QEMU as the MPS2 AN386 board.
+set(SLIPEST_TARGET_NAME cortex-m4)
+set(SLIPEST_TARGET_DESCRIPTION "Cortex-M4F (ARMv7E-M, single-precision FPU)")
+set(SLIPEST_TARGET_COMPILER arm-none-eabi-gcc)
+set(SLIPEST_TARGET_ENDIAN little)
+set(SLIPEST_TARGET_FPU ON)
+set(SLIPEST_TARGET_INTEGER_ONLY OFF)
+set(SLIPEST_TARGET_QEMU qemu-system-arm)
+set(SLIPEST_TARGET_QEMU_MODE system)
+set(SLIPEST_TARGET_QEMU_MACHINE mps2-an386)
+set(SLIPEST_TARGET_QEMU_CPU cortex-m4)
+set(SLIPEST_TARGET_REFERENCE ON)  # the target whose figures bench c, the demo and the report quote first
+set(SLIPEST_TARGET_REPORT semihosting)
+set(SLIPEST_TARGET_VECTORS semihosting)
+set(SLIPEST_TARGET_COUNTER systick)
+set(SLIPEST_TARGET_STARTUP startup.c)
+set(SLIPEST_TARGET_LINKER_SCRIPT mps2.ld)
 set(SLIPEST_CPU_FLAGS "-mcpu=cortex-m4 -mthumb -mfloat-abi=hard -mfpu=fpv4-sp-d16")
-set(SLIPEST_QEMU_MACHINE mps2-an386)
 include("${CMAKE_CURRENT_LIST_DIR}/arm-none-eabi-common.cmake")

@@ -1,64 +1,172 @@
-# Cross build (included from the top-level CMakeLists.txt when CMAKE_CROSSCOMPILING):
-# libraries, QEMU test images, the soft-float symbol check and the cost image.
+# Cross build for one CPU target (included from the top-level CMakeLists.txt when CMAKE_CROSSCOMPILING).
+# Everything about the CPU comes from its target file (firmware_c/cmake/<name>.cmake, SLIPEST_TARGET_*):
+# libraries, QEMU test images, the node-frames golden check, the soft-float symbol check, the cost image.
+# The QEMU command line is written here only; it is also recorded in slipest_target.json in the build
+# dir, which the Python driver (fleetlab.host_tools.firmware) reads instead of writing its own.
+if(NOT SLIPEST_TARGET_NAME)
+  message(FATAL_ERROR "cross build without a fleetlab target file (-DCMAKE_TOOLCHAIN_FILE=firmware_c/cmake/<name>.cmake)")
+endif()
+set(SLIPEST_CPU ${SLIPEST_TARGET_NAME})
 set(TGT "${FW}/target")
-set(SLIPEST_TARGET_OPT "-O3" CACHE STRING "optimisation flags of the Cortex-M kernels (per-frame code uses -Os)")
+set(SLIPEST_TARGET_OPT "-O3" CACHE STRING "optimisation flags of the target kernels (per-frame code uses -Os)")
 set(VECTORS_BIN "${SLIPEST_BUNDLE}/vectors.bin")
 set(CMAKE_C_FLAGS_RELEASE "${SLIPEST_TARGET_OPT}")
+if(NOT SLIPEST_TARGET_QEMU STREQUAL "none")  # "none": link-only target
+  find_program(SLIPEST_QEMU ${SLIPEST_TARGET_QEMU})
+endif()
 
-add_library(slipest STATIC ${SLIPEST_SOURCES})
-slipest_setup(slipest)
+if(NOT SLIPEST_TARGET_INTEGER_ONLY)
+  add_library(slipest STATIC ${SLIPEST_SOURCES})
+  slipest_setup(slipest)
+endif()
 # fixed-point only: no float extractor, no float kernel, node without the f32 class
 add_library(slipest_q STATIC ${SLIPEST_Q_SOURCES})
 target_compile_definitions(slipest_q PUBLIC SLIPEST_Q_ONLY)
 slipest_setup(slipest_q)
 
-add_library(slipest_rt STATIC ${TGT}/startup.c ${TGT}/semihost.c)
+# runtime of the test images: startup + host I/O (semihosting on bare metal, stdio in user mode)
+set(rt_sources ${TGT}/target_vectors.c)
+foreach(s ${SLIPEST_TARGET_STARTUP})
+  list(APPEND rt_sources ${TGT}/${s})
+endforeach()
+if(SLIPEST_TARGET_REPORT STREQUAL "semihosting")
+  list(APPEND rt_sources ${TGT}/semihost.c)
+elseif(SLIPEST_TARGET_REPORT STREQUAL "stdio")
+  list(APPEND rt_sources ${TGT}/stdio_io.c)
+else()
+  message(FATAL_ERROR "${SLIPEST_TARGET_NAME}: unknown SLIPEST_TARGET_REPORT '${SLIPEST_TARGET_REPORT}'")
+endif()
+set_source_files_properties(${TGT}/freestanding_libc.c PROPERTIES
+                            COMPILE_OPTIONS "-fno-builtin;-fno-tree-loop-distribute-patterns")
+add_library(slipest_rt STATIC ${rt_sources})
 target_include_directories(slipest_rt PUBLIC ${TGT})
 target_compile_options(slipest_rt PRIVATE ${SLIPEST_WARNINGS})
+target_compile_definitions(slipest_rt PRIVATE SLIPEST_VECTORS_PATH="${VECTORS_BIN}")
+if(SLIPEST_TARGET_VECTORS STREQUAL "embed")
+  target_compile_definitions(slipest_rt PRIVATE SLIPEST_VECTORS_EMBED)
+  set_source_files_properties(${TGT}/target_vectors.c PROPERTIES OBJECT_DEPENDS "${VECTORS_BIN}")
+endif()
+
+set(SLIPEST_LINK_OPTIONS "")
+if(SLIPEST_TARGET_LINKER_SCRIPT)
+  set(SLIPEST_LINK_OPTIONS -T${TGT}/${SLIPEST_TARGET_LINKER_SCRIPT})
+endif()
 
 enable_testing()
 function(slipest_image name lib main)
   add_executable(${name} ${main} ${FW}/common/slipest_vectors.c)
   set_target_properties(${name} PROPERTIES SUFFIX ".elf")
   target_include_directories(${name} PRIVATE ${FW}/common)
-  target_compile_definitions(${name} PRIVATE SLIPEST_VECTORS_PATH="${VECTORS_BIN}")
-  target_link_libraries(${name} PRIVATE ${lib} slipest_rt m)
-  target_link_options(${name} PRIVATE -T${TGT}/mps2.ld -Wl,-Map=$<TARGET_FILE:${name}>.map)
+  # the runtime twice: startup/target_vectors need semihost_*, which may come after them
+  target_link_libraries(${name} PRIVATE ${lib} slipest_rt ${lib} slipest_rt m)
+  target_link_options(${name} PRIVATE ${SLIPEST_LINK_OPTIONS} -Wl,-Map=$<TARGET_FILE:${name}>.map)
   slipest_setup(${name})
 endfunction()
 
-slipest_image(slipest_test_vectors slipest ${TGT}/test_target.c)
-slipest_image(slipest_test_q slipest_q ${TGT}/test_target.c)
-slipest_image(slipest_bench_target slipest ${TGT}/bench_target.c)
-slipest_image(slipest_bench_target_q slipest_q ${TGT}/bench_target.c)
-
-set(QEMU_ARGS -machine ${SLIPEST_QEMU_MACHINE} -cpu ${SLIPEST_CPU} -nographic -monitor none -serial none
-    -semihosting-config enable=on,target=native)
-if(SLIPEST_QEMU)
-  add_test(NAME vectors_${SLIPEST_CPU} COMMAND ${SLIPEST_QEMU} ${QEMU_ARGS} -kernel $<TARGET_FILE:slipest_test_vectors>)
-  add_test(NAME vectors_q_${SLIPEST_CPU} COMMAND ${SLIPEST_QEMU} ${QEMU_ARGS} -kernel $<TARGET_FILE:slipest_test_q>)
-  add_test(NAME bench_image_${SLIPEST_CPU}
-           COMMAND ${SLIPEST_QEMU} ${QEMU_ARGS} -icount shift=0 -kernel $<TARGET_FILE:slipest_bench_target>)
-  set_tests_properties(vectors_${SLIPEST_CPU} vectors_q_${SLIPEST_CPU} bench_image_${SLIPEST_CPU}
-                       PROPERTIES TIMEOUT 120)
-  # pass/fail is the image's exit code (semihosting SYS_EXIT_EXTENDED); a fault report fails too
-  set_tests_properties(vectors_${SLIPEST_CPU} vectors_q_${SLIPEST_CPU} bench_image_${SLIPEST_CPU}
-                       PROPERTIES FAIL_REGULAR_EXPRESSION "FAIL|FAULT")
+# --- the one QEMU command line: "@IMAGE@" stands for the image ---
+if(SLIPEST_TARGET_QEMU_MODE STREQUAL "system")
+  set(SLIPEST_RUN -machine ${SLIPEST_TARGET_QEMU_MACHINE})
+  if(SLIPEST_TARGET_QEMU_CPU)
+    list(APPEND SLIPEST_RUN -cpu ${SLIPEST_TARGET_QEMU_CPU})
+  endif()
+  list(APPEND SLIPEST_RUN -nographic -monitor none -serial none)
+  if(SLIPEST_TARGET_QEMU_MACHINE STREQUAL "virt")
+    list(APPEND SLIPEST_RUN -bios none)
+  endif()
+  if(SLIPEST_TARGET_REPORT STREQUAL "semihosting")
+    list(APPEND SLIPEST_RUN -semihosting-config enable=on,target=native)
+  endif()
+  set(SLIPEST_RUN_ICOUNT -icount shift=0)
+  set(SLIPEST_RUN_IMAGE -kernel)
+else()
+  set(SLIPEST_RUN "")
+  if(SLIPEST_TARGET_QEMU_CPU)
+    list(APPEND SLIPEST_RUN -cpu ${SLIPEST_TARGET_QEMU_CPU})
+  endif()
+  # no -icount in user mode: the cost image is traced one instruction per block ("@TRACE@" = log file)
+  set(SLIPEST_RUN_ICOUNT -singlestep -d exec,nochain -D @TRACE@)
+  set(SLIPEST_RUN_IMAGE "")
 endif()
-# the example main loops of docs/integrating_slipest.md, on the fixed-point library
-include("${FW}/examples/examples.cmake")
-# the fixed-point image must not contain soft-float helpers; the full image on a core
-# without FPU must (proves the check can fail)
+function(slipest_qemu_test test image)
+  if(SLIPEST_QEMU)
+    add_test(NAME ${test} COMMAND ${SLIPEST_QEMU} ${SLIPEST_RUN} ${ARGN} ${SLIPEST_RUN_IMAGE} $<TARGET_FILE:${image}>)
+    # pass/fail is the image's exit code; a fault report or a FAIL line fails too
+    set_tests_properties(${test} PROPERTIES TIMEOUT 120 FAIL_REGULAR_EXPRESSION "FAIL|FAULT")
+  endif()
+endfunction()
+function(_json_list out)
+  set(items "")
+  foreach(a ${ARGN})
+    string(APPEND items "\"${a}\", ")
+  endforeach()
+  string(REGEX REPLACE ", $" "" items "${items}")
+  set(${out} "[${items}]" PARENT_SCOPE)
+endfunction()
+_json_list(j_run ${SLIPEST_QEMU} ${SLIPEST_RUN} ${SLIPEST_RUN_IMAGE} @IMAGE@)
+_json_list(j_icount ${SLIPEST_RUN_ICOUNT})
+file(WRITE "${CMAKE_BINARY_DIR}/slipest_target.json"
+     "{\"name\": \"${SLIPEST_TARGET_NAME}\", \"run\": ${j_run}, \"icount\": ${j_icount}, "
+     "\"nm\": \"${SLIPEST_TARGET_NM_PATH}\", "
+     "\"size\": \"${SLIPEST_TARGET_SIZE_PATH}\"}\n")
+
+# --- test images: every bundle vector bit-exact ---
+if(NOT SLIPEST_TARGET_INTEGER_ONLY)
+  slipest_image(slipest_test_vectors slipest ${TGT}/test_target.c)
+  slipest_qemu_test(vectors_${SLIPEST_CPU} slipest_test_vectors)
+endif()
+slipest_image(slipest_test_q slipest_q ${TGT}/test_target.c)
+slipest_qemu_test(vectors_q_${SLIPEST_CPU} slipest_test_q)
+
+# --- endianness: the node's transmitted frames equal the x86-64 golden file ---
+slipest_image(slipest_node_frames slipest_q ${TGT}/node_frames.c)
+set(NODE_GOLDEN "${FW}/tests/golden/node_frames_example.txt")
+if(SLIPEST_QEMU AND EXISTS "${NODE_GOLDEN}"
+   AND "${SLIPEST_BUNDLE}" STREQUAL "${CMAKE_SOURCE_DIR}/firmware_c/bundles/example")
+  add_test(NAME node_frames_golden_${SLIPEST_CPU}
+           COMMAND ${CMAKE_COMMAND} "-DRUN=${SLIPEST_QEMU};${SLIPEST_RUN};${SLIPEST_RUN_IMAGE};$<TARGET_FILE:slipest_node_frames>"
+                   -DGOLDEN=${NODE_GOLDEN} -P ${FW}/cmake/compare_output.cmake)
+  set_tests_properties(node_frames_golden_${SLIPEST_CPU} PROPERTIES TIMEOUT 120)
+endif()
+
+# --- cost image: where instructions can be counted (SysTick or minstret under -icount, or the exec trace) ---
+if(SLIPEST_TARGET_COUNTER STREQUAL "trace")
+  set(bench_run_args "")  # ctest runs the cost image untraced (a smoke test); bench c traces it
+  set(SLIPEST_COUNT_BY_TRACE SLIPEST_COUNT_BY_TRACE)
+else()
+  set(bench_run_args ${SLIPEST_RUN_ICOUNT})
+  set(SLIPEST_COUNT_BY_TRACE "")
+endif()
+if(NOT SLIPEST_TARGET_COUNTER STREQUAL "none")
+  if(NOT SLIPEST_TARGET_INTEGER_ONLY)
+    slipest_image(slipest_bench_target slipest ${TGT}/bench_target.c)
+    target_compile_definitions(slipest_bench_target PRIVATE ${SLIPEST_COUNT_BY_TRACE})
+    slipest_qemu_test(bench_image_${SLIPEST_CPU} slipest_bench_target ${bench_run_args})
+  endif()
+  slipest_image(slipest_bench_target_q slipest_q ${TGT}/bench_target.c)
+  target_compile_definitions(slipest_bench_target_q PRIVATE ${SLIPEST_COUNT_BY_TRACE})
+  slipest_qemu_test(bench_image_q_${SLIPEST_CPU} slipest_bench_target_q ${bench_run_args})
+  set_source_files_properties(${TGT}/bench_target.c PROPERTIES COMPILE_OPTIONS -fno-shrink-wrap)
+endif()
+
+# the example main loops of docs/integrating_slipest.md (ARM semihosting boards with room for them)
+if(SLIPEST_TARGET_REPORT STREQUAL "semihosting" AND SLIPEST_TARGET_LINKER_SCRIPT STREQUAL "mps2.ld")
+  set(QEMU_ARGS ${SLIPEST_RUN})
+  include("${FW}/examples/examples.cmake")
+endif()
+
+# the fixed-point library and image must not contain soft-float helpers (archive and linked image);
+# the full image on a core without FPU must (proves the check can fail)
 add_test(NAME no_softfloat_q_${SLIPEST_CPU}
-         COMMAND ${CMAKE_COMMAND} -DNM=${SLIPEST_ARM_NM} -DIMAGE=$<TARGET_FILE:slipest_test_q> -DEXPECT=absent
+         COMMAND ${CMAKE_COMMAND} -DNM=${SLIPEST_TARGET_NM_PATH} -DIMAGE=$<TARGET_FILE:slipest_test_q> -DEXPECT=absent
                  -P ${FW}/cmake/check_softfloat.cmake)
-if(SLIPEST_CPU STREQUAL "cortex-m3")
+add_test(NAME no_softfloat_q_archive_${SLIPEST_CPU}
+         COMMAND ${CMAKE_COMMAND} -DNM=${SLIPEST_TARGET_NM_PATH} -DIMAGE=$<TARGET_FILE:slipest_q> -DEXPECT=absent
+                 -P ${FW}/cmake/check_softfloat.cmake)
+if(NOT SLIPEST_TARGET_FPU AND NOT SLIPEST_TARGET_INTEGER_ONLY)
   add_test(NAME softfloat_present_full_${SLIPEST_CPU}
-           COMMAND ${CMAKE_COMMAND} -DNM=${SLIPEST_ARM_NM} -DIMAGE=$<TARGET_FILE:slipest_test_vectors> -DEXPECT=present
+           COMMAND ${CMAKE_COMMAND} -DNM=${SLIPEST_TARGET_NM_PATH} -DIMAGE=$<TARGET_FILE:slipest_test_vectors> -DEXPECT=present
                    -P ${FW}/cmake/check_softfloat.cmake)
 endif()
-# the stack painter reads sp and paints right below it: its prologue must run before that
-set_source_files_properties(${TGT}/bench_target.c PROPERTIES COMPILE_OPTIONS -fno-shrink-wrap)
 # size matters more than speed outside the inference kernels (per-frame code, run at 150 Hz)
 set_source_files_properties(${FW}/src/slipest_node.c ${FW}/src/slipest_slcan.c ${FW}/src/slipest_cobs.c
                             ${FW}/src/slipest_crc.c ${FW}/src/slipest_status.c ${FW}/src/slipest_features.c

@@ -46,31 +46,52 @@ int slipest_vectors_parse(const uint8_t *buf, size_t len, slipest_vectors_t *v, 
     return 0;
 }
 
-static int32_t i32_at(const uint8_t *base, uint32_t i)
+/* vectors.bin is little-endian whatever the CPU: every field is assembled from its bytes, so
+ * the same reader is right on big-endian PowerPC/SPARC (a memcpy would byte-swap them there) */
+static int32_t i32le(const uint8_t *p)
 {
-    int32_t x;
-    memcpy(&x, base + (size_t)i * 4u, 4u);
-    return x;
+    uint32_t u = u32le(p);
+    /* two's complement without implementation-defined conversion of out-of-range values */
+    return (u & 0x80000000u) ? -(int32_t)(~u) - 1 : (int32_t)u;
+}
+
+static int32_t i32_at(const uint8_t *base, uint32_t i) { return i32le(base + (size_t)i * 4u); }
+
+static float f32le(const uint8_t *p)
+{
+    /* IEEE-754 binary32 on every target we build for: copy the assembled bit pattern */
+    uint32_t u = u32le(p);
+    float f;
+    memcpy(&f, &u, sizeof f);
+    return f;
 }
 
 void slipest_vectors_input(const slipest_vectors_t *v, uint32_t i, float out[12])
 {
-    memcpy(out, v->inputs + (size_t)i * 48u, 48u);
+    uint32_t k;
+    for (k = 0; k < 12u; k++) out[k] = f32le(v->inputs + (size_t)i * 48u + k * 4u);
 }
 
 void slipest_vectors_q_input(const slipest_vectors_t *v, uint32_t i, int16_t out[12])
 {
-    memcpy(out, v->q_inputs + (size_t)i * 24u, 24u);
+    uint32_t k;
+    for (k = 0; k < 12u; k++) {
+        const uint8_t *p = v->q_inputs + (size_t)i * 24u + k * 2u;
+        uint16_t u = (uint16_t)((uint16_t)p[0] | ((uint16_t)p[1] << 8));
+        out[k] = (u & 0x8000u) ? (int16_t)(-(int32_t)(uint16_t)~u - 1) : (int16_t)u;
+    }
 }
 
 void slipest_vectors_torch_logits(const slipest_vectors_t *v, uint32_t i, float out[3])
 {
-    memcpy(out, v->torch_logits + (size_t)i * 12u, 12u);
+    uint32_t k;
+    for (k = 0; k < 3u; k++) out[k] = f32le(v->torch_logits + (size_t)i * 12u + k * 4u);
 }
 
 void slipest_vectors_q_logits(const slipest_vectors_t *v, uint32_t i, int32_t out[3])
 {
-    memcpy(out, v->q_logits + (size_t)i * 12u, 12u);
+    uint32_t k;
+    for (k = 0; k < 3u; k++) out[k] = i32le(v->q_logits + (size_t)i * 12u + k * 4u);
 }
 
 static int argmax_i32(const int32_t x[3])

@@ -1,5 +1,5 @@
-/* Cortex-M cost image, run with qemu -icount shift=0 (1 instruction = 1 ns of virtual time):
- * SysTick ticks for a calibration loop of known length and for many inferences; host side
+/* Cost image (Cortex-M, RISC-V), run with qemu -icount shift=0 (1 instruction = 1 ns of virtual time):
+ * counter ticks (SysTick, or minstret on RISC-V) for a calibration loop of known length and for many inferences; host side
  * (fleetlab bench c) turns ticks into instructions. Also paints the stack to measure the
  * peak stack use of one fixed-point inference. Prints key=value lines. */
 #include <stdint.h>
@@ -10,15 +10,17 @@
 #include "slipest_infer.h"
 #include "slipest_node.h"
 #include "slipest_vectors.h"
+#include "target_vectors.h"
 
-#define SYST_CSR (*(volatile uint32_t *)0xE000E010u)
-#define SYST_RVR (*(volatile uint32_t *)0xE000E014u)
-#define SYST_CVR (*(volatile uint32_t *)0xE000E018u)
+#if defined(SLIPEST_COUNT_BY_TRACE)
+#define N_BENCH 16u /* every instruction is a trace line: fewer inferences */
+#define REPS 1u
+#else
 #define N_BENCH 64u
 #define REPS 16u
+#endif
 #define PAINT 0xC5C5C5C5u
 
-static uint8_t file_buf[1024u * 1024u];
 static int16_t q_in[N_BENCH][12];
 static float f_in[N_BENCH][12];
 static volatile int32_t sink;
@@ -30,14 +32,62 @@ static slipest_node_t node;
 static slipest_slcan_rx_t slcan;
 static uint32_t node_out_bytes;
 
+#if defined(SLIPEST_COUNT_BY_TRACE)
+/* user-mode QEMU has no instruction counter the guest can read: each reading is a call to
+ * slipest_count_mark, and fleetlab bench c counts the instructions QEMU's exec trace (one instruction
+ * per block) shows between consecutive calls; the printed *_ticks are placeholders it replaces */
+void slipest_count_mark(void);
+__attribute__((noinline)) void slipest_count_mark(void) { __asm volatile("" : : : "memory"); }
+static uint32_t ticks_now(void)
+{
+    slipest_count_mark();
+    return 0;
+}
+static uint32_t ticks_since(uint32_t start)
+{
+    slipest_count_mark();
+    return start;
+}
+static void counter_start(void) {}
+#elif defined(__riscv)
+/* RISC-V: minstret, which QEMU derives from the instruction count under -icount */
+static uint32_t ticks_now(void)
+{
+    uint32_t v;
+    __asm volatile(".option push\n\t.option arch, +zicsr\n\tcsrr %0, minstret\n\t.option pop" : "=r"(v));
+    return v;
+}
+static uint32_t ticks_since(uint32_t start) { return ticks_now() - start; }
+static void counter_start(void) {}
+#else
+/* Cortex-M: SysTick, a 24-bit down-counter on the processor clock */
+#define SYST_CSR (*(volatile uint32_t *)0xE000E010u)
+#define SYST_RVR (*(volatile uint32_t *)0xE000E014u)
+#define SYST_CVR (*(volatile uint32_t *)0xE000E018u)
 static uint32_t ticks_now(void) { return SYST_CVR; }
 static uint32_t ticks_since(uint32_t start) { return (start - SYST_CVR) & 0xFFFFFFu; }
+static void counter_start(void)
+{
+    SYST_RVR = 0xFFFFFFu;
+    SYST_CVR = 0;
+    SYST_CSR = 5u; /* enable, processor clock, no interrupt */
+}
+#endif
 
+#if !defined(SLIPEST_COUNT_BY_TRACE)
 __attribute__((noinline)) static void calibration_loop(uint32_t n)
 {
     /* exactly 2 instructions per iteration */
+#if defined(__riscv)
+    __asm volatile("1: addi %0, %0, -1\n\tbnez %0, 1b" : "+r"(n));
+#elif defined(__ARM_ARCH_6M__)
+    /* GCC hands Thumb-1 inline asm to the assembler in divided syntax */
+    __asm volatile(".syntax unified\n1: subs %0, %0, #1\n\tbne 1b\n\t.syntax divided" : "+r"(n) : : "cc");
+#else
     __asm volatile("1: subs %0, %0, #1\n\tbne 1b" : "+r"(n) : : "cc");
+#endif
 }
+#endif
 
 __attribute__((noinline)) static void one_q(uint32_t i)
 {
@@ -69,7 +119,15 @@ __attribute__((noinline)) static uint32_t stack_use(void (*fn)(uint32_t))
 {
     uint32_t sp;
     volatile uint32_t *p, *lo; /* volatile: no memset call, which would use the painted stack */
+#if defined(__riscv)
+    __asm volatile("mv %0, sp" : "=r"(sp));
+#elif defined(__powerpc__)
+    __asm volatile("mr %0, 1" : "=r"(sp));
+#elif defined(__sparc__)
+    __asm volatile("mov %%sp, %0" : "=r"(sp));
+#else
     __asm volatile("mov %0, sp" : "=r"(sp));
+#endif
     lo = (volatile uint32_t *)(sp - 4096u);
     for (p = lo; p < (volatile uint32_t *)sp; p++) *p = PAINT; /* nothing lives below sp */
     fn(0);
@@ -134,14 +192,14 @@ int main(void)
 {
     slipest_vectors_t v;
     const char *why = "";
+    const uint8_t *file = 0;
     size_t len = 0;
     uint32_t i, r, t;
     model_q = slipest_bundle_model_q();
 #ifndef SLIPEST_Q_ONLY
     model_f32 = slipest_bundle_model_f32();
 #endif
-    if (semihost_read_file(SLIPEST_VECTORS_PATH, file_buf, sizeof file_buf, &len) != 0 ||
-        slipest_vectors_parse(file_buf, len, &v, &why) != 0) {
+    if (target_vectors(&file, &len) != 0 || slipest_vectors_parse(file, len, &v, &why) != 0) {
         semihost_puts("cannot load vectors\n");
         return 2;
     }
@@ -149,14 +207,17 @@ int main(void)
         slipest_vectors_q_input(&v, i % v.n, q_in[i]);
         slipest_vectors_input(&v, i % v.n, f_in[i]);
     }
-    SYST_RVR = 0xFFFFFFu;
-    SYST_CVR = 0;
-    SYST_CSR = 5u; /* enable, processor clock, no interrupt */
+    counter_start();
 
+#if defined(SLIPEST_COUNT_BY_TRACE)
+    put_kv("calib_instructions", 1u); /* a trace line is one instruction */
+    put_kv("calib_ticks", 1u);
+#else
     t = ticks_now();
     calibration_loop(1000000u);
     put_kv("calib_instructions", 2000000u);
     put_kv("calib_ticks", ticks_since(t));
+#endif
 
     t = ticks_now();
     for (r = 0; r < REPS; r++)

@@ -11,6 +11,25 @@
 #define SYS_EXIT_EXTENDED 0x20
 #define ADP_STOPPED_APPLICATION_EXIT 0x20026u
 
+#if defined(__riscv)
+/* RISC-V semihosting: the ebreak must sit between these two uncompressed no-op markers, so that
+ * QEMU tells it from a debugger breakpoint. A function of its own, 16-byte aligned, so the three
+ * instructions never straddle a page and no alignment padding is ever executed; a0 = op, a1 = arg. */
+int semihost_trap(int op, const void *arg);
+__asm__(".section .text.semihost_trap,\"ax\",@progbits\n"
+        ".balign 16\n"
+        ".global semihost_trap\n"
+        "semihost_trap:\n"
+        ".option push\n.option norvc\n"
+        "  slli x0, x0, 0x1f\n"
+        "  ebreak\n"
+        "  srai x0, x0, 7\n"
+        ".option pop\n"
+        "  ret\n"
+        ".previous\n");
+
+static int call(int op, const void *arg) { return semihost_trap(op, arg); }
+#else
 static int call(int op, const void *arg)
 {
     register int r0 __asm__("r0") = op;
@@ -18,6 +37,7 @@ static int call(int op, const void *arg)
     __asm volatile("bkpt 0xAB" : "+r"(r0) : "r"(r1) : "memory");
     return r0;
 }
+#endif
 
 void semihost_puts(const char *s) { call(SYS_WRITE0, s); }
 

@@ -1,4 +1,5 @@
-/* ARM semihosting (bkpt 0xAB) calls used by the QEMU test images. */
+/* Host I/O of the QEMU test images: ARM (bkpt 0xAB) or RISC-V semihosting in semihost.c, or the C
+ * library's stdio in stdio_io.c for images run under user-mode QEMU. */
 #ifndef SEMIHOST_H
 #define SEMIHOST_H
 #include <stddef.h>

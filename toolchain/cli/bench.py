@@ -12,7 +12,7 @@ import importlib
 KINDS: dict[str, tuple[str, str]] = {
     "data": ("fleetlab.data.bench", "featurisation (raw samples/s) and simulation speed (simulated s per wall s)"),
     "fusion": ("fleetlab.fusion.bench", "AcoMerge: batched vs one-ant-at-a-time generation, full-run time"),
-    "c": ("fleetlab.host_tools.bench_c", "C estimator: host ns/inference vs onnxruntime and torch, Cortex-M4 cost and size"),
+    "c": ("fleetlab.host_tools.firmware.bench", "C estimator: host ns/inference vs onnxruntime and torch, Cortex-M4 cost and size"),
 }
 
 

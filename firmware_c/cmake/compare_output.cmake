@@ -1,0 +1,28 @@
+# cmake "-DRUN=cmd;args" -DGOLDEN=file -P compare_output.cmake
+# Runs an image (under QEMU) and compares everything it prints with a golden file, line by line;
+# the first differing line is reported. QEMU's semihosting console writes to stderr, user mode to
+# stdout: both are taken, in that order of appearance per stream (an image writes to one of them).
+cmake_policy(SET CMP0007 NEW)
+execute_process(COMMAND ${RUN} OUTPUT_VARIABLE out ERROR_VARIABLE err RESULT_VARIABLE rc TIMEOUT 110)
+set(text "${out}${err}")
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "image exited with ${rc}:\n${text}")
+endif()
+file(READ "${GOLDEN}" want)
+if(NOT text STREQUAL want)
+  string(REPLACE "\n" ";" got_lines "${text}")
+  string(REPLACE "\n" ";" want_lines "${want}")
+  list(LENGTH got_lines ng)
+  list(LENGTH want_lines nw)
+  set(i 0)
+  while(i LESS ng AND i LESS nw)
+    list(GET got_lines ${i} a)
+    list(GET want_lines ${i} b)
+    if(NOT a STREQUAL b)
+      message(FATAL_ERROR "FAIL: output differs from ${GOLDEN} at line ${i}:\n  got:  ${a}\n  want: ${b}")
+    endif()
+    math(EXPR i "${i} + 1")
+  endwhile()
+  message(FATAL_ERROR "FAIL: output has ${ng} lines, ${GOLDEN} has ${nw}")
+endif()
+message(STATUS "identical to ${GOLDEN}")

@@ -1,0 +1,21 @@
+# fleetlab CPU target: SPARC V8 / LEON3 (big-endian, FPU), code generated for -mcpu=leon3, run as a
+# static 32-bit Linux image under qemu-sparc32plus USER MODE (not bare metal on leon3_generic: no
+# APBUART startup yet). Record format: see cortex-m3.cmake.
+set(SLIPEST_TARGET_NAME sparc-leon3)
+set(SLIPEST_TARGET_DESCRIPTION "SPARC V8 LEON3 (big-endian, FPU; user-mode QEMU)")
+set(SLIPEST_TARGET_COMPILER sparc64-linux-gnu-gcc)
+set(SLIPEST_TARGET_ENDIAN big)
+set(SLIPEST_TARGET_FPU ON)
+set(SLIPEST_TARGET_INTEGER_ONLY OFF)
+set(SLIPEST_TARGET_QEMU qemu-sparc32plus)
+set(SLIPEST_TARGET_QEMU_MODE user)
+set(SLIPEST_TARGET_QEMU_MACHINE none)
+set(SLIPEST_TARGET_QEMU_CPU "")
+set(SLIPEST_TARGET_REPORT stdio)
+set(SLIPEST_TARGET_VECTORS file)
+set(SLIPEST_TARGET_COUNTER trace)
+set(SLIPEST_TARGET_STARTUP "")
+set(SLIPEST_TARGET_LINKER_SCRIPT "")
+set(SLIPEST_TRIPLET sparc64-linux-gnu)
+set(SLIPEST_CPU_FLAGS "-m32 -mcpu=leon3")
+include("${CMAKE_CURRENT_LIST_DIR}/linux-user-common.cmake")

@@ -1,0 +1,182 @@
+"""CPU targets: the registry (one file per target under firmware_c/cmake/), the CMake/QEMU driver,
+and every new target's ctest under QEMU: all bundle vectors bit-exact, the node's transmitted frames
+byte-identical to the x86-64 golden file (the big-endian property), no soft-float helpers in the
+integer-only archives and images. (Cortex-M3/M4 run in tests/test_firmware.py.)"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fleetlab.host_tools.firmware import bench, build, targets
+from fleetlab.paths import repo_root
+
+REPO = repo_root()
+
+BUNDLE = REPO / "firmware_c" / "bundles" / "example"
+GOLDEN = REPO / "firmware_c" / "tests" / "golden" / "node_frames_example.txt"
+NEW_TARGETS = ["powerpc", "sparc-leon3", "riscv32", "cortex-m0", "cortex-m7"]
+
+
+def _list(capsys, monkeypatch, extra_dir: Path | None = None) -> dict:
+    if extra_dir is not None:
+        monkeypatch.setenv(targets.ENV_DIRS, str(extra_dir))
+    parser = argparse.ArgumentParser()
+    bench.add_arguments(parser)
+    assert bench.run(parser.parse_args(["--list-targets", "--json"])) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_registry_lists_every_target_file(capsys, monkeypatch):
+    monkeypatch.delenv(targets.ENV_DIRS, raising=False)
+    found = _list(capsys, monkeypatch)
+    files = sorted(p.stem for p in (REPO / "firmware_c" / "cmake").glob("*.cmake")
+                   if re.search(r"^set\(SLIPEST_TARGET_NAME ", p.read_text(), re.M))
+    assert sorted(found) == files  # each target file is named after its target
+    assert {"cortex-m3", "cortex-m4", *NEW_TARGETS} <= set(found)
+    assert found["powerpc"]["endian"] == "big" and found["powerpc"]["qemu_mode"] == "user"
+    assert found["cortex-m0"]["integer_only"] and not found["cortex-m0"]["fpu"]
+    assert found["cortex-m4"]["qemu_machine"] == "mps2-an386" and targets.reference().name == "cortex-m4"
+
+
+def test_a_new_target_file_is_discovered_without_other_changes(tmp_path, capsys, monkeypatch):
+    toy = tmp_path / "toy-cpu.cmake"
+    toy.write_text("\n".join([
+        "# fleetlab CPU target: a throw-away one",
+        "set(SLIPEST_TARGET_NAME toy-cpu)",
+        'set(SLIPEST_TARGET_DESCRIPTION "Toy CPU (test only)")',
+        "set(SLIPEST_TARGET_COMPILER toy-gcc)",
+        "set(SLIPEST_TARGET_ENDIAN big)", "set(SLIPEST_TARGET_FPU OFF)", "set(SLIPEST_TARGET_INTEGER_ONLY ON)",
+        "set(SLIPEST_TARGET_QEMU qemu-system-toy)", "set(SLIPEST_TARGET_QEMU_MODE system)",
+        "set(SLIPEST_TARGET_QEMU_MACHINE toyboard)", "set(SLIPEST_TARGET_REPORT semihosting)",
+        "set(SLIPEST_TARGET_VECTORS embed)", "set(SLIPEST_TARGET_COUNTER none)", ""]))
+    found = _list(capsys, monkeypatch, tmp_path)
+    assert found["toy-cpu"]["qemu_machine"] == "toyboard" and found["toy-cpu"]["endian"] == "big"
+    assert "cortex-m4" in found  # the repo's targets are still there
+    # a broken record is an error that names the file and the missing key, not a silent drop
+    toy.write_text(toy.read_text().replace("set(SLIPEST_TARGET_ENDIAN big)\n", ""))
+    with pytest.raises(targets.TargetError, match=r"toy-cpu.cmake.*SLIPEST_TARGET_ENDIAN"):
+        targets.discover()
+
+
+def test_no_cpu_is_named_in_code_outside_the_registry():
+    """Only the target files (and tests/docs) name a CPU or its QEMU board."""
+    names = set()
+    for t in targets.discover().values():
+        names.add(t.name)
+        if t.qemu_machine not in ("none", "virt"):
+            names.add(t.qemu_machine)
+    pattern = re.compile("|".join(re.escape(n) for n in sorted(names)))
+    offenders = []
+    for folder in ("toolchain", "host_tools", "export"):
+        for path in (REPO / folder).rglob("*.py"):
+            if path.name == "targets.py":
+                continue
+            for i, line in enumerate(path.read_text().splitlines(), 1):
+                if pattern.search(line):
+                    offenders.append(f"{path.relative_to(REPO)}:{i}: {line.strip()}")
+    assert not offenders, "\n".join(offenders)
+
+
+# --------------------------------------------------------------------------- QEMU runs
+def _need(t: targets.Target) -> None:
+    missing = [tool for tool in t.tools if shutil.which(tool) is None]
+    if missing:
+        pytest.skip(f"{', '.join(missing)} not installed: run scripts/setup.sh (scripts/apt-packages.txt)")
+
+
+@pytest.fixture(scope="module")
+def cross_builds(tmp_path_factory):
+    return {"root": tmp_path_factory.mktemp("targets"), "done": {}}
+
+
+def _built(cross_builds, name: str) -> tuple[targets.Target, Path]:
+    t = targets.get(name)
+    _need(t)
+    if name not in cross_builds["done"]:
+        cross_builds["done"][name] = build.cmake_build(cross_builds["root"] / name, BUNDLE, target=t)
+    return t, cross_builds["done"][name]
+
+
+@pytest.mark.parametrize("name", NEW_TARGETS)
+def test_target_runs_every_vector_bit_exact_and_sends_the_x86_frames(cross_builds, name):
+    t, bdir = _built(cross_builds, name)
+    out = build.ctest(bdir)
+    assert "100% tests passed" in out
+    n = int(np.load(BUNDLE / "vectors.npz")["inputs"].shape[0])
+    passes = re.findall(rf"vectors={n} q_fail=0 f32_fail=0 extractor_fail=0 model=\w+ PASS", out)
+    # fixed-point image everywhere, plus the full (float) image where the target has the float path
+    assert len(passes) == (1 if t.integer_only else 2), out[-3000:]
+    assert re.search(rf"node_frames_golden_{re.escape(name)} \.+ +Passed", out)
+    assert f"identical to {GOLDEN}" in out
+    for what in ("slipest_test_q.elf", "libslipest_q.a"):
+        assert f"{what}: 0 soft-float helper symbols (expected absent)" in out
+
+
+def test_golden_comparison_can_fail(cross_builds, tmp_path):
+    """The frame comparison run on the big-endian PowerPC image reports one changed character of the golden file."""
+    t, bdir = _built(cross_builds, "powerpc")
+    lines = GOLDEN.read_text().splitlines(keepends=True)
+    lines[5] = lines[5].replace("|", "0|", 1)
+    bad = tmp_path / "golden.txt"
+    bad.write_text("".join(lines))
+    cmd = build.qemu_command(bdir, bdir / "slipest_node_frames.elf")
+    res = subprocess.run(["cmake", f"-DRUN={';'.join(cmd)}", f"-DGOLDEN={bad}", "-P",
+                          str(REPO / "firmware_c" / "cmake" / "compare_output.cmake")],
+                         capture_output=True, text=True, timeout=120)
+    msg = " ".join(res.stderr.split())  # CMake wraps its messages
+    assert res.returncode != 0 and "output differs from" in msg and "at line 5:" in msg, msg
+
+
+def test_big_endian_arm_compiles_and_links(cross_builds):
+    """Big-endian ARM has no emulator here: the library, vectors reader, node and test images must
+    build and link as big-endian code, and the archive/image soft-float checks pass."""
+    t, bdir = _built(cross_builds, "cortex-r5-be")
+    assert t.endian == "big" and not t.runs
+    rec = build.run_record(bdir)
+    readelf = rec["nm"].replace("-nm", "-readelf")
+    for image in ("slipest_test_q.elf", "slipest_node_frames.elf"):
+        head = subprocess.run([readelf, "-h", str(bdir / image)], capture_output=True, text=True).stdout
+        assert "big endian" in head, head
+    out = build.ctest(bdir)
+    assert "slipest_test_q.elf: 0 soft-float helper symbols (expected absent)" in out
+
+
+def test_soft_float_check_catches_rv32_float_code(cross_builds, tmp_path):
+    """The archive/image check that guards the integer-only RISC-V build flags float code compiled for
+    the same rv32imc core (RISC-V's helpers are __addsf3/__mulsf3..., not __aeabi_*): it can fail."""
+    t, bdir = _built(cross_builds, "riscv32")
+    src = tmp_path / "f.c"
+    src.write_text("float scale(float a, float b) { return a * b + 1.0f; }\n")
+    obj = tmp_path / "f.o"
+    subprocess.run([t.compiler, "-march=rv32imc", "-mabi=ilp32", "-O2", "-c", str(src), "-o", str(obj)], check=True)
+    check = REPO / "firmware_c" / "cmake" / "check_softfloat.cmake"
+    nm = build.run_record(bdir)["nm"]
+
+    def verdict(expect: str) -> subprocess.CompletedProcess:
+        return subprocess.run(["cmake", f"-DNM={nm}", f"-DIMAGE={obj}", f"-DEXPECT={expect}", "-P", str(check)],
+                              capture_output=True, text=True)
+
+    bad = verdict("absent")
+    assert bad.returncode != 0 and "__mulsf3" in bad.stderr and "__addsf3" in bad.stderr
+    assert verdict("present").returncode == 0
+
+
+@pytest.mark.parametrize("name", ["powerpc", "riscv32"])
+def test_bench_counts_instructions_without_systick(cross_builds, name):
+    """`bench c --target` figures where there is no SysTick: the user-mode exec trace (PowerPC) and
+    minstret under -icount (RISC-V); integer-only targets have no float figure."""
+    t, bdir = _built(cross_builds, name)
+    row = bench.target_figures(t, bdir)
+    assert 1_000 < row["instructions_per_inference_q"] < 20_000, row
+    assert 1_000 < row["instructions_per_sample_node_slcan"] < 50_000, row
+    assert (row["instructions_per_inference_f32"] is None) == t.integer_only
+    assert 0 < row["stack_bytes_q"] <= row["stack_bytes_node_window"] < 4096
+    assert 1_000 < row["flash_bytes_kernel_and_model"] < row["flash_bytes_can_node"]

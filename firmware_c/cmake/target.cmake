@@ -52,6 +52,11 @@ include("${FW}/examples/examples.cmake")
 add_test(NAME no_softfloat_q_${SLIPEST_CPU}
          COMMAND ${CMAKE_COMMAND} -DNM=${SLIPEST_ARM_NM} -DIMAGE=$<TARGET_FILE:slipest_test_q> -DEXPECT=absent
                  -P ${FW}/cmake/check_softfloat.cmake)
+# ... and neither may the archive a user links: an unreferenced float helper that
+# --gc-sections drops from our images would still reach a user who calls it
+add_test(NAME no_softfloat_archive_q_${SLIPEST_CPU}
+         COMMAND ${CMAKE_COMMAND} -DNM=${SLIPEST_ARM_NM} -DIMAGE=$<TARGET_FILE:slipest_q> -DEXPECT=absent
+                 -P ${FW}/cmake/check_softfloat.cmake)
 if(SLIPEST_CPU STREQUAL "cortex-m3")
   add_test(NAME softfloat_present_full_${SLIPEST_CPU}
            COMMAND ${CMAKE_COMMAND} -DNM=${SLIPEST_ARM_NM} -DIMAGE=$<TARGET_FILE:slipest_test_vectors> -DEXPECT=present

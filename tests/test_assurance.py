@@ -59,3 +59,33 @@ def test_configure_rejects_a_missing_listed_file(tmp_path):
     proc = configure(tmp_path / "build", bundle)
     assert proc.returncode != 0
     assert "vectors.bin" in proc.stderr and "missing" in proc.stderr, proc.stderr[-3000:]
+
+
+# --------------------------------------------------------------------------- 1 MISRA C:2012
+@pytest.fixture(scope="module")
+def misra_findings():
+    from fleetlab.assurance import misra
+
+    return misra.run_cppcheck(BUNDLE)
+
+
+def test_misra_findings_are_all_recorded_deviations(misra_findings):
+    from fleetlab.assurance import misra
+
+    res = misra.compare(misra_findings[0])
+    assert res.total > 0, "the MISRA addon reported nothing: is it running at all?"
+    assert not res.unrecorded, "unrecorded MISRA findings (fix them or add a permit): " + "; ".join(
+        f"rule {r} in {f}: {n} found, {rec} recorded, lines {res.lines[(r, f)]}" for r, f, n, rec in res.unrecorded)
+
+
+def test_misra_checker_fails_on_an_unrecorded_deviation(tmp_path, misra_findings):
+    """The checker can fail: drop one permit's rows and its section from a copy of the record."""
+    from fleetlab.assurance import misra
+
+    text = misra.DEVIATIONS.read_text()
+    trimmed = "\n".join(line for line in text.splitlines()
+                        if not line.startswith("| 13.4 |") and not line.startswith("### MD-13.4"))
+    record = tmp_path / "MISRA_DEVIATIONS.md"
+    record.write_text(trimmed)
+    res = misra.compare(misra_findings[0], record)
+    assert [(r, f) for r, f, _, _ in res.unrecorded] == [("13.4", "firmware_c/src/slipest_node.c")]

@@ -68,7 +68,9 @@ static int handle_line(const char *s, size_t len, slipest_frame_t *f, char *repl
     case 't':
     case 'T': {
         int r = parse_data_frame(s, len, f);
-        if (r < 0) break;
+        if (r < 0) {
+            break;
+        }
         return r;
     }
     case 'O': case 'C': case 'L': case 'X': case 'W': case 'Q':

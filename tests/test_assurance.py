@@ -89,3 +89,20 @@ def test_misra_checker_fails_on_an_unrecorded_deviation(tmp_path, misra_findings
     record.write_text(trimmed)
     res = misra.compare(misra_findings[0], record)
     assert [(r, f) for r, f, _, _ in res.unrecorded] == [("13.4", "firmware_c/src/slipest_node.c")]
+
+
+# --------------------------------------------------------------------------- 4 coverage
+def test_c_tests_cover_the_library():
+    """gcov statement/branch coverage of src/*.c by ctest. The issue's goal is >= 95 % statements
+    and >= 90 % branches; the floors here are what this branch's C tests reach (regressions fail)."""
+    from fleetlab.assurance import coverage
+
+    res = coverage.measure(REPO / "build" / "test-coverage")  # inside the repo: gcovr needs that
+    assert "100% tests passed" in res.ctest_summary
+    names = {f.name for f in res.files}
+    assert {"firmware_c/src/slipest_node.c", "firmware_c/src/slipest_infer_q.c", "generated/slipest_dbc.c"} <= names
+    hw = res.handwritten()
+    assert hw.line_pct >= 96.0, coverage.table(res)
+    assert hw.branch_pct >= 77.0, coverage.table(res)
+    # every file the tests reach is listed with real counts (a broken gcov run gives zeros)
+    assert all(f.lines > 0 and f.lines_hit > 0 for f in res.files), coverage.table(res)

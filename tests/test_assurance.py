@@ -106,3 +106,24 @@ def test_c_tests_cover_the_library():
     assert hw.branch_pct >= 77.0, coverage.table(res)
     # every file the tests reach is listed with real counts (a broken gcov run gives zeros)
     assert all(f.lines > 0 and f.lines_hit > 0 for f in res.files), coverage.table(res)
+
+
+# --------------------------------------------------------------------------- 2 static analysers
+@pytest.mark.parametrize("tool", ["strict_warnings", "gcc_analyzer", "clang_tidy"])
+def test_static_analyser_is_clean(tool):
+    from fleetlab.assurance import analysers
+
+    res = getattr(analysers, tool)(BUNDLE)
+    assert res.version, f"{tool}: no version string, tool did not run"
+    assert res.clean, f"{res.name}:\n" + "\n".join(res.findings)
+
+
+def test_static_analyser_can_fail(tmp_path, monkeypatch):
+    """The warning check sees a defect: a file with a sign conversion among the sources fails it."""
+    from fleetlab.assurance import analysers
+
+    bad = tmp_path / "bad.c"
+    bad.write_text("#include <stdint.h>\nuint32_t f(int32_t x);\nuint32_t f(int32_t x) { return x; }\n")
+    monkeypatch.setattr(analysers, "library_sources", lambda: [bad])
+    res = analysers.strict_warnings(BUNDLE)
+    assert not res.clean and any("Wsign-conversion" in f for f in res.findings), res.findings

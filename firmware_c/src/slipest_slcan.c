@@ -56,7 +56,7 @@ static int parse_data_frame(const char *s, size_t len, slipest_frame_t *f)
 static int set_reply(char *reply, size_t *reply_len, const char *text)
 {
     size_t n = strlen(text);
-    memcpy(reply, text, n);
+    memcpy(reply, text, n); /* NOLINT(bugprone-not-null-terminated-result): reply is length-counted */
     *reply_len = n;
     return SLIPEST_SLCAN_REPLY;
 }

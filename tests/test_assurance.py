@@ -127,3 +127,25 @@ def test_static_analyser_can_fail(tmp_path, monkeypatch):
     monkeypatch.setattr(analysers, "library_sources", lambda: [bad])
     res = analysers.strict_warnings(BUNDLE)
     assert not res.clean and any("Wsign-conversion" in f for f in res.findings), res.findings
+
+
+# --------------------------------------------------------------------------- 3 stack bounds
+def test_stack_bounds_cover_the_call_graph_without_recursion():
+    from fleetlab.assurance import stack
+
+    rows, cycles = stack.analyse(BUNDLE, q_only=True)
+    assert cycles == []
+    worst = {r.function: r for r in rows}
+    # the node's worst path runs through the inference kernel, so its bound contains it
+    node, infer = worst["slipest_node_handle"], worst["slipest_infer_q"]
+    assert "slipest_infer_q" in node.chain and node.bytes > infer.bytes > 0
+    assert not node.dynamic and not infer.dynamic
+
+
+def test_stack_cycle_check_finds_recursion():
+    from fleetlab.assurance.stack import StackGraph
+
+    g = StackGraph(frame={"a": 8, "b": 16, "c": 4}, calls={"a": {"b"}, "b": {"c"}, "c": {"a"}})
+    assert g.cycles() == [["a", "b", "c", "a"]]
+    g.calls["c"] = set()
+    assert g.cycles() == [] and g.worst("a")[0] == 28

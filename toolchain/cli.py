@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "stream": ("fleetlab.host_tools.stream", "stream telemetry or features to the estimator over CAN or serial"),
     "monitor": ("fleetlab.host_tools.monitor", "watch slip estimates and status frames on a CAN bus"),
     "bench": ("fleetlab.bench", "benchmarks: featurisation and simulation, fusion, C inference"),
+    "assure": ("fleetlab.assurance.cli", "flight-software evidence: MISRA, analysers, stack, coverage, fuzzing report"),
     "demo": ("fleetlab.demo", "the whole pipeline on built-in defaults, ending in a report"),
 }
 

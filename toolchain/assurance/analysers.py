@@ -116,9 +116,11 @@ def frama_c_eva(bundle: Path = EXAMPLE_BUNDLE, entries: list[str] | None = None,
             if res.returncode != 0 or f"done for function {entry}" not in text:
                 raise RuntimeError(f"frama-c failed on {entry}:\n{text[-3000:]}")
             alarms = []
-            for m in re.finditer(r"\[eva:alarm\] (\S+): Warning: *\n\s+(.+?)\n\s+assert(.+?);", text, re.S):
-                alarms.append(f"{Path(m[1].split(':')[0]).name}:{m[1].split(':')[1]}: {m[2].strip()} "
-                              f"assert {' '.join(m[3].split())}")
+            # each message starts with "[eva...]"; an alarm is "[eva:alarm] FILE:LINE: Warning:" + indented text
+            for chunk in re.split(r"\n(?=\[)", text):
+                m = re.match(r"\[eva:alarm\] (\S+?):(\d+): Warning: *\n(.*)", chunk, re.S)
+                if m:
+                    alarms.append(f"{Path(m[1]).name}:{m[2]}: {' '.join(m[3].split())}")
             results.append(EvaResult(entry, alarms, time.perf_counter() - t0, text))
         return results
 

@@ -102,8 +102,8 @@ def test_c_tests_cover_the_library():
     names = {f.name for f in res.files}
     assert {"firmware_c/src/slipest_node.c", "firmware_c/src/slipest_infer_q.c", "generated/slipest_dbc.c"} <= names
     hw = res.handwritten()
-    assert hw.line_pct >= 96.0, coverage.table(res)
-    assert hw.branch_pct >= 77.0, coverage.table(res)
+    assert hw.line_pct >= 98.0, coverage.table(res)
+    assert hw.branch_pct >= 78.0, coverage.table(res)
     # every file the tests reach is listed with real counts (a broken gcov run gives zeros)
     assert all(f.lines > 0 and f.lines_hit > 0 for f in res.files), coverage.table(res)
 

@@ -1,10 +1,15 @@
 /* C tests for paths the other unit tests leave out (coverage, issue 16): every status text,
  * the SLCAN adapter commands and their malformed forms, and COBS encoding at the 254-byte
- * block boundary with too small an output buffer. */
+ * block boundary with too small an output buffer, the size/version/hash queries, the kernels'
+ * argument checks and their behaviour at the extremes of the int16 feature range. */
 #include <string.h>
+
+#include <math.h>
 
 #include "check.h"
 #include "slipest_codec.h"
+#include "slipest_infer.h"
+#include "slipest_node.h"
 #include "slipest_status.h"
 
 /* feed a whole line; returns the last feed result and copies the reply */
@@ -71,5 +76,39 @@ int main(void)
     CHECK(slipest_cobs_encode(in, 254, out, 255) == SLIPEST_E_OVERFLOW);
     CHECK(slipest_cobs_encode(in, 10, out, 0) == SLIPEST_E_OVERFLOW);
     CHECK(slipest_cobs_encode(NULL, 1, out, sizeof out) == SLIPEST_E_NULL);
+
+    /* queries ctypes callers use; the hash hex is the 64-digit sha256 whose first 4 bytes hash32 is */
+    CHECK(slipest_node_size() == sizeof(slipest_node_t) && slipest_frame_size() == sizeof(slipest_frame_t));
+    CHECK(slipest_extractor_size() == sizeof(slipest_extractor_t) && slipest_window_size() == sizeof(slipest_window_t));
+    CHECK(slipest_lib_version() == SLIPEST_LIB_VERSION);
+    CHECK(strlen(slipest_node_model_hash_hex()) == 64u && slipest_node_model_hash32() == slipest_model_hash32());
+
+    /* kernel argument checks */
+    {
+        int16_t fq[SLIPEST_N_FEATURES];
+        int32_t lq[SLIPEST_N_CLASSES];
+        float ff[SLIPEST_N_FEATURES], lf[SLIPEST_N_CLASSES];
+        uint16_t sat;
+        int k, r;
+        memset(fq, 0, sizeof fq);
+        memset(ff, 0, sizeof ff);
+        CHECK(slipest_infer_q(NULL, lq, NULL) == SLIPEST_E_NULL && slipest_infer_q(fq, NULL, NULL) == SLIPEST_E_NULL);
+        CHECK(slipest_infer_f32(NULL, lf) == SLIPEST_E_NULL && slipest_infer_f32(ff, NULL) == SLIPEST_E_NULL);
+        ff[3] = NAN;
+        CHECK(slipest_infer_f32(ff, lf) == SLIPEST_E_NONFINITE);
+        ff[3] = INFINITY;
+        CHECK(slipest_infer_f32(ff, lf) == SLIPEST_E_NONFINITE);
+        ff[3] = 3.0e38f; /* finite, but overflows float32 in the first layer */
+        CHECK(slipest_infer_f32(ff, lf) == SLIPEST_E_RANGE);
+        /* the int16 extremes, alternating and constant: a class, never a crash; the constant
+         * vectors drive LayerNorm to its zero-variance and saturation branches */
+        for (k = 0; k < 4; k++) {
+            for (i = 0; i < SLIPEST_N_FEATURES; i++) {
+                fq[i] = (k == 0) ? INT16_MAX : (k == 1) ? INT16_MIN : (int16_t)((i + (size_t)k) % 2u ? INT16_MAX : INT16_MIN);
+            }
+            r = slipest_infer_q(fq, lq, &sat);
+            CHECK(r >= 0 && r < SLIPEST_N_CLASSES);
+        }
+    }
     CHECK_DONE();
 }

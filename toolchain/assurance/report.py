@@ -158,7 +158,8 @@ def assure(args: argparse.Namespace) -> int:
         sections.append(_section("Execution cost (Cortex-M4, QEMU icount)",
                                  f"Measured, averaged over the bench loop of the vectors (not a bound): "
                                  f"slipest_infer_q {measured['q']:.0f} instructions per inference; "
-                                 f"node {measured['node_instructions_per_sample']:.0f} instructions per sample. "
+                                 f"SLCAN parsing + slipest_node_handle {measured['node_instructions_per_sample']:.0f} instructions "
+                                 f"per telemetry sample (3 frames). "
                                  "A worst-case path analysis is not part of this report yet."))
 
     # coverage

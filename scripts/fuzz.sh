@@ -1,12 +1,23 @@
 #!/usr/bin/env bash
-# Run the slipest libFuzzer targets (SLCAN parser, COBS decoder, sample push, model image) for a bounded
-# time each, in parallel, and print the executions of each.
-#   scripts/fuzz.sh [SECONDS] [BUILD_DIR]     (SECONDS default: $FLEETLAB_FUZZ_SECONDS or 60)
+# Run the slipest libFuzzer targets (SLCAN parser, COBS decoder, sample push, model image, raw frames into
+# the node, payload parser) under ASan+UBSan and print the executions of each.
+#   scripts/fuzz.sh [SECONDS] [BUILD_DIR]     short mode: every target for SECONDS
+#                                             (default $FLEETLAB_FUZZ_SECONDS or 60), in parallel
+#   scripts/fuzz.sh --long [EXECS] [BUILD_DIR] long mode: every target until EXECS executions
+#                                             (default $FUZZ_EXECS or 10000000), one after the
+#                                             other on one core; writes BUILD_DIR/fuzz-stats.json
 set -euo pipefail
-SECONDS_PER_TARGET="${1:-${FLEETLAB_FUZZ_SECONDS:-60}}"
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+MODE=short
+if [[ "${1:-}" == "--long" ]]; then
+  MODE=long
+  shift
+  EXECS="${1:-${FUZZ_EXECS:-10000000}}"
+else
+  SECONDS_PER_TARGET="${1:-${FLEETLAB_FUZZ_SECONDS:-60}}"
+fi
 BUILD="${2:-$ROOT/build/fuzz}"
-TARGETS=(fuzz_slcan fuzz_cobs fuzz_push fuzz_image)
+TARGETS=(fuzz_payload fuzz_node_frames fuzz_image fuzz_cobs fuzz_slcan fuzz_push)
 PY="${PYTHON:-$(command -v python3 || command -v python)}"
 
 command -v clang >/dev/null || { echo "fuzz.sh: clang not found (scripts/setup.sh installs it)" >&2; exit 2; }
@@ -15,28 +26,49 @@ cmake --build "$BUILD" -j2 --target "${TARGETS[@]}" >/dev/null
 
 LOGS="$BUILD/fuzz-logs"
 mkdir -p "$LOGS"
-pids=()
-for t in "${TARGETS[@]}"; do
+
+run_one() { # target, extra libFuzzer options...; crashes leave a reproducer in $LOGS
+  local t="$1"; shift
   mkdir -p "$BUILD/corpus/$t"
   # seed: a valid image, so that mutations start past the magic, sizes and CRC
   if [ "$t" = fuzz_image ] && [ -z "$(ls -A "$BUILD/corpus/$t")" ]; then
     cp "$ROOT/firmware_c/bundles/example/model.img" "$BUILD/corpus/$t/example.img"
   fi
-  # -max_total_time bounds each run; crashes leave a reproducer in $LOGS
-  "$BUILD/$t" -max_total_time="$SECONDS_PER_TARGET" -max_len=4096 -print_final_stats=1 \
-      -artifact_prefix="$LOGS/$t-" "$BUILD/corpus/$t" >"$LOGS/$t.log" 2>&1 &
-  pids+=($!)
-done
+  "$BUILD/$t" "$@" -max_len=4096 -print_final_stats=1 -artifact_prefix="$LOGS/$t-" \
+      "$BUILD/corpus/$t" >"$LOGS/$t.log" 2>&1
+}
+report_fail() {
+  echo "FAIL $1: see $LOGS/$1.log" >&2
+  tail -20 "$LOGS/$1.log" >&2
+}
+
 status=0
-for i in "${!TARGETS[@]}"; do
-  if ! wait "${pids[$i]}"; then
-    echo "FAIL ${TARGETS[$i]}: see $LOGS/${TARGETS[$i]}.log" >&2
-    tail -20 "$LOGS/${TARGETS[$i]}.log" >&2
-    status=1
-  fi
-done
+declare -A SECS
+if [[ "$MODE" == short ]]; then
+  pids=()
+  for t in "${TARGETS[@]}"; do
+    run_one "$t" -max_total_time="$SECONDS_PER_TARGET" &
+    pids+=($!)
+  done
+  for i in "${!TARGETS[@]}"; do
+    wait "${pids[$i]}" || { report_fail "${TARGETS[$i]}"; status=1; }
+    SECS[${TARGETS[$i]}]=$SECONDS_PER_TARGET
+  done
+else
+  for t in "${TARGETS[@]}"; do
+    start=$(date +%s)
+    run_one "$t" -runs="$EXECS" || { report_fail "$t"; status=1; }
+    SECS[$t]=$(( $(date +%s) - start ))
+  done
+fi
+
+json="{\"mode\": \"$MODE\", \"date\": \"$(date -u +%Y-%m-%dT%H:%M:%SZ)\", \"sanitizers\": \"address,undefined\", \"targets\": {"
+sep=""
 for t in "${TARGETS[@]}"; do
   execs=$(grep -E "stat::number_of_executed_units" "$LOGS/$t.log" | awk '{print $2}')
-  echo "$t executions=${execs:-0} seconds=$SECONDS_PER_TARGET"
+  echo "$t executions=${execs:-0} seconds=${SECS[$t]}"
+  json+="$sep\"$t\": {\"executions\": ${execs:-0}, \"seconds\": ${SECS[$t]}}"
+  sep=", "
 done
+echo "$json}, \"clean\": $([[ $status == 0 ]] && echo true || echo false)}" >"$BUILD/fuzz-stats.json"
 exit $status

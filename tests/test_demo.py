@@ -16,6 +16,9 @@ def test_demo_quick_end_to_end(tmp_path):
     assert "**All stages green**" in report and "FAILED" not in report
     for stage in ("Simulate", "AcoMerge", "MCCV", "Export", "host", "Cortex-M4", "SLCAN", "cost"):
         assert stage in report, stage
+    # the assurance stage's own summary table, for the bundle this run exported
+    assert "## Assurance evidence" in report and "MISRA C:2012 (cppcheck addon)" in report
+    assert (out / "assurance" / "assurance.html").exists()
     # the report's figures are the run's own files
     manifest = json.loads((out / "bundle" / "manifest.json").read_text())
     assert manifest["content_hash"] in report

@@ -89,6 +89,8 @@ def test_example_main_loops_estimate_every_window(builds, build):
 def test_m3_fixed_point_image_has_no_soft_float(builds):
     out = ctest(builds["cortex-m3"], "softfloat")
     assert "slipest_test_q.elf: 0 soft-float helper symbols (expected absent)" in out
+    # the archive a user links, not only our gc-sectioned image (issue 16: DBC phys-range helpers)
+    assert "libslipest_q.a: 0 soft-float helper symbols (expected absent)" in out
     # the same check finds the helpers in the float image: it can fail
     assert re.search(r"slipest_test_vectors.elf: [1-9]\d* soft-float helper symbols \(expected present\)", out)
 
@@ -139,7 +141,7 @@ def test_fuzzers_run_clean(tmp_path):
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr[-4000:]
     execs = dict(re.findall(r"^(fuzz_\w+) executions=(\d+)", proc.stdout, flags=re.M))
-    assert set(execs) == {"fuzz_slcan", "fuzz_cobs", "fuzz_push", "fuzz_image"}
+    assert set(execs) == {"fuzz_slcan", "fuzz_cobs", "fuzz_push", "fuzz_image", "fuzz_node_frames", "fuzz_payload"}
     assert all(int(v) > 1000 for v in execs.values()), execs
     print(proc.stdout)
 

@@ -115,6 +115,9 @@ def plan(out: Path, seed: int, prof: Profile, cortex_m: bool) -> list[Stage]:
         stages.append(Stage("bench_c", f"C estimator cost: host timing, {cpu.description} instructions and size",
                             [_fleetlab("bench", "c", "--bundle", bundle, "--build-dir", out / "build",
                                        "--iterations", prof.bench_iterations, "--json")]))
+    # flight-software evidence for the exported bundle (cross builds are the stages above)
+    stages.append(Stage("assure", "Assurance evidence: MISRA, analysers, stack bounds, coverage",
+                        [_fleetlab("assure", "--bundle", bundle, "--out", out / "assurance", "--no-target")]))
     return stages
 
 

@@ -162,6 +162,7 @@ def write_report(out: Path, stages: list, total_s: float, args, prof, cortex_not
         ("build_host", lambda: _section_c(out, by_name, cortex_note)),
         ("emulate", lambda: _section_emulate(out)),
         ("bench_c", lambda: _section_bench(by_name["bench_c"])),
+        ("assure", lambda: _section_assure(out)),
     ]
     for name, make in sections:
         if name not in by_name:
@@ -174,6 +175,14 @@ def write_report(out: Path, stages: list, total_s: float, args, prof, cortex_not
     (out / "report.md").write_text(md)
     _write_html(md, out / "report.html")
     return out / "report.md"
+
+
+def _section_assure(out: Path) -> list[str]:
+    """The summary table of the evidence report `fleetlab assure` wrote (assurance/assurance.md)."""
+    text = (out / "assurance" / "assurance.md").read_text()
+    summary = text.split("## Summary", 1)[1].split("\n## ", 1)[0].strip()
+    return ["## Assurance evidence", "", summary, "",
+            "Full report: [assurance/assurance.md](assurance/assurance.md) (and .html).", ""]
 
 
 def _display(cmd: list[str]) -> str:

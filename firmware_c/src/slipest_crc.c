@@ -9,8 +9,9 @@ uint16_t slipest_crc16(const uint8_t *data, size_t len)
     if (data == NULL) return crc;
     for (i = 0; i < len; i++) {
         crc ^= (uint16_t)((uint16_t)data[i] << 8);
-        for (b = 0; b < 8; b++)
+        for (b = 0; b < 8; b++) {
             crc = (crc & 0x8000u) ? (uint16_t)((crc << 1) ^ 0x1021u) : (uint16_t)(crc << 1);
+        }
     }
     return crc;
 }

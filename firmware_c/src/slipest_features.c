@@ -87,9 +87,13 @@ int slipest_extractor_push(slipest_extractor_t *ex, uint16_t counter,
         win = ex->slot / SLIPEST_SAMPLES_PER_WINDOW;
         if (win != open_index) {
             uint32_t first_new = open_index + 1u;
-            if (ex->has_open) close_window(ex, &out[closed++]);
+            if (ex->has_open) {
+                close_window(ex, &out[closed++]);
+            }
             /* windows strictly between are empty: skipped, flagged */
-            if (win > first_new) ex->windows_flagged += win - first_new;
+            if (win > first_new) {
+                ex->windows_flagged += win - first_new;
+            }
             start_window(ex, win);
         }
     }
@@ -106,7 +110,9 @@ uint32_t slipest_isqrt_u64(uint64_t x)
     /* bitwise square root: one result bit per step, no division */
     uint64_t res = 0;
     uint64_t bit = (uint64_t)1 << 62;
-    while (bit > x) bit >>= 2;
+    while (bit > x) {
+        bit >>= 2;
+    }
     while (bit != 0) {
         if (x >= res + bit) {
             x -= res + bit;
@@ -166,6 +172,8 @@ int slipest_window_features_q(const slipest_window_t *w, int16_t feat[SLIPEST_N_
         } else if (value < -32768) {
             value = -32768;
             saturated++;
+        } else {
+            /* in range: kept as is */
         }
         feat[f] = (int16_t)value;
     }

@@ -26,7 +26,12 @@ static uint32_t le32(const uint8_t *p)
 
 /* two's complement from the unsigned bit pattern without implementation-defined conversions */
 static int32_t s32(uint32_t u) { return u > 0x7FFFFFFFu ? -(int32_t)(~u) - 1 : (int32_t)u; }
-static int16_t s16(uint16_t u) { return u > 0x7FFFu ? (int16_t)(-(int32_t)(uint16_t)~u - 1) : (int16_t)u; }
+static int16_t s16(uint16_t u)
+{
+    /* both branches are in [-32768, 32767] by construction, so the conversions keep the value */
+    int32_t v = u > 0x7FFFu ? -(int32_t)(uint16_t)~u - 1 : (int32_t)u;
+    return (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): v fits int16_t (see above) */
+}
 
 uint32_t slipest_crc32(const uint8_t *data, size_t len)
 {
@@ -110,10 +115,16 @@ slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t exp
     hash32 = le32(img + 38);
     trailer_hash32 = ((uint32_t)img[body + 4] << 24) | ((uint32_t)img[body + 5] << 16) |
                      ((uint32_t)img[body + 6] << 8) | (uint32_t)img[body + 7]; /* sha256 bytes, big-endian */
-    if (hash32 != trailer_hash32 || (expect32 != 0u && hash32 != expect32)) return SLIPEST_E_HASH;
-    if (mf != NULL && !(flags & SLIPEST_IMAGE_FLAG_F32)) return SLIPEST_E_STATE;
+    if (hash32 != trailer_hash32 || (expect32 != 0u && hash32 != expect32)) {
+        return SLIPEST_E_HASH;
+    }
+    if (mf != NULL && !(flags & SLIPEST_IMAGE_FLAG_F32)) {
+        return SLIPEST_E_STATE;
+    }
 #ifdef SLIPEST_Q_ONLY
-    if (mf != NULL) return SLIPEST_E_STATE;
+    if (mf != NULL) {
+        return SLIPEST_E_STATE;
+    }
 #endif
 
     memset(&q, 0, sizeof q);

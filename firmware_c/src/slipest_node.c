@@ -121,12 +121,21 @@ static int emit_estimate(slipest_node_t *node, uint16_t window_counter, const in
                 /* fed features are integers in raw LSB units: back to physical units */
                 static const float lsb[SLIPEST_N_FEATURES] = {0.001f, 0.001f, 0.01f, 0.01f, 0.001f, 0.001f,
                                                                0.001f, 0.001f, 0.001f, 0.001f, 0.0001f, 0.0001f};
-                for (i = 0; i < SLIPEST_N_FEATURES; i++) feat_f[i] = (float)feat_q[i] * lsb[i];
+                for (i = 0; i < SLIPEST_N_FEATURES; i++) {
+                    feat_f[i] = (float)feat_q[i] * lsb[i];
+                }
                 rf = SLIPEST_OK;
             }
-            if (rf >= 0 && node->mf != NULL) rf = slipest_infer_f32(node->mf, feat_f, logits_f);
-            else if (rf >= 0) rf = SLIPEST_E_STATE; /* no float model: no float class */
-            if (rf >= 0) cls_f = (uint8_t)rf;
+            if (rf >= 0) {
+                if (node->mf != NULL) {
+                    rf = slipest_infer_f32(node->mf, feat_f, logits_f);
+                } else {
+                    rf = SLIPEST_E_STATE; /* no float model: no float class */
+                }
+            }
+            if (rf >= 0) {
+                cls_f = (uint8_t)rf;
+            }
         }
 #else
         (void)w;
@@ -216,7 +225,9 @@ static int handle_telem(slipest_node_t *node, unsigned type, uint16_t counter, c
         node->asm_counter = counter;
         node->asm_mask = 0;
     }
-    for (i = 0; i < count; i++) node->asm_sample[first + i] = vals[i];
+    for (i = 0; i < count; i++) {
+        node->asm_sample[first + i] = vals[i];
+    }
     node->asm_mask |= (uint8_t)(1u << type);
     if (node->asm_mask == TELEM_ALL) return push_sample(node, out);
     return 0;

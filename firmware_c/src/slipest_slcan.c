@@ -56,7 +56,7 @@ static int parse_data_frame(const char *s, size_t len, slipest_frame_t *f)
 static int set_reply(char *reply, size_t *reply_len, const char *text)
 {
     size_t n = strlen(text);
-    memcpy(reply, text, n);
+    memcpy(reply, text, n); /* NOLINT(bugprone-not-null-terminated-result): reply is length-counted */
     *reply_len = n;
     return SLIPEST_SLCAN_REPLY;
 }
@@ -68,7 +68,9 @@ static int handle_line(const char *s, size_t len, slipest_frame_t *f, char *repl
     case 't':
     case 'T': {
         int r = parse_data_frame(s, len, f);
-        if (r < 0) break;
+        if (r < 0) {
+            break;
+        }
         return r;
     }
     case 'O': case 'C': case 'L': case 'X': case 'W': case 'Q':

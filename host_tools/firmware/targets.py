@@ -51,6 +51,7 @@ class Target:
     vectors: str  # how it gets vectors.bin: "semihosting" | "file" | "embed"
     counter: str  # instruction counter of the cost image: "systick" | "none"
     reference: bool = False  # the target whose figures are quoted first (bench c's m4_* keys, the demo)
+    cpu_flags: tuple[str, ...] = ()  # SLIPEST_CPU_FLAGS: the compiler's CPU/FPU/ABI options (stack analysis reuses them)
 
     @property
     def toolchain_file(self) -> Path:
@@ -87,6 +88,9 @@ class Target:
                 "vectors": self.vectors, "counter": self.counter}
 
 
+_CPU_FLAGS = re.compile(r'^set\(SLIPEST_CPU_FLAGS\s+"([^"]*)"\)', re.M)
+
+
 def parse_target_file(path: Path) -> Target | None:
     """The target recorded in `path`, or None if it records none; TargetError if the record is broken."""
     fields: dict[str, str] = {}
@@ -104,7 +108,8 @@ def parse_target_file(path: Path) -> Target | None:
                   compiler=fields["COMPILER"], reference=_on(fields.get("REFERENCE", "OFF")), endian=fields["ENDIAN"], fpu=_on(fields["FPU"]), integer_only=_on(fields["INTEGER_ONLY"]),
                   qemu=fields["QEMU"], qemu_mode=fields["QEMU_MODE"], qemu_machine=fields.get("QEMU_MACHINE", "none"),
                   qemu_cpu=fields.get("QEMU_CPU", ""), report=fields["REPORT"], vectors=fields["VECTORS"],
-                  counter=fields["COUNTER"])
+                  counter=fields["COUNTER"], cpu_flags=tuple(shlex.split(m.group(1)) if (m := _CPU_FLAGS.search(
+                      Path(path).read_text())) else ()))
 
 
 def target_dirs() -> list[Path]:

@@ -25,6 +25,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "stream": ("fleetlab.cli.stream", "stream telemetry or features to the estimator over CAN or serial"),
     "monitor": ("fleetlab.cli.monitor", "watch slip estimates and status frames on a CAN bus"),
     "bench": ("fleetlab.cli.bench", "benchmarks: featurisation and simulation, fusion, C inference"),
+    "assure": ("fleetlab.cli.assure", "flight-software evidence: MISRA, analysers, stack, coverage, fuzzing report"),
     "demo": ("fleetlab.demo", "the whole pipeline on built-in defaults, ending in a report"),
 }
 

@@ -1,0 +1,151 @@
+"""Static analysers over the slipest library: clang-tidy (clang-analyzer, bugprone, cert; the
+configuration and its disabled checks are in firmware_c/.clang-tidy), gcc -fanalyzer, the strict
+warning set, and Frama-C EVA (sound value analysis) through firmware_c/eva/eva_driver.c.
+
+    python -m fleetlab.assurance.analysers [--bundle DIR] [--eva]
+"""
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .sources import EXAMPLE_BUNDLE, FW, generate_dbc, include_dirs, library_sources, need, rel, run
+
+STRICT_WARNINGS = ["-Wall", "-Wextra", "-pedantic", "-Wconversion", "-Wsign-conversion", "-Wcast-align",
+                   "-Wshadow", "-Wstrict-prototypes"]
+EVA_DRIVER = FW / "eva" / "eva_driver.c"
+# EVA entry points of the driver and the library files each one needs
+EVA_TARGETS = {
+    "eva_infer_q": ["slipest_infer_q.c"],
+    "eva_features": ["slipest_features.c"],
+}
+EVA_OPTIONS = ["-machdep", "x86_32", "-eva-precision", "1"]
+
+
+@dataclass
+class ToolResult:
+    name: str
+    findings: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+    version: str = ""
+    note: str = ""
+
+    @property
+    def clean(self) -> bool:
+        return not self.findings
+
+
+def _with_sources(bundle: Path, fn):
+    with tempfile.TemporaryDirectory() as tmp:
+        gen = generate_dbc(Path(tmp) / "generated")
+        incs = [f"-I{d}" for d in include_dirs(bundle, gen.parent)]
+        return fn([*library_sources(), gen], incs, gen.parent)
+
+
+def _gcc(flags: list[str], name: str, bundle: Path) -> ToolResult:
+    gcc = need("gcc")
+    t0 = time.perf_counter()
+
+    def go(files, incs, gen):
+        out = ToolResult(name, version=run([gcc, "--version"]).stdout.splitlines()[0])
+        for f in files:
+            res = run([gcc, "-std=c99", "-O2", "-c", "-o", "/dev/null", *incs, *flags, f])
+            for line in (res.stdout + res.stderr).splitlines():
+                if re.search(r": (warning|error):", line):
+                    out.findings.append(line.replace(str(f), rel(f, gen)))
+        return out
+
+    out = _with_sources(bundle, go)
+    out.seconds = time.perf_counter() - t0
+    return out
+
+
+def strict_warnings(bundle: Path = EXAMPLE_BUNDLE) -> ToolResult:
+    return _gcc(STRICT_WARNINGS, "gcc " + " ".join(STRICT_WARNINGS[3:]), bundle)
+
+
+def gcc_analyzer(bundle: Path = EXAMPLE_BUNDLE) -> ToolResult:
+    return _gcc(["-fanalyzer"], "gcc -fanalyzer", bundle)
+
+
+def clang_tidy(bundle: Path = EXAMPLE_BUNDLE) -> ToolResult:
+    tidy = need("clang-tidy")
+    t0 = time.perf_counter()
+
+    def go(files, incs, gen):
+        res = run([tidy, "-quiet", f"--config-file={FW / '.clang-tidy'}", *files, "--", "-std=c99", *incs])
+        out = ToolResult("clang-tidy (clang-analyzer-*, bugprone-*, cert-*)",
+                         version=run([tidy, "--version"]).stdout.strip().splitlines()[-1].strip())
+        out.findings = [l for l in (res.stdout + res.stderr).splitlines() if re.search(r": (warning|error):", l)]
+        if res.returncode != 0 and not out.findings:
+            out.findings.append(f"clang-tidy exited {res.returncode}: {res.stderr[-500:]}")
+        return out
+
+    out = _with_sources(bundle, go)
+    out.seconds = time.perf_counter() - t0
+    return out
+
+
+@dataclass
+class EvaResult:
+    entry: str
+    alarms: list[str]
+    seconds: float
+    log: str
+
+
+def frama_c_eva(bundle: Path = EXAMPLE_BUNDLE, entries: list[str] | None = None,
+                options: list[str] | None = None) -> list[EvaResult]:
+    """Alarms of EVA per driver entry point (fixed-point library: -DSLIPEST_Q_ONLY)."""
+    frama = need("frama-c")
+    results = []
+
+    def go(files, incs, gen):
+        for entry in entries or list(EVA_TARGETS):
+            srcs = [FW / "src" / name for name in EVA_TARGETS[entry]]
+            t0 = time.perf_counter()
+            res = run([frama, "-no-autoload-plugins", "-load-module", "eva", *(options or EVA_OPTIONS),
+                       f"-cpp-extra-args={' '.join(incs)} -DSLIPEST_Q_ONLY", EVA_DRIVER, *srcs,
+                       "-eva", "-main", entry], timeout=3600)
+            text = res.stdout + res.stderr
+            if res.returncode != 0 or f"done for function {entry}" not in text:
+                raise RuntimeError(f"frama-c failed on {entry}:\n{text[-3000:]}")
+            alarms = []
+            # each message starts with "[eva...]"; an alarm is "[eva:alarm] FILE:LINE: Warning:" + indented text
+            for chunk in re.split(r"\n(?=\[)", text):
+                m = re.match(r"\[eva:alarm\] (\S+?):(\d+): Warning: *\n(.*)", chunk, re.S)
+                if m:
+                    alarms.append(f"{Path(m[1]).name}:{m[2]}: {' '.join(m[3].split())}")
+            results.append(EvaResult(entry, alarms, time.perf_counter() - t0, text))
+        return results
+
+    return _with_sources(bundle, go)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m fleetlab.assurance.analysers", description=__doc__.split("\n")[0])
+    ap.add_argument("--bundle", type=Path, default=EXAMPLE_BUNDLE)
+    ap.add_argument("--eva", action="store_true", help="also run Frama-C EVA")
+    args = ap.parse_args(argv)
+    status = 0
+    for fn in (strict_warnings, gcc_analyzer, clang_tidy):
+        r = fn(args.bundle)
+        print(f"{r.name}: {len(r.findings)} findings ({r.seconds:.1f} s)")
+        for f in r.findings:
+            print("  " + f)
+        status |= not r.clean
+    if args.eva:
+        for e in frama_c_eva(args.bundle):
+            print(f"frama-c eva {e.entry}: {len(e.alarms)} alarms ({e.seconds:.1f} s)")
+            for a in e.alarms:
+                print("  " + a)
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,211 @@
+"""``fleetlab assure --bundle DIR --out DIR``: run every assurance check on one bundle and write
+one evidence report (OUT/assurance.md and OUT/assurance.html) built only from what the tools
+printed in this run (plus the statistics file of the last long fuzz campaign, named in the report).
+Exit status 1 when a gating check fails: bundle hashes, float-free archive, unrecorded MISRA
+findings, a finding of clang-tidy / gcc -fanalyzer / the strict warnings, recursion.
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import re
+import sys
+import time
+from pathlib import Path
+
+from ..host_tools.firmware.bench import target_costs
+from ..host_tools.firmware.build import cmake_build
+from . import analysers, coverage, misra, stack
+from .sources import EXAMPLE_BUNDLE, REPO, run, tool_version
+
+DEFAULT_FUZZ_STATS = [REPO / "build" / "fuzz-long" / "fuzz-stats.json", REPO / "build" / "fuzz" / "fuzz-stats.json"]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--bundle", type=Path, default=EXAMPLE_BUNDLE, help="export bundle (default: the example bundle)")
+    p.add_argument("--out", type=Path, required=True, help="directory for assurance.md / assurance.html")
+    p.add_argument("--fuzz-stats", type=Path, default=None,
+                   help="fuzz-stats.json of the last campaign (default: build/fuzz-long, else build/fuzz)")
+    p.add_argument("--no-eva", action="store_true", help="skip Frama-C EVA")
+    p.add_argument("--no-target", action="store_true",
+                   help="skip the Cortex-M3/M4 builds (float-free archive check, measured stack and cost)")
+
+
+def _section(title: str, body: str) -> str:
+    return f"## {title}\n\n{body.strip()}\n"
+
+
+def bundle_hashes(bundle: Path) -> tuple[bool, str, str]:
+    manifest = bundle / "manifest.json"
+    data = json.loads(manifest.read_text())
+    rows, ok = ["| File | sha256 (manifest) | matches |", "|---|---|---|"], True
+    for name, entry in sorted(data.get("files", {}).items()):
+        if "sha256" not in entry:
+            continue
+        path = bundle / name
+        got = hashlib.sha256(path.read_bytes()).hexdigest() if path.exists() else "missing"
+        match = got == entry["sha256"]
+        ok &= match
+        rows.append(f"| {name} | `{entry['sha256'][:16]}…` | {'yes' if match else 'NO (' + got[:16] + ')'} |")
+    return ok, hashlib.sha256(manifest.read_bytes()).hexdigest(), "\n".join(rows)
+
+
+def _cross_build(cpu: str, build: Path, bundle: Path) -> None:
+    cmake_build(build, bundle, target=cpu, jobs=2)
+
+
+def float_free(build_m3: Path) -> tuple[bool, str]:
+    res = run(["ctest", "--test-dir", build_m3, "-R", "softfloat", "-V"])
+    lines = [l.split(": -- ", 1)[-1] for l in res.stdout.splitlines() if "soft-float helper symbols" in l]
+    nm = run(["arm-none-eabi-nm", build_m3 / "libslipest_q.a"]).stdout
+    hits = sorted(set(re.findall(r"\b(__aeabi_[fd]\w*)", nm)))
+    ok = res.returncode == 0 and not hits
+    body = "\n".join(f"- {l.strip()}" for l in lines)
+    body += f"\n- `arm-none-eabi-nm libslipest_q.a` (Cortex-M3): {len(hits)} `__aeabi_f*`/`__aeabi_d*` symbols"
+    body += (": " + ", ".join(hits)) if hits else ""
+    return ok, body
+
+
+def assure(args: argparse.Namespace) -> int:
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    bundle = args.bundle.resolve()
+    t_start = time.perf_counter()
+    sections, summary, gating_ok = [], [], True
+
+    def summary_row(item: str, result: str, ok: bool | None) -> None:
+        summary.append(f"| {item} | {result} | {'pass' if ok else ('—' if ok is None else 'FAIL')} |")
+
+    # bundle
+    ok, manifest_hash, rows = bundle_hashes(bundle)
+    gating_ok &= ok
+    summary_row("Bundle hashes (manifest.json)", f"manifest sha256 `{manifest_hash[:16]}…`", ok)
+    sections.append(_section("Bundle", f"Bundle: `{bundle}`\n\nmanifest.json sha256: `{manifest_hash}`\n\n{rows}"))
+
+    # target builds: float-free archive, measured stack and cost
+    measured = {}
+    if not args.no_target:
+        work = REPO / "build" / "assure"
+        _cross_build("cortex-m3", work / "cortex-m3", bundle)
+        ok, body = float_free(work / "cortex-m3")
+        gating_ok &= ok
+        summary_row("Float-free fixed-point archive (M3)", "0 soft-float symbols" if ok else "soft-float found", ok)
+        sections.append(_section("Float-free check", body))
+        _cross_build("cortex-m4", work / "cortex-m4", bundle)
+        measured = target_costs("cortex-m4", work / "cortex-m4")
+
+    # MISRA
+    m = misra.check(bundle)
+    gating_ok &= not m.unrecorded
+    summary_row("MISRA C:2012 (cppcheck addon)", f"{m.total} findings in {len(m.by_rule())} rules, "
+                f"{len(m.unrecorded)} unrecorded", not m.unrecorded)
+    by_rule = "\n".join(f"| {r} | {n} |" for r, n in sorted(m.by_rule().items(), key=lambda kv: misra._rule_key(kv[0])))
+    unrec = "\n".join(f"- rule {r} in {f}: {n} found, {rec} recorded" for r, f, n, rec in m.unrecorded) or "none"
+    sections.append(_section("MISRA C:2012", f"{m.version}; deviations: `firmware_c/MISRA_DEVIATIONS.md` "
+                             f"(one permit per rule).\n\n| Rule | Findings |\n|---|---:|\n{by_rule}\n\n"
+                             f"Unrecorded findings: {unrec}\n\nOther cppcheck findings (style, not gating): "
+                             f"{len(m.other)}\n\n" + "\n".join(f"- {o}" for o in m.other)))
+
+    # analysers
+    rows = ["| Analyser | Findings | Seconds |", "|---|---:|---:|"]
+    details = []
+    for fn in (analysers.strict_warnings, analysers.gcc_analyzer, analysers.clang_tidy):
+        r = fn(bundle)
+        gating_ok &= r.clean
+        rows.append(f"| {r.name} | {len(r.findings)} | {r.seconds:.1f} |")
+        summary_row(r.name, f"{len(r.findings)} findings", r.clean)
+        details += [f"- {f}" for f in r.findings]
+    eva_text = "Frama-C EVA skipped (--no-eva)."
+    if not args.no_eva:
+        eva = analysers.frama_c_eva(bundle)
+        eva_rows = ["| EVA entry (all int16 inputs) | Alarms | Seconds |", "|---|---:|---:|"]
+        for e in eva:
+            eva_rows.append(f"| {e.entry} | {len(e.alarms)} | {e.seconds:.1f} |")
+            summary_row(f"Frama-C EVA {e.entry}", f"{len(e.alarms)} alarms (goal 0)", not e.alarms)
+        alarm_list = "\n".join(f"- {e.entry}: {a}" for e in eva for a in e.alarms)
+        eva_text = (f"{tool_version(['frama-c', '-version'])}, options `{' '.join(analysers.EVA_OPTIONS)}`, "
+                    f"driver `firmware_c/eva/eva_driver.c`.\n\n" + "\n".join(eva_rows) +
+                    "\n\nAlarms (not yet shown false; each is a place where EVA could not bound a value):\n\n"
+                    + (alarm_list or "none"))
+    sections.append(_section("Static analysis", "\n".join(rows) + "\n\n" + ("\n".join(details) or "No findings.")
+                             + "\n\n### Frama-C EVA\n\n" + eva_text))
+
+    # stack
+    rows_q, cycles = stack.analyse(bundle, q_only=True)
+    rows_full, cycles_full = stack.analyse(bundle, q_only=False)
+    no_rec = not cycles and not cycles_full
+    gating_ok &= no_rec
+    summary_row("No recursion (call-graph cycle check)", "acyclic" if no_rec else f"cycles: {cycles + cycles_full}", no_rec)
+    worst = {r.function: r.bytes for r in rows_q}
+    body = "Frames from `-fstack-usage -fcallgraph-info=su` (arm-none-eabi-gcc, Cortex-M4 flags of the target build).\n\n"
+    if measured:
+        # the painter measures a wrapper in the cost image: compare the wrapper's bound with it
+        harness = stack.bench_bounds(bundle)
+        cmp_rows = ["| Entry (cost-image wrapper) | Entry bound | Wrapper bound (bytes) | Measured peak, painted (bytes) "
+                    "| bound >= measured |", "|---|---:|---:|---:|---|"]
+        for fn, key in (("slipest_infer_q", "stack_q"), ("slipest_node_handle", "stack_node_window")):
+            ok = harness[key] >= measured[key]
+            cmp_rows.append(f"| {fn} ({stack.BENCH_WRAPPERS[key]}) | {worst[fn]} | {harness[key]} | {measured[key]:.0f} "
+                            f"| {'yes' if ok else 'NO'} |")
+            summary_row(f"Stack bound {fn}", f"{worst[fn]} B; with the bench wrapper {harness[key]} B bound vs "
+                        f"{measured[key]:.0f} B measured", ok)
+        body += "\n".join(cmp_rows) + "\n\n"
+    body += "### Fixed-point library (slipest_q)\n\n" + stack.table(rows_q)
+    body += "\n\n### Full library (with the float path)\n\n" + stack.table(rows_full[:6])
+    sections.append(_section("Worst-case stack", body))
+    if measured:
+        sections.append(_section("Execution cost (Cortex-M4, QEMU icount)",
+                                 f"Measured, averaged over the bench loop of the vectors (not a bound): "
+                                 f"slipest_infer_q {measured['q']:.0f} instructions per inference; "
+                                 f"SLCAN parsing + slipest_node_handle {measured['node_instructions_per_sample']:.0f} instructions "
+                                 f"per telemetry sample (3 frames). "
+                                 "A worst-case path analysis is not part of this report yet."))
+
+    # coverage
+    cov = coverage.measure(REPO / "build" / "assure" / "coverage", bundle)
+    hw = cov.handwritten()
+    cov_ok = hw.line_pct >= coverage.GOAL_LINES and hw.branch_pct >= coverage.GOAL_BRANCHES
+    summary_row("Coverage by the C tests (src/*.c)", f"{hw.line_pct:.1f} % statements, {hw.branch_pct:.1f} % branches "
+                f"(goal {coverage.GOAL_LINES:.0f} / {coverage.GOAL_BRANCHES:.0f})", cov_ok)
+    sections.append(_section("Coverage", f"{cov.gcovr_version}; ctest: {cov.ctest_summary.strip()}\n\n"
+                             + coverage.table(cov)))
+
+    # fuzzing
+    stats_file = args.fuzz_stats or next((p for p in DEFAULT_FUZZ_STATS if p.exists()), None)
+    if stats_file and stats_file.exists():
+        st = json.loads(stats_file.read_text())
+        frows = ["| Target | Executions | Seconds |", "|---|---:|---:|"]
+        frows += [f"| {t} | {v['executions']:,} | {v['seconds']} |" for t, v in st["targets"].items()]
+        fewest = min(v["executions"] for v in st["targets"].values())
+        summary_row("Fuzzing (last campaign, ASan+UBSan)", f"{st['mode']} run {st['date']}, "
+                    f"min {fewest:,} executions/target, {'clean' if st['clean'] else 'CRASH'}", st["clean"])
+        sections.append(_section("Fuzzing", f"From `{stats_file}` (written by scripts/fuzz.sh).\n\n" + "\n".join(frows)))
+    else:
+        summary_row("Fuzzing", "no fuzz-stats.json found (run scripts/fuzz.sh --long)", None)
+
+    versions = {
+        "gcc": tool_version(["gcc", "--version"]), "arm-none-eabi-gcc": tool_version(["arm-none-eabi-gcc", "--version"]),
+        "clang": tool_version(["clang", "--version"]), "clang-tidy": tool_version(["clang-tidy", "--version"]).strip(),
+        "cppcheck": tool_version(["cppcheck", "--version"]), "frama-c": tool_version(["frama-c", "-version"]),
+        "gcovr": cov.gcovr_version, "cmake": tool_version(["cmake", "--version"]),
+        "qemu-system-arm": tool_version(["qemu-system-arm", "--version"]),
+    }
+    sections.append(_section("Toolchain versions", "\n".join(f"- {k}: {v}" for k, v in versions.items())))
+    commit = run(["git", "-C", REPO, "rev-parse", "HEAD"]).stdout.strip()
+    dirty = bool(run(["git", "-C", REPO, "status", "--porcelain", "--untracked-files=no"]).stdout.strip())
+    head = (f"# slipest assurance evidence\n\nGenerated by `fleetlab assure` in {time.perf_counter() - t_start:.0f} s "
+            f"on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; source commit `{commit}`"
+            f"{' (with uncommitted changes)' if dirty else ''}.\n\n## Summary\n\n| Check | Result | Status |\n|---|---|---|\n"
+            + "\n".join(summary) + f"\n\nGating checks: {'all pass' if gating_ok else 'FAILED'}.\n")
+    md = head + "\n" + "\n".join(sections)
+    (out / "assurance.md").write_text(md)
+    import markdown
+    html = markdown.markdown(md, extensions=["tables"])
+    (out / "assurance.html").write_text(f"<!doctype html><meta charset='utf-8'><title>slipest assurance</title>"
+                                        f"<style>body{{font-family:sans-serif;max-width:70em;margin:auto}}"
+                                        f"td,th{{border:1px solid #ccc;padding:2px 6px}}table{{border-collapse:collapse}}"
+                                        f"</style>{html}")
+    print(head)
+    print(f"report: {out / 'assurance.md'} and assurance.html")
+    return 0 if gating_ok else 1

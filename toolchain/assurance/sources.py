@@ -1,0 +1,89 @@
+"""What the assurance tools look at: the library's C files found by glob, the generated
+CAN codec, include paths, and a helper that runs a tool and keeps its output."""
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..paths import default_bundle, repo_root
+
+REPO = repo_root()
+FW = REPO / "firmware_c"
+DBC = REPO / "dbc" / "slipest.dbc"
+EXAMPLE_BUNDLE = default_bundle()
+# sources that use float on purpose (the f32 reference path); the fixed-point library omits them
+FLOAT_SOURCES = ("slipest_features_f32.c", "slipest_infer_f32.c")
+
+
+def library_sources(include_float: bool = True) -> list[Path]:
+    files = sorted((FW / "src").glob("*.c"))
+    if not include_float:
+        files = [f for f in files if f.name not in FLOAT_SOURCES]
+    return files
+
+
+def public_headers() -> list[Path]:
+    return sorted((FW / "include").glob("*.h"))
+
+
+def generate_dbc(out_dir: Path) -> Path:
+    """cantools C codec from the repo DBC, integer-only, exactly as the CMake build makes it."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    run([sys.executable, "-m", "cantools", "generate_c_source", str(DBC), "--database-name", "slipest_dbc",
+         "--no-floating-point-numbers", "-o", str(out_dir)], check=True)
+    run(["cmake", f"-DGEN={out_dir}", "-P", str(FW / "cmake" / "strip_float_dbc.cmake")], check=True)
+    return out_dir / "slipest_dbc.c"
+
+
+def include_dirs(bundle: Path, gen_dir: Path) -> list[Path]:
+    return [FW / "include", Path(bundle), gen_dir]
+
+
+@dataclass
+class Result:
+    cmd: list[str]
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def need(tool: str) -> str:
+    """Path of `tool`, or a clear error naming the package that provides it."""
+    path = shutil.which(tool)
+    if path is None:
+        raise RuntimeError(f"{tool} not found: install it (scripts/apt-packages.txt, scripts/setup.sh)")
+    return path
+
+
+def run(cmd: list[str], *, check: bool = False, cwd: Path | None = None, timeout: float = 1800) -> Result:
+    proc = subprocess.run([str(c) for c in cmd], capture_output=True, text=True, cwd=cwd, timeout=timeout)
+    res = Result([str(c) for c in cmd], proc.returncode, proc.stdout, proc.stderr)
+    if check and proc.returncode != 0:
+        raise RuntimeError(f"{Path(cmd[0]).name} exited {proc.returncode}:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    return res
+
+
+def rel(path: str | Path, gen_dir: Path | None = None) -> str:
+    """Stable display name: repo-relative, the generated codec as generated/<name>, a bundle file as bundle/<name>."""
+    p = Path(path).resolve()
+    if gen_dir is not None and p.parent == Path(gen_dir).resolve():
+        return f"generated/{p.name}"
+    try:
+        r = p.relative_to(REPO)
+    except ValueError:
+        return f"bundle/{p.name}"
+    if r.parts[:2] == ("firmware_c", "bundles"):
+        return f"bundle/{p.name}"
+    return str(r)
+
+
+def tool_version(cmd: list[str]) -> str:
+    try:
+        res = run(cmd, timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return "not installed"
+    text = (res.stdout or res.stderr).strip().splitlines()
+    return text[0] if text else "unknown"

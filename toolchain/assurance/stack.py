@@ -1,0 +1,190 @@
+"""Worst-case stack of every public entry point on Cortex-M4, from GCC's own numbers.
+
+Each library file is cross-compiled with the target's flags plus ``-fstack-usage
+-fcallgraph-info=su``; the .ci files give every function's frame size and its call edges.
+The worst case of a function is its frame plus the worst case of its deepest callee. A cycle
+in the call graph would make that unbounded, so the graph is checked for cycles first (no
+recursion proof); a frame GCC marks dynamic, or a call to a function with no frame size
+(a libc routine), is listed, not silently counted as zero.
+
+    python -m fleetlab.assurance.stack [--bundle DIR] [--full]
+"""
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..host_tools.firmware import targets as target_registry
+from .sources import EXAMPLE_BUNDLE, FW, generate_dbc, include_dirs, library_sources, need, public_headers, run
+
+# the stack bound is computed for the reference target (the CPU whose painted stack bench c measures)
+CPU_FLAGS = list(target_registry.reference().cpu_flags)
+KERNEL_OPT = "-O3"   # firmware_c/cmake/target.cmake: inference kernels
+FRAME_OPT = "-Os"    # ... and per-frame code
+KERNELS = ("slipest_infer_q.c", "slipest_infer_f32.c", "slipest_features_f32.c")
+
+_NODE = re.compile(r'node: \{ title: "(?P<title>[^"]+)" label: "(?P<label>[^"]*)"')
+_EDGE = re.compile(r'edge: \{ sourcename: "(?P<src>[^"]+)" targetname: "(?P<dst>[^"]+)"')
+_SIZE = re.compile(r"\\n(\d+) bytes \(([a-z,]+)\)$")
+
+
+@dataclass
+class StackGraph:
+    frame: dict = field(default_factory=dict)      # title -> bytes
+    qualifier: dict = field(default_factory=dict)  # title -> static / dynamic / dynamic,bounded
+    calls: dict = field(default_factory=dict)      # title -> set of titles
+
+    def cycles(self) -> list[list[str]]:
+        """Every back edge found by an iterative DFS, as the cycle it closes."""
+        found, state = [], {}
+        for root in sorted(self.calls.keys() | self.frame.keys()):
+            if root in state:
+                continue
+            stack = [(root, iter(sorted(self.calls.get(root, ()))))]
+            path = [root]
+            state[root] = "open"
+            while stack:
+                node, it = stack[-1]
+                nxt = next(it, None)
+                if nxt is None:
+                    state[node] = "done"
+                    stack.pop()
+                    path.pop()
+                elif state.get(nxt) == "open":
+                    found.append(path[path.index(nxt):] + [nxt])
+                elif nxt not in state:
+                    state[nxt] = "open"
+                    path.append(nxt)
+                    stack.append((nxt, iter(sorted(self.calls.get(nxt, ())))))
+        return found
+
+    def worst(self, fn: str) -> tuple[int, list[str], set[str]]:
+        """(bytes, deepest call chain, callees without a known frame) — needs an acyclic graph."""
+        memo: dict[str, tuple[int, list[str], set[str]]] = {}
+        order, seen = [], set()
+        todo = [(fn, False)]
+        while todo:  # post-order without recursion
+            node, expanded = todo.pop()
+            if expanded:
+                order.append(node)
+                continue
+            if node in seen:
+                continue
+            seen.add(node)
+            todo.append((node, True))
+            todo.extend((c, False) for c in self.calls.get(node, ()))
+        for node in order:
+            unknown = set() if node in self.frame else {node}
+            best, chain = 0, []
+            for c in self.calls.get(node, ()):
+                b, ch, u = memo[c]
+                unknown |= u
+                if b > best:
+                    best, chain = b, ch
+            memo[node] = (self.frame.get(node, 0) + best, [node] + chain, unknown)
+        return memo[fn]
+
+
+# the QEMU cost image's stack painter measures these wrappers (firmware_c/target/bench_target.c)
+BENCH = FW / "target" / "bench_target.c"
+BENCH_WRAPPERS = {"stack_q": "one_q", "stack_node_window": "node_last_frame"}
+
+
+def compile_graph(bundle: Path = EXAMPLE_BUNDLE, q_only: bool = True, with_bench: bool = False) -> StackGraph:
+    gcc = need("arm-none-eabi-gcc")
+    graph = StackGraph()
+    with tempfile.TemporaryDirectory() as tmp:
+        gen = generate_dbc(Path(tmp) / "generated")
+        incs = [f"-I{d}" for d in include_dirs(bundle, gen.parent)]
+        defs = ["-DSLIPEST_Q_ONLY"] if q_only else []
+        for i, src in enumerate([*library_sources(include_float=not q_only), gen] + ([BENCH] if with_bench else [])):
+            opt = KERNEL_OPT if src.name in KERNELS else FRAME_OPT
+            extra = []
+            if src == BENCH:  # as target.cmake builds the cost image
+                opt = KERNEL_OPT
+                extra = ["-fno-shrink-wrap", '-DSLIPEST_VECTORS_PATH="unused"', f"-I{FW / 'target'}", f"-I{FW / 'common'}"]
+            obj = Path(tmp) / f"{i}_{src.stem}.o"
+            run([gcc, *CPU_FLAGS, "-std=c99", opt, "-ffunction-sections", "-fdata-sections", *defs, *incs, *extra,
+                 "-fstack-usage", "-fcallgraph-info=su", "-c", src, "-o", obj], check=True, cwd=tmp)
+            text = obj.with_suffix(".ci").read_text()
+            for m in _NODE.finditer(text):
+                size = _SIZE.search(m["label"])
+                if size:
+                    graph.frame[m["title"]] = int(size[1])
+                    graph.qualifier[m["title"]] = size[2]
+            for m in _EDGE.finditer(text):
+                graph.calls.setdefault(m["src"], set()).add(m["dst"])
+    return graph
+
+
+def bench_bounds(bundle: Path = EXAMPLE_BUNDLE) -> dict[str, int]:
+    """Stack bound of each measured wrapper of the cost image (its frame plus the library call),
+    keyed like fleetlab.host_tools.firmware.bench.target_costs, so bound and measurement compare 1:1."""
+    graph = compile_graph(bundle, q_only=True, with_bench=True)
+    out = {}
+    for key, fn in BENCH_WRAPPERS.items():
+        title = next(t for t in graph.frame if t == fn or t.endswith(":" + fn))
+        out[key] = graph.worst(title)[0]
+    return out
+
+
+def public_functions() -> list[str]:
+    names = set()
+    for h in public_headers():
+        names |= set(re.findall(r"^\s*(?:const\s+)?[\w ]+?\**\s*\b(slipest_\w+)\s*\(", h.read_text(), re.M))
+    return sorted(names)
+
+
+@dataclass
+class StackRow:
+    function: str
+    bytes: int
+    chain: list[str]
+    unknown: set[str]
+    dynamic: bool
+
+
+def analyse(bundle: Path = EXAMPLE_BUNDLE, q_only: bool = True) -> tuple[list[StackRow], list[list[str]]]:
+    graph = compile_graph(bundle, q_only)
+    cycles = graph.cycles()
+    rows = []
+    if cycles:
+        return rows, cycles
+    for fn in public_functions():
+        if fn not in graph.frame:
+            continue  # declared but not in this library variant (e.g. the f32 path in slipest_q)
+        b, chain, unknown = graph.worst(fn)
+        dyn = any(graph.qualifier.get(c, "static") != "static" for c in chain)
+        rows.append(StackRow(fn, b, [c.rsplit(":", 1)[-1] for c in chain], unknown, dyn))
+    return rows, cycles
+
+
+def table(rows: list[StackRow]) -> str:
+    out = ["| Entry point | Worst-case stack (bytes) | Deepest chain | Calls without a frame size |",
+           "|---|---:|---|---|"]
+    for r in sorted(rows, key=lambda r: -r.bytes):
+        out.append(f"| {r.function} | {r.bytes}{' (dynamic frame)' if r.dynamic else ''} | "
+                   f"{' → '.join(r.chain)} | {', '.join(sorted(r.unknown)) or '—'} |")
+    return "\n".join(out)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m fleetlab.assurance.stack", description=__doc__.split("\n")[0])
+    ap.add_argument("--bundle", type=Path, default=EXAMPLE_BUNDLE)
+    ap.add_argument("--full", action="store_true", help="the full library (float path too) instead of slipest_q")
+    args = ap.parse_args(argv)
+    rows, cycles = analyse(args.bundle, q_only=not args.full)
+    if cycles:
+        print("RECURSION: " + "; ".join(" → ".join(c) for c in cycles))
+        return 1
+    print("call graph acyclic: no recursion")
+    print(table(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

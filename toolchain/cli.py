@@ -15,7 +15,7 @@ import sys
 # name -> (module, one-line help, longer description)
 COMMANDS: dict[str, tuple[str, str]] = {
     "simulate": ("fleetlab.data.simulator.cli", "simulate rover telemetry and write window CSVs (built-in fleet scenario)"),
-    "data": ("fleetlab.data.info", "inspect a dataset folder: rows, roles, class mix, feature statistics"),
+    "data": ("fleetlab.data_command", "inspect a dataset folder (info) or compare two of them (compare: realism report)"),
     "fuse": ("fleetlab.fusion.cli", "train the experts and fuse them with AcoMerge into one model"),
     "evaluate": ("fleetlab.evaluation.cli", "Monte Carlo cross-validation of AcoMerge against the paper's baselines"),
     "export": ("fleetlab.export.cli", "export a model to ONNX, fixed-point C headers and test vectors"),

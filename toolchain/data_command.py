@@ -58,9 +58,9 @@ def print_report(rep: dict) -> None:
                      f"acc_z {r['acceleration']['mean_acc_z']:+.2f}"))
         for name in FEATURE_NAMES:
             rows.append((name, lambda r, n=name: f"{r['features'][n]['mean']:.3g} ± {r['features'][n]['std']:.3g}"))
-        print(f"{'':32s}{'A':>28s}{'B':>28s}")
+        print(f"{'':32s} {'A':>30s} {'B':>30s}")
         for label, get in rows:
-            print(f"{label:32s}{get(ra) if ra else '—':>28s}{get(rb) if rb else '—':>28s}")
+            print(f"{label:32s} {get(ra) if ra else '—':>30s} {get(rb) if rb else '—':>30s}")
     if "learnability" in rep:
         la, lb = rep["learnability"]["a"], rep["learnability"]["b"]
         print("\n== learnability on the target (SN-S, balanced accuracy) ==")

@@ -16,7 +16,9 @@ from fleetlab.data.csvio import read_windows_csv
 from fleetlab.data.dataset import load_dataset
 from fleetlab.data.features import featurise
 from fleetlab.data.labels import slip_class, slip_ratio
-from fleetlab.data.simulator.engine import TraverseSpec, simulate_batch, simulate_traverse
+from fleetlab.data.simulator.engine import (
+    ACCEL_LINEAR, ACCEL_SPECIFIC_FORCE, TraverseSpec, simulate_batch, simulate_traverse,
+)
 from fleetlab.data.simulator.rovers import GRAVITY_EARTH, GRAVITY_MOON, ROVERS
 from fleetlab.data.simulator.scenario import scenario_specs, write_scenario
 from fleetlab.data.simulator.terrain import TerrainSpec
@@ -28,7 +30,9 @@ def _fleetlab(*args: str) -> subprocess.CompletedProcess:
 
 
 def _terrain(slope_deg: float, soil: str = "lunar_regolith", name: str = "test") -> TerrainSpec:
-    return TerrainSpec(name, soil, soil, 0.0, 10.0, slope_deg)
+    # Short wavelengths, so that a 2-minute physics traverse goes both up and down hill (the
+    # scenario terrains' long wavelengths can keep a short traverse on one slope).
+    return TerrainSpec(name, soil, soil, 0.0, 10.0, slope_deg, wavelength_m=(2.0, 20.0))
 
 
 @pytest.fixture(scope="module")
@@ -162,7 +166,9 @@ def test_traction_solve_balances_the_required_pull():
 def test_more_slope_means_more_slip_and_current(physics):
     flat, steep = physics["flat"], physics["steep"]
     slip = lambda trs: np.mean([np.abs(t.truth["slip"][_moving(t)]).mean() for t in trs])  # noqa: E731
-    assert slip(steep) > slip(flat) + 0.05
+    # Per-traverse site soils (paired by seed here) and slow soil variation add spread, so the
+    # margin over a 2-minute traverse is smaller than the uphill-vs-level one below.
+    assert slip(steep) > slip(flat) + 0.02
     pitch_spread = lambda trs: np.mean([t.samples[:, CH["pitch"]].std() for t in trs])  # noqa: E731
     assert pitch_spread(steep) > 3 * pitch_spread(flat)
     # Within the hilly traverses: driving uphill needs more slip and more current than level driving.
@@ -188,8 +194,18 @@ def test_softer_soil_means_more_slip_and_sinkage(physics):
 
 def test_gravity_sets_acc_z_and_sinkage(physics):
     moon, earth = physics["level_moon"][0], physics["level_earth"][0]
-    assert abs(moon.samples[:, CH["acc_z"]].mean() - GRAVITY_MOON) < 0.05
-    assert abs(earth.samples[:, CH["acc_z"]].mean() - GRAVITY_EARTH) < 0.1
+    # Default convention: gravity-free linear acceleration, like the Fleet-To-Lab files.
+    assert abs(moon.samples[:, CH["acc_z"]].mean()) < 0.05 and abs(earth.samples[:, CH["acc_z"]].mean()) < 0.05
+    assert moon.meta["accel"] == ACCEL_LINEAR
+    # Raw specific force: the same traverses (same draws), with gravity in the accelerometer.
+    specs = [TraverseSpec.make("leo", _CASES[n][0], _CASES[n][1], 120.0, _CASES[n][2][0])
+             for n in ("level_moon", "level_earth")]
+    raw_moon, raw_earth = simulate_batch(specs, accel=ACCEL_SPECIFIC_FORCE)
+    assert abs(raw_moon.samples[:, CH["acc_z"]].mean() - GRAVITY_MOON) < 0.05
+    assert abs(raw_earth.samples[:, CH["acc_z"]].mean() - GRAVITY_EARTH) < 0.1
+    np.testing.assert_array_equal(raw_moon.truth["slip"], moon.truth["slip"])  # only the IMU convention differs
+    with pytest.raises(ValueError, match="acceleration convention"):
+        simulate_batch(specs, accel="gravity-ish")
     # Level ground: attitude near zero, x/y specific force near zero on average.
     assert np.abs(moon.samples[:, [CH["roll"], CH["pitch"]]].mean(axis=0)).max() < 0.02
     assert np.abs(moon.samples[:, [CH["acc_x"], CH["acc_y"]]].mean(axis=0)).max() < 0.1
@@ -226,10 +242,18 @@ def test_roles_differ_as_expected(small_scenario):
     low = {r: ds.table(r).class_counts()[0] / len(ds.table(r)) for r in ds.roles}
     assert low["earth"] > 0.8
     assert all(low[r] < low["earth"] for r in ds.fleet_roles)
-    # acc_z = g cos(pitch) cos(roll) on average: a little below g on sloped terrain.
+    # Gravity-free linear acceleration by default: mean acc_z near 0 in every role, Earth included.
+    acc_z = {r: ds.table(r).features[:, 8].mean() for r in ds.roles}
+    assert all(abs(v) < 0.1 for v in acc_z.values()), acc_z
+
+
+def test_specific_force_option_puts_gravity_in_acc_z(tmp_path):
+    """--accel specific-force: acc_z = g cos(pitch) cos(roll), a little below g on sloped terrain."""
+    ds = load_dataset(write_scenario(tmp_path / "sf", seed=7, scale=0.03, accel=ACCEL_SPECIFIC_FORCE))
     acc_z = {r: ds.table(r).features[:, 8].mean() for r in ds.roles}
     assert 0.95 * GRAVITY_EARTH < acc_z["earth"] < GRAVITY_EARTH + 0.05
     assert all(0.85 * GRAVITY_MOON < acc_z[r] < GRAVITY_MOON + 0.02 for r in ds.roles if r != "earth")
+    assert json.loads((tmp_path / "sf" / "dataset.json").read_text())["accel"] == ACCEL_SPECIFIC_FORCE
 
 
 # --- CLI ----------------------------------------------------------------------------------------
@@ -287,3 +311,28 @@ def test_bench_data_json(capsys):
     out = json.loads(capsys.readouterr().out)
     assert out["featurise"]["samples_per_s"] > 1e5
     assert out["simulate"]["batched_sim_s_per_wall_s"] > 10
+
+
+# --- realism against the real Fleet-To-Lab files (issue 17) --------------------------------------
+
+
+def test_default_scenario_within_realism_bands(real_data_dir, tmp_path):
+    """`fleetlab simulate` (default seed) against the real files: class mix 65/22/13 +- 4 points,
+    lag-1 slip autocorrelation 0.90-0.99, same-class runs 8-22 windows, and leave-one-traverse-out
+    and Earth-expert zero-shot balanced accuracy within +- 0.05 of the real files' (SN-S, seed 0).
+    The full report, with Earth + FullFinetune too: `fleetlab data compare SIM REAL`."""
+    from fleetlab.data.compare import persistence
+    from fleetlab.evaluation.realism import earth_zero_shot, loto
+
+    sim, real = load_dataset(write_scenario(tmp_path / "sim", seed=1)), load_dataset(real_data_dir)
+    target = sim.table("target")
+    mix = np.bincount(target.label, minlength=3) / len(target)
+    assert np.abs(100 * mix - [65, 22, 13]).max() <= 4, mix
+    p = persistence([f.table for f in sim.files_of("target")])
+    assert 0.90 <= p["slip_lag1_autocorr_mean"] <= 0.99, p
+    assert 8 <= p["mean_run_length"] <= 22, p
+    for name, measure in (("leave-one-traverse-out", lambda ds: float(np.mean(loto(ds)))),
+                          ("Earth zero-shot", earth_zero_shot)):
+        s, r = measure(sim), measure(real)
+        print(f"{name}: simulator {s:.3f}, real files {r:.3f}")
+        assert abs(s - r) <= 0.05, (name, s, r)

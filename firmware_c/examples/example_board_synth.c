@@ -51,7 +51,8 @@ static struct {
     struct slipest_dbc_status_loss_t loss;
 } sb;
 
-/* the 7 raw channels of slot i: 1.2 rad/s, 3.5 A, IMU near lunar gravity, small roll/pitch */
+/* the 7 raw channels of slot i: 1.2 rad/s, 3.5 A, IMU values, small roll/pitch (synthetic load only:
+ * the estimator's contract is gravity-free acc_x/y/z; these sample values are not meant as physics) */
 static void synth_sample(uint32_t i, int16_t s[SLIPEST_N_CHANNELS])
 {
     static const int16_t base[SLIPEST_N_CHANNELS] = {1200, 350, 40, -15, 1620, 300, -800};

@@ -4,6 +4,8 @@
  *
  * Push one raw telemetry sample at a time (7 int16 values in the raw CAN units of
  * RAW_CHANNELS: wheel_speed, motor_current, acc_x, acc_y, acc_z, roll, pitch) with its
+ * acc_x/y/z are body-frame linear acceleration with gravity removed, as in the training
+ * data (a raw accelerometer's specific force must have gravity subtracted first);
  * 16-bit sample counter. The window grid starts at the first accepted sample; a window
  * holds 100 counter slots. A window is emitted when its last slot is filled or when a
  * sample of a later window arrives; windows without any sample are skipped (counted as

@@ -11,7 +11,7 @@ from __future__ import annotations
 RAW_CHANNELS: tuple[str, ...] = (
     "wheel_speed",  # rad/s
     "motor_current",  # A
-    "acc_x",  # m/s^2, body frame, gravity included (specific force)
+    "acc_x",  # m/s^2, body frame, linear acceleration: gravity removed (as in the Fleet-To-Lab files)
     "acc_y",
     "acc_z",
     "roll",  # rad

@@ -12,7 +12,8 @@ from .contracts import CLASS_NAMES, FEATURE_NAMES
 from .dataset import Dataset, load_dataset
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
+def add_arguments(parser: argparse.ArgumentParser) -> argparse._SubParsersAction:
+    """Add the `info` action; returns the sub-parsers so other actions can join them."""
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     p = sub.add_parser(
         "info",
@@ -23,6 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("path", type=Path, help="dataset folder")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
     p.add_argument("--plot", type=Path, metavar="FILE", help="write per-class feature histograms to this PNG")
+    return sub
 
 
 def summarise(ds: Dataset) -> dict:

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..contracts import CLASS_NAMES, DEFAULT_RATE_HZ
 from ..dataset import load_dataset
+from .engine import ACCEL_CONVENTIONS, ACCEL_LINEAR
 from .rovers import ROVERS
 from .scenario import DEFAULT_FLEET, SCENARIO, write_scenario
 
@@ -30,6 +31,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"comma-separated fleet rovers on the Moon, out of {', '.join(ROVERS)} (the target "
                         f"rover is leo, so 'leo' adds a sister rover); the Earth and target traverses do not "
                         f"change with the fleet (default: {','.join(DEFAULT_FLEET)})")
+    parser.add_argument("--accel", choices=ACCEL_CONVENTIONS, default=ACCEL_LINEAR,
+                        help="acc_x/y/z convention: 'linear' = gravity-free linear acceleration, like the "
+                        "Fleet-To-Lab files; 'specific-force' = raw accelerometer output with gravity "
+                        f"(default {ACCEL_LINEAR})")
     parser.add_argument("--raw", action="store_true", help="also save the raw samples of each traverse as .npz")
 
 
@@ -40,7 +45,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--scale must be in (0, 10], got {args.scale}")
     fleet = tuple(r.strip() for r in args.fleet.split(",") if r.strip())
     t0 = time.perf_counter()
-    out = write_scenario(args.out, args.seed, args.scale, args.rate, raw=args.raw, progress=True, fleet=fleet)
+    out = write_scenario(args.out, args.seed, args.scale, args.rate, raw=args.raw, progress=True, fleet=fleet,
+                          accel=args.accel)
     elapsed = time.perf_counter() - t0
     ds = load_dataset(out)
     print(f"wrote {len(ds.files)} traverses to {out} in {elapsed:.1f} s (seed {args.seed}, scale {args.scale:g})")

@@ -21,10 +21,13 @@ YAW_LAG_S = 0.8
 
 @dataclass(frozen=True)
 class DriverStyle:
-    segment_s: tuple[float, float] = (5.0, 25.0)  # drive segment length
-    stop_probability: float = 0.12  # chance that a segment is a stop
+    # Long segments: a rover operator commands a drive leg of a minute or more, and slip
+    # stays persistent over many 2 s windows, as in the real rover traverses.
+    segment_s: tuple[float, float] = (30.0, 120.0)  # drive segment length
+    stop_probability: float = 0.06  # chance that a segment is a stop
     stop_s: tuple[float, float] = (3.0, 9.0)  # long enough to cover a whole 2 s window
-    turn_probability: float = 0.4  # chance that a drive segment is an arc turn
+    turn_probability: float = 0.4  # chance that a drive segment starts with an arc turn
+    turn_deg: tuple[float, float] = (20.0, 120.0)  # heading change of an arc turn
 
 
 @dataclass
@@ -54,7 +57,11 @@ def drive_commands(rover: Rover, n_samples: int, rate_hz: float, rng: np.random.
         v = rng.uniform(*rover.speed_range_mps)
         speed[i : i + n] = v / rover.wheel_radius_m
         if rng.random() < style.turn_probability:
-            yaw[i : i + n] = rng.choice([-1.0, 1.0]) * rng.uniform(0.3, 1.0) * rover.max_yaw_rate
+            # An arc turn changes the heading by a bounded angle, then the leg goes on straight;
+            # circling for a whole long leg would make the slope under the rover oscillate.
+            rate = rng.uniform(0.3, 1.0) * rover.max_yaw_rate
+            turn_n = min(n, int(np.radians(rng.uniform(*style.turn_deg)) / rate * rate_hz))
+            yaw[i : i + turn_n] = rng.choice([-1.0, 1.0]) * rate
         i += n
     wheel_speed = _first_order_lag(speed, SPEED_LAG_S, dt)
     return Commands(

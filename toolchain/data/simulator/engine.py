@@ -25,10 +25,14 @@ Sensors (all with white noise, and with a constant bias drawn per traverse):
 * wheel_speed: mean over the left and right wheels of |w +- yaw_rate * track / (2 r)|.
 * motor_current: mean over both sides of |H +- R_turn / N| r / (k_t G eta) plus
   the no-load current while the wheels turn (they hold the rover when stopped).
-* acc_x/y/z: specific force in the body frame (x forward, y left, z up),
-  gravity included: f = (dv/dt + g sin(pitch), v * yaw_rate + g cos(pitch)
-  sin(roll), g cos(pitch) cos(roll)), plus chassis vibration: coloured noise
-  whose level grows with rim speed, terrain roughness, sinkage and slip.
+* acc_x/y/z: body frame (x forward, y left, z up). Default ACCEL_LINEAR:
+  gravity-free linear acceleration a = (dv/dt, v * yaw_rate, 0), as an IMU
+  with an attitude filter reports it and as the Fleet-To-Lab files carry it
+  (mean acc_z ~ 0 on Earth and Moon alike). ACCEL_SPECIFIC_FORCE: the raw
+  accelerometer's specific force, gravity included: f = (dv/dt + g sin(pitch),
+  v * yaw_rate + g cos(pitch) sin(roll), g cos(pitch) cos(roll)). Both add
+  chassis vibration: coloured noise whose level grows with rim speed, terrain
+  roughness, sinkage and slip.
 * roll, pitch: attitude estimate = true attitude + noise + bias.
 
 Ground truth per sample: d_actual_step = |v| dt (path length of the body) and,
@@ -45,7 +49,7 @@ from scipy.signal import lfilter
 from ..contracts import CH, DEFAULT_RATE_HZ, N_CHANNELS
 from ..features import LabelledWindows, featurise_trace
 from .driver import Commands, drive_commands
-from .rovers import ROVERS, Rover
+from .rovers import GRAVITY_EARTH, ROVERS, Rover
 from .terrain import TERRAINS, SoilBlend, TerrainField, TerrainSpec
 from .terramechanics import solve_slip
 
@@ -54,9 +58,28 @@ PHYSICS_HZ = 25.0  # rate of the traction solve
 # away at full yaw rate for ESCAPE_S instead of spinning the wheels forever.
 STUCK_SLIP, STUCK_S, ESCAPE_S, N_ESCAPE_SIGNS = 0.7, 5.0, 3.0, 64
 TURN_RATE_FULL = 0.15  # rad/s: yaw rate at which a skid-steer turn scrubs fully
-HETEROGENEITY = 0.12  # relative std of the small-scale soil strength variation
-HETEROGENEITY_S = 1.5  # its correlation time at cruise speed
+HETEROGENEITY = 0.25  # relative std of the soil strength variation along the way
+HETEROGENEITY_S = 60.0  # its correlation time at cruise speed
 VIBRATION_S = 0.06  # correlation time of chassis vibration
+# Site-to-site soil variability: no two traverses cross the same soil, even of one nominal type
+# (regolith strength varies with depth, compaction and grain size from site to site). Each traverse
+# multiplies these soil parameters by exp(spread * N(0, 1)); a model trained on some traverses
+# therefore meets soils it has not seen on the others, as with real rover traverses.
+SITE_SPREAD = {"cohesion_pa": 0.6, "friction_deg": 0.12, "k_c": 0.5, "k_phi": 0.5, "shear_k": 0.4}
+# Motor current for a given torque drifts from traverse to traverse (winding temperature, gearbox
+# friction and lubricant viscosity in the lunar thermal cycle): a per-traverse factor exp(spread * N(0, 1)).
+CURRENT_GAIN_SPREAD = 0.3
+# How rocky a site is varies around its terrain type's roughness: a per-traverse factor on vibration.
+ROCKINESS_SPREAD = 0.55
+# Chassis vibration grows as (g_Earth / g) ** this in lower gravity (wheel hop); 0.3 gives the
+# Moon about 1.7 times Earth's vibration at the same rim speed and roughness. (The Fleet-To-Lab
+# target rover's acc_z std is 1.38 on the Moon against 0.38 in the Earth analog, speed and
+# terrain included.)
+LOW_GRAVITY_VIBRATION_EXP = 0.3
+# The acceleration convention of acc_x/y/z (see the module docstring).
+ACCEL_LINEAR = "linear"
+ACCEL_SPECIFIC_FORCE = "specific-force"
+ACCEL_CONVENTIONS = (ACCEL_LINEAR, ACCEL_SPECIFIC_FORCE)
 
 
 @dataclass
@@ -113,6 +136,9 @@ class _Draws:
     noise: np.ndarray  # (n, 2 * 2 + 5) unit white noise for the sensors
     bias: np.ndarray  # (7,) unit normal draws for the sensor biases
     escape_sign: np.ndarray  # (N_ESCAPE_SIGNS,) +-1: direction of each escape turn
+    site: dict[str, float]  # per-traverse multiplicative factors on soil parameters (SITE_SPREAD)
+    current_gain: float  # per-traverse factor on motor current (CURRENT_GAIN_SPREAD)
+    rockiness: float  # per-traverse factor on chassis vibration (ROCKINESS_SPREAD)
 
 
 def _ar1(rng: np.random.Generator, shape: tuple[int, int], tau_s: float, dt: float) -> np.ndarray:
@@ -131,7 +157,10 @@ def _draw(spec: TraverseSpec, n: int, rate_hz: float) -> _Draws:
     soil = _ar1(rng, (n, 2), HETEROGENEITY_S, dt)
     soil = np.column_stack([np.exp(HETEROGENEITY * soil[:, 0]), 1.0 + 0.3 * HETEROGENEITY * soil[:, 1]])
     return _Draws(terrain, commands, heading0, soil, _ar1(rng, (n, 3), VIBRATION_S, dt),
-                  rng.standard_normal((n, 9)), rng.standard_normal(7), rng.choice([-1.0, 1.0], N_ESCAPE_SIGNS))
+                  rng.standard_normal((n, 9)), rng.standard_normal(7), rng.choice([-1.0, 1.0], N_ESCAPE_SIGNS),
+                  {k: float(np.exp(spread * rng.standard_normal())) for k, spread in SITE_SPREAD.items()},
+                  float(np.exp(CURRENT_GAIN_SPREAD * rng.standard_normal())),
+                  float(np.exp(ROCKINESS_SPREAD * rng.standard_normal())))
 
 
 def _pad(arrays: list[np.ndarray], n: int) -> np.ndarray:
@@ -143,7 +172,8 @@ def _pad(arrays: list[np.ndarray], n: int) -> np.ndarray:
     return np.stack(out, axis=1)
 
 
-def simulate_batch(specs: list[TraverseSpec], rate_hz: float = DEFAULT_RATE_HZ, progress=None) -> list[Trace]:
+def simulate_batch(specs: list[TraverseSpec], rate_hz: float = DEFAULT_RATE_HZ, progress=None,
+                   accel: str = ACCEL_LINEAR) -> list[Trace]:
     """Simulate several traverses in lock-step (vectorised over traverses).
 
     Each traverse draws from its own generator seeded with its spec.seed, so its
@@ -154,6 +184,8 @@ def simulate_batch(specs: list[TraverseSpec], rate_hz: float = DEFAULT_RATE_HZ, 
         return []
     if not rate_hz > 0:
         raise ValueError(f"rate must be positive, got {rate_hz} Hz")
+    if accel not in ACCEL_CONVENTIONS:
+        raise ValueError(f"unknown acceleration convention {accel!r}; choose one of {', '.join(ACCEL_CONVENTIONS)}")
     dt = 1.0 / rate_hz
     lengths = [max(1, int(round(s.duration_s * rate_hz))) for s in specs]
     n = max(lengths)
@@ -166,6 +198,7 @@ def simulate_batch(specs: list[TraverseSpec], rate_hz: float = DEFAULT_RATE_HZ, 
     wheelbase, track = arr(lambda s: s.rover.wheelbase_m), arr(lambda s: s.rover.track_m)
     turn_drag = arr(lambda s: s.rover.turn_drag)
     soils = SoilBlend([s.terrain.soils[0] for s in specs], [s.terrain.soils[1] for s in specs])
+    site = {k: np.array([d.site[k] for d in draws]) for k in SITE_SPREAD}
     terrain = TerrainField.stack([d.field for d in draws])
 
     omega = _pad([d.commands.wheel_speed for d in draws], n)  # (n, B)
@@ -203,6 +236,7 @@ def simulate_batch(specs: list[TraverseSpec], rate_hz: float = DEFAULT_RATE_HZ, 
         roll = np.arctan((h[:, 2] - h[:, 3]) / track)
         w_patch = terrain.patch_weight(x, y)
         soil = soils.at(w_patch)
+        soil = {k: v * site[k] if k in site else v for k, v in soil.items()}
         soil["cohesion_pa"] = soil["cohesion_pa"] * soil_noise[i, :, 0]
         soil["friction_deg"] = soil["friction_deg"] * soil_noise[i, :, 1]
         weight = mass * g * np.cos(pitch) * np.cos(roll)
@@ -237,13 +271,13 @@ def simulate_batch(specs: list[TraverseSpec], rate_hz: float = DEFAULT_RATE_HZ, 
 
     return [
         _sensors(spec, draws[b], {k: v[: lengths[b], b] for k, v in rec.items()}, yaw[: lengths[b], b],
-                 omega[: lengths[b], b], rate_hz)
+                 omega[: lengths[b], b], rate_hz, accel)
         for b, spec in enumerate(specs)
     ]
 
 
 def _sensors(spec: TraverseSpec, d: _Draws, t: dict[str, np.ndarray], yaw: np.ndarray, omega: np.ndarray,
-             rate_hz: float) -> Trace:
+             rate_hz: float, accel_convention: str = ACCEL_LINEAR) -> Trace:
     """Raw sensor channels and distance increments of one traverse from its true states."""
     rover, g, dt = spec.rover, spec.gravity, 1.0 / rate_hz
     r = rover.wheel_radius_m
@@ -263,25 +297,25 @@ def _sensors(spec: TraverseSpec, d: _Draws, t: dict[str, np.ndarray], yaw: np.nd
     idle = np.where(turning, rover.no_load_current_a, 0.0)
     amps = [np.abs(t["thrust"] + sign * t["turn_force"]) * to_amp + idle for sign in (-1.0, 1.0)]
     cur_noise = 0.01 + 0.02 * (amps[0] + amps[1]) / 2
-    current = 0.5 * (amps[0] + amps[1]) + cur_noise * noise[:, 2] + 0.02 * bias[0]
+    current = d.current_gain * 0.5 * (amps[0] + amps[1]) + cur_noise * noise[:, 2] + 0.02 * bias[0]
     current = np.abs(current)
 
-    # IMU: specific force with gravity, plus vibration driven by speed, roughness, sinkage and slip.
+    # IMU: linear acceleration (or specific force with gravity), plus vibration driven by speed,
+    # roughness, sinkage and slip.
     speed = t["speed"]
     accel = np.gradient(speed, dt) if n > 1 else np.zeros(n)
     rim = r * omega
-    level = rover.vibration_gain * spec.terrain.roughness * rim * (
+    # Low gravity shakes the chassis more: bumps lift a lightly loaded wheel off the ground
+    # sooner and it lands with an impact, and the suspension is less preloaded.
+    hop = (GRAVITY_EARTH / g) ** LOW_GRAVITY_VIBRATION_EXP
+    level = rover.vibration_gain * spec.terrain.roughness * d.rockiness * hop * rim * (
         1.0 + 10.0 * t["sinkage"] / r + 2.0 * np.abs(t["slip"])
     )
     vib = d.vibration * level[:, None] * np.array([0.6, 0.5, 1.0])
     pitch, roll = t["pitch"], t["roll"]
-    acc = np.column_stack(
-        [
-            accel + g * np.sin(pitch),
-            speed * yaw + g * np.cos(pitch) * np.sin(roll),
-            g * np.cos(pitch) * np.cos(roll),
-        ]
-    )
+    acc = np.column_stack([accel, speed * yaw, np.zeros(n)])
+    if accel_convention == ACCEL_SPECIFIC_FORCE:
+        acc = acc + g * np.column_stack([np.sin(pitch), np.cos(pitch) * np.sin(roll), np.cos(pitch) * np.cos(roll)])
     acc = acc + vib + 0.02 * noise[:, 3:6] + 0.03 * bias[1:4]
 
     samples = np.empty((n, N_CHANNELS))
@@ -300,12 +334,13 @@ def _sensors(spec: TraverseSpec, d: _Draws, t: dict[str, np.ndarray], yaw: np.nd
         "duration_s": n / rate_hz,
         "rate_hz": rate_hz,
         "n_samples": n,
+        "accel": accel_convention,
     }
     truth = {k: t[k] for k in ("slip", "sinkage", "speed", "x", "y", "pitch", "roll", "patch")}
     return Trace(samples, np.abs(speed) * dt, wheel_speed * r * dt, float(rate_hz), meta, truth)
 
 
 def simulate_traverse(rover: Rover | str, terrain: TerrainSpec | str, gravity: float, duration_s: float,
-                      seed: int, rate_hz: float = DEFAULT_RATE_HZ) -> Trace:
+                      seed: int, rate_hz: float = DEFAULT_RATE_HZ, accel: str = ACCEL_LINEAR) -> Trace:
     """One traverse of `rover` on a random instance of `terrain` under `gravity` (m/s^2)."""
-    return simulate_batch([TraverseSpec.make(rover, terrain, gravity, duration_s, seed)], rate_hz)[0]
+    return simulate_batch([TraverseSpec.make(rover, terrain, gravity, duration_s, seed)], rate_hz, accel=accel)[0]

@@ -28,7 +28,7 @@ from ..contracts import DEFAULT_RATE_HZ, RAW_CHANNELS
 from ..csvio import WindowTable, write_windows_csv
 from ..dataset import EARTH, FLEET_PREFIX, TARGET, write_manifest
 from ..features import WindowSpec
-from .engine import Trace, TraverseSpec, simulate_batch
+from .engine import ACCEL_LINEAR, Trace, TraverseSpec, simulate_batch
 from .rovers import GRAVITY_EARTH, GRAVITY_MOON, ROVERS
 
 GENERATOR = "fleetlab.data.simulator/1"
@@ -98,18 +98,20 @@ def scenario_specs(seed: int, scale: float = 1.0, fleet: tuple[str, ...] | None 
 
 
 def scenario_traces(seed: int, scale: float = 1.0, rate_hz: float = DEFAULT_RATE_HZ,
-                    progress: bool = False, fleet: tuple[str, ...] | None = None) -> list[tuple[str, str, Trace]]:
+                    progress: bool = False, fleet: tuple[str, ...] | None = None,
+                    accel: str = ACCEL_LINEAR) -> list[tuple[str, str, Trace]]:
     """Simulate the built-in scenario: (role, name, Trace) per traverse."""
     entries = scenario_specs(seed, scale, fleet)
     specs = [spec for _, _, spec in entries]
     total = sum(int(round(s.duration_s * rate_hz)) for s in specs)
     with tqdm(total=total, desc="simulating", unit="sample", unit_scale=True, disable=not progress) as bar:
-        traces = simulate_batch(specs, rate_hz, progress=bar)
+        traces = simulate_batch(specs, rate_hz, progress=bar, accel=accel)
     return [(role, name, trace) for (role, name, _), trace in zip(entries, traces)]
 
 
 def write_scenario(out_dir: Path | str, seed: int, scale: float = 1.0, rate_hz: float = DEFAULT_RATE_HZ,
-                   raw: bool = False, progress: bool = False, fleet: tuple[str, ...] | None = None) -> Path:
+                   raw: bool = False, progress: bool = False, fleet: tuple[str, ...] | None = None,
+                   accel: str = ACCEL_LINEAR) -> Path:
     """Write one window CSV per traverse and dataset.json into out_dir (created); returns out_dir.
 
     With `raw`, also one .npz per traverse with the raw samples and distance increments.
@@ -118,7 +120,7 @@ def write_scenario(out_dir: Path | str, seed: int, scale: float = 1.0, rate_hz: 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, dict] = {}
-    for role, name, trace in scenario_traces(seed, scale, rate_hz, progress, fleet):
+    for role, name, trace in scenario_traces(seed, scale, rate_hz, progress, fleet, accel):
         table = WindowTable.from_windows(trace.windows())
         write_windows_csv(out / f"{name}.csv", table)
         entry = {"role": role, **{k: trace.meta[k] for k in ("rover", "terrain", "soils", "gravity", "seed")},
@@ -131,5 +133,5 @@ def write_scenario(out_dir: Path | str, seed: int, scale: float = 1.0, rate_hz: 
             entry["raw"] = f"{name}.npz"
         files[f"{name}.csv"] = entry
     write_manifest(out, files, {"generator": GENERATOR, "seed": seed, "scale": scale, "rate_hz": rate_hz,
-                                "fleet": list(DEFAULT_FLEET if fleet is None else fleet)})
+                                "fleet": list(DEFAULT_FLEET if fleet is None else fleet), "accel": accel})
     return out

@@ -32,7 +32,7 @@ class TerrainSpec:
     patch_fraction: float  # share of the ground covered by soil_b
     patch_scale_m: float  # typical patch size
     slope_rms_deg: float  # RMS terrain slope
-    wavelength_m: tuple[float, float] = (2.0, 20.0)
+    wavelength_m: tuple[float, float] = (15.0, 90.0)
     roughness: float = 1.0  # multiplies chassis vibration (rocks, clods)
 
     def __post_init__(self) -> None:
@@ -118,12 +118,12 @@ class SoilBlend:
 TERRAINS: dict[str, TerrainSpec] = {
     t.name: t
     for t in (
-        TerrainSpec("analog_hall", "analog_sand", "analog_loose", 0.45, 6.0, 9.0, roughness=0.8),
+        TerrainSpec("analog_hall", "analog_sand", "analog_loose", 0.5, 6.0, 11.0, roughness=0.8),
         TerrainSpec("mare_plain", "lunar_regolith", "lunar_fluffy", 0.6, 10.0, 17.0),
         TerrainSpec("highland_slope", "lunar_compacted", "lunar_fluffy", 0.45, 12.0, 21.0, roughness=1.3),
         TerrainSpec("crater_rim", "lunar_regolith", "lunar_fluffy", 0.6, 8.0, 22.0, roughness=1.2),
-        TerrainSpec("polar_crater", "lunar_regolith", "lunar_dust", 0.35, 8.0, 12.0),
-        TerrainSpec("ejecta_field", "lunar_compacted", "lunar_dust", 0.35, 6.0, 14.0, roughness=1.6),
-        TerrainSpec("rille_wall", "lunar_regolith", "lunar_dust", 0.3, 10.0, 12.0, roughness=1.1),
+        TerrainSpec("polar_crater", "lunar_regolith", "lunar_dust", 0.5, 8.0, 16.0),
+        TerrainSpec("ejecta_field", "lunar_compacted", "lunar_dust", 0.45, 6.0, 18.0, roughness=1.6),
+        TerrainSpec("rille_wall", "lunar_regolith", "lunar_dust", 0.45, 10.0, 16.0, roughness=1.1),
     )
 }

@@ -1,0 +1,122 @@
+"""`fleetlab data`: `info PATH` (fleetlab.data.info) and `compare DIR_A DIR_B` (this module).
+
+`compare` joins the pure statistics of `fleetlab.data.compare` with the SN-S
+learnability figures of `fleetlab.evaluation.realism`; this module only wires the
+two to the command line and prints them side by side.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from ..data import info
+from ..data.compare import compare_statistics
+from ..data.contracts import CLASS_NAMES, FEATURE_NAMES
+from ..data.dataset import load_dataset
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = info.add_arguments(parser)
+    p = sub.add_parser(
+        "compare",
+        help="compare two dataset folders role by role (realism report)",
+        description="Side by side, per role: class mix, within-traverse persistence (lag-1 slip "
+        "autocorrelation, mean same-class run length), per-feature mean and std with the acceleration "
+        "convention detected, and SN-S learnability on the target (leave-one-traverse-out, Earth expert "
+        "zero-shot, Earth + FullFinetune at |D_Cal| = 150 under both protocols).",
+    )
+    p.add_argument("dir_a", type=Path, help="first dataset folder")
+    p.add_argument("dir_b", type=Path, help="second dataset folder")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
+    p.add_argument("--plot", type=Path, metavar="FILE", help="write per-role class mix and feature means to this PNG")
+    p.add_argument("--runs", type=int, default=5, help="D_Cal draws per protocol for Earth + FullFinetune (default 5)")
+    p.add_argument("--seed", type=int, default=0, help="model seed (default 0)")
+    p.add_argument("--no-learnability", action="store_true", help="statistics only, no model training (fast)")
+
+
+def _fmt(v, spec: str = ".3f") -> str:
+    return "—" if v is None else format(v, spec)
+
+
+def print_report(rep: dict) -> None:
+    a, b = rep["a"], rep["b"]
+    print(f"A: {a['path']}\nB: {b['path']}")
+    roles = list(dict.fromkeys([*a["roles"], *b["roles"]]))
+    for role in roles:
+        ra, rb = a["roles"].get(role), b["roles"].get(role)
+        print(f"\n== {role} ==")
+        rows = [("files / rows", lambda r: f"{r['files']} / {r['rows']}")]
+        rows.append(("class mix " + "/".join(CLASS_NAMES),
+                     lambda r: " / ".join(f"{100 * m:.1f}" for m in r["class_mix"])))
+        rows.append(("slip lag-1 autocorr (mean)", lambda r: _fmt(r["persistence"]["slip_lag1_autocorr_mean"])))
+        rows.append(("slip lag-1 autocorr (min..max)", lambda r: f"{_fmt(r['persistence']['slip_lag1_autocorr_min'], '.2f')}"
+                     f"..{_fmt(r['persistence']['slip_lag1_autocorr_max'], '.2f')}"))
+        rows.append(("mean same-class run (windows)", lambda r: _fmt(r["persistence"]["mean_run_length"], ".1f")))
+        rows.append(("acceleration", lambda r: f"{r['acceleration']['convention'].split(' (')[0]}, "
+                     f"acc_z {r['acceleration']['mean_acc_z']:+.2f}"))
+        for name in FEATURE_NAMES:
+            rows.append((name, lambda r, n=name: f"{r['features'][n]['mean']:.3g} ± {r['features'][n]['std']:.3g}"))
+        print(f"{'':32s} {'A':>30s} {'B':>30s}")
+        for label, get in rows:
+            print(f"{label:32s} {get(ra) if ra else '—':>30s} {get(rb) if rb else '—':>30s}")
+    if "learnability" in rep:
+        la, lb = rep["learnability"]["a"], rep["learnability"]["b"]
+        print("\n== learnability on the target (SN-S, balanced accuracy) ==")
+        for label, key in (("leave-one-traverse-out", "loto_bacc_mean"), ("Earth expert zero-shot", "earth_zero_shot_bacc"),
+                           ("Earth + FullFinetune 150, paper", "earth_ft_paper_bacc"),
+                           ("Earth + FullFinetune 150, traverse", "earth_ft_traverse_bacc")):
+            print(f"{label:36s}{_fmt(la.get(key)):>12s}{_fmt(lb.get(key)):>12s}")
+
+
+def plot_report(rep: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    roles = list(dict.fromkeys([*rep["a"]["roles"], *rep["b"]["roles"]]))
+    fig, axes = plt.subplots(1, 2, figsize=(14, 5))
+    for k, side in enumerate(("a", "b")):
+        mix = np.array([rep[side]["roles"].get(r, {"class_mix": [0, 0, 0]})["class_mix"] for r in roles])
+        axes[0].bar(np.arange(len(roles)) + 0.4 * k, mix[:, 0], 0.38, label=f"{side.upper()} {CLASS_NAMES[0]}")
+        axes[0].bar(np.arange(len(roles)) + 0.4 * k, mix[:, 1], 0.38, bottom=mix[:, 0], label=f"{side.upper()} {CLASS_NAMES[1]}")
+        axes[0].bar(np.arange(len(roles)) + 0.4 * k, mix[:, 2], 0.38, bottom=mix[:, :2].sum(1), label=f"{side.upper()} {CLASS_NAMES[2]}")
+        t = rep[side]["roles"].get("target")
+        if t:
+            means = [t["features"][n]["mean"] / (abs(t["features"][n]["std"]) + 1e-9) for n in FEATURE_NAMES]
+            axes[1].plot(means, "o-", label=side.upper())
+    axes[0].set_xticks(np.arange(len(roles)) + 0.2, roles, rotation=20)
+    axes[0].set_title("class mix per role (A left, B right)")
+    axes[0].legend(fontsize=7)
+    axes[1].set_xticks(range(len(FEATURE_NAMES)), [n.replace("feat_", "") for n in FEATURE_NAMES], rotation=60)
+    axes[1].set_title("target: feature mean / std")
+    axes[1].legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def run_compare(args: argparse.Namespace) -> int:
+    ds_a, ds_b = load_dataset(args.dir_a), load_dataset(args.dir_b)
+    rep = compare_statistics(ds_a, ds_b)
+    if not args.no_learnability:
+        from ..evaluation.realism import learnability
+
+        rep["learnability"] = {side: learnability(ds, seed=args.seed, runs=args.runs).as_dict()
+                               for side, ds in (("a", ds_a), ("b", ds_b))}
+    if args.json:
+        print(json.dumps(rep, indent=2))
+    else:
+        print_report(rep)
+    if args.plot:
+        plot_report(rep, args.plot)
+        if not args.json:
+            print(f"\nwrote {args.plot}")
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    return run_compare(args) if args.action == "compare" else info.run(args)

@@ -153,3 +153,17 @@ def test_stack_cycle_check_finds_recursion():
     assert g.cycles() == [["a", "b", "c", "a"]]
     g.calls["c"] = set()
     assert g.cycles() == [] and g.worst("a")[0] == 28
+
+
+def test_bundle_files_are_keyed_alike_wherever_the_bundle_lives(tmp_path):
+    """The deviations table keys the model headers as bundle/<name>: a bundle exported inside the clone
+    (the demo's demo_out/bundle) or outside it must map onto the same keys, or its findings look unrecorded."""
+    from fleetlab.assurance.sources import rel
+
+    inside = REPO / "build" / "test-rel-bundle"
+    for d in (inside, tmp_path / "b"):
+        d.mkdir(parents=True, exist_ok=True)
+        (d / "manifest.json").write_text("{}")
+        (d / "slipest_model_q.h").write_text("")
+        assert rel(d / "slipest_model_q.h") == "bundle/slipest_model_q.h"
+    assert rel(REPO / "firmware_c" / "src" / "slipest_node.c") == "firmware_c/src/slipest_node.c"

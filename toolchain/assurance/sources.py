@@ -71,6 +71,8 @@ def rel(path: str | Path, gen_dir: Path | None = None) -> str:
     p = Path(path).resolve()
     if gen_dir is not None and p.parent == Path(gen_dir).resolve():
         return f"generated/{p.name}"
+    if (p.parent / "manifest.json").is_file():  # any export bundle, wherever it lives (the demo's is in demo_out/)
+        return f"bundle/{p.name}"
     try:
         r = p.relative_to(REPO)
     except ValueError:

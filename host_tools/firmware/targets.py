@@ -69,7 +69,7 @@ class Target:
 
     @property
     def emulator(self) -> str:
-        """How the target runs, for reports: "QEMU mps2-an386" or "qemu-ppc user mode"."""
+        """How the target runs, for reports: "QEMU <machine>" (system mode) or "<qemu binary> user mode"."""
         if not self.runs:
             return "no emulator (link only)"
         if self.qemu_mode == "system":

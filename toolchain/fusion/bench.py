@@ -1,7 +1,7 @@
 """`fleetlab bench fusion`: how fast AcoMerge evaluates a generation, and a full run.
 
 Figures (one JSON object with --json):
-- batched_ms_per_generation: one generation's ants (300 different models, none shared)
+- batched_ms_per_generation: one generation's ants (AcoMergeConfig.n_ants different models, none shared)
   evaluated the way `acomerge` evaluates them — models gathered from the buffer, one
   batched fitness computation on `--threads` torch threads;
 - sequential_ms_per_generation: the same ants evaluated one at a time the way the
@@ -16,7 +16,7 @@ Figures (one JSON object with --json):
 - sequential_fullbatch_ms_per_generation: one at a time through the nn.Module but with
   all of D_Cal in one batch and torch's weighted cross-entropy (a stronger baseline), and
   speedup_vs_fullbatch;
-- full_run_s: one complete run (SN-S, 300 ants, 130 generations, |D_Cal| = 200 by default);
+- full_run_s: one complete run (SN-S, the paper budget of AcoMergeConfig, |D_Cal| = 200 by default);
 - every timing is the best of its repeats (the one least disturbed by other processes);
 - max_abs_fitness_diff: batched vs sequential fitness of the same ants (must be ~1e-6);
 - cpu: process CPU time of the same work (with more than one thread it adds the threads

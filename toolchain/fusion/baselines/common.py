@@ -1,7 +1,7 @@
 """Pieces shared by the baselines: the step budget, the D_Cal objective, merge bases.
 
 Every baseline gets the same budget of optimisation steps as AcoMerge gets
-pheromone updates (130): one Adam update, one CMA-ES generation or one PSO
+pheromone updates (AcoMergeConfig.generations): one Adam update, one CMA-ES generation or one PSO
 iteration counts as one step.
 """
 

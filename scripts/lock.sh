@@ -7,9 +7,10 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 PY=${PYTHON:-python3}
 TMP=$(mktemp -d); trap 'rm -rf "$TMP"' EXIT
 "$PY" -m venv "$TMP/venv"
-quiet() { "$@" 2> >(grep -v -e "is ignored: it is neither" -e "DEPRECATION: crcmod" >&2); }
-quiet "$TMP/venv/bin/python" -m pip install -q --disable-pip-version-check torch==2.13.0
-quiet "$TMP/venv/bin/python" -m pip install -q --disable-pip-version-check "$ROOT[test]"
+# shellcheck source=scripts/venv.sh
+source "$ROOT/scripts/venv.sh"
+pip_install "$TMP/venv/bin/python" torch==2.13.0
+pip_install "$TMP/venv/bin/python" "$ROOT[test]"
 {
   echo "# Versions the test suite passed with; scripts/setup.sh installs exactly these (pip -c)."
   echo "# Refresh: bash scripts/lock.sh  (then run bash scripts/test.sh before committing)"

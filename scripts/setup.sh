@@ -37,7 +37,6 @@ fi
 VPY="$FLEETLAB_VENV/bin/python"
 # The torch CPU wheel first, so that no dependency pulls a CUDA build; then everything at the locked versions.
 "$VPY" -c "import torch, sys; sys.exit(0 if torch.__version__.startswith('2.13.0') else 1)" 2>/dev/null \
-  || "$VPY" -m pip install -q --disable-pip-version-check torch==2.13.0 2> >(grep -v "is ignored: it is neither" >&2)
-"$VPY" -m pip install -q --disable-pip-version-check -c requirements.lock -e ".[test]" \
-  2> >(grep -v -e "is ignored: it is neither" -e "DEPRECATION: crcmod" >&2)
+  || pip_install "$VPY" torch==2.13.0
+pip_install "$VPY" -c requirements.lock -e ".[test]"
 echo "setup: ready ($("$VPY" -c 'import sys, torch; print("python", sys.version.split()[0], "torch", torch.__version__)')); source $FLEETLAB_VENV/bin/activate to put fleetlab on PATH"

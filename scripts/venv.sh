@@ -7,3 +7,10 @@ activate_fleetlab_venv() {
   export PATH="$FLEETLAB_VENV/bin:$PATH"
   export PYTHON="$FLEETLAB_VENV/bin/python"
 }
+# pip install into the given interpreter, quiet, without the noise of this machine's local wheel indexes
+# (missing index folders) and of crcmod's legacy setup.py; real errors still reach stderr.
+pip_install() {
+  local py="$1"; shift
+  "$py" -m pip install -q --disable-pip-version-check "$@" \
+    2> >(grep -v -e "is ignored: it is neither" -e "DEPRECATION: crcmod" >&2)
+}

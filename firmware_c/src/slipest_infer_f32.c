@@ -4,6 +4,7 @@
 
 #include <math.h>
 
+#include "slipest_erf_f32.h"
 #include "slipest_status.h"
 
 #define NI SLIPEST_N_FEATURES
@@ -80,7 +81,7 @@ int slipest_infer_f32(const slipest_model_f32_t *m, const float feat[SLIPEST_N_F
     }
     for (i = 0; i < NH; ++i) {
         float y = (h[i] - mean) * inv * m->gamma[i] + m->beta[i];
-        float g = 0.5f * y * (1.0f + erff(y * 0.707106781f));
+        float g = 0.5f * y * (1.0f + slipest_erf_f32(y * 0.707106781f)); /* not libm's erff: see slipest_erf_f32.h */
         for (c = 0; c < NO; ++c) {
             out[c] += m->w2[c * NH + i] * g;
         }

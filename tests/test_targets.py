@@ -42,6 +42,7 @@ def test_registry_lists_every_target_file(capsys, monkeypatch):
     assert sorted(found) == files  # each target file is named after its target
     assert {"cortex-m3", "cortex-m4", *NEW_TARGETS} <= set(found)
     assert found["powerpc"]["endian"] == "big" and found["powerpc"]["qemu_mode"] == "user"
+    assert found["sparc-leon3"]["endian"] == "big" and found["sparc-leon3"]["qemu_mode"] == "system"  # bare metal
     assert found["cortex-m0"]["integer_only"] and not found["cortex-m0"]["fpu"]
     assert found["cortex-m4"]["qemu_machine"] == "mps2-an386" and targets.reference().name == "cortex-m4"
 
@@ -169,10 +170,10 @@ def test_soft_float_check_catches_rv32_float_code(cross_builds, tmp_path):
     assert verdict("present").returncode == 0
 
 
-@pytest.mark.parametrize("name", ["powerpc", "riscv32"])
+@pytest.mark.parametrize("name", ["powerpc", "riscv32", "sparc-leon3"])
 def test_bench_counts_instructions_without_systick(cross_builds, name):
-    """`bench c --target` figures where there is no SysTick: the user-mode exec trace (PowerPC) and
-    minstret under -icount (RISC-V); integer-only targets have no float figure."""
+    """`bench c --target` figures where there is no SysTick: the exec trace (user-mode PowerPC, bare-metal
+    SPARC) and minstret under -icount (RISC-V); integer-only targets have no float figure."""
     t, bdir = _built(cross_builds, name)
     row = bench.target_figures(t, bdir)
     assert 1_000 < row["instructions_per_inference_q"] < 20_000, row

@@ -1,21 +1,37 @@
-# fleetlab CPU target: SPARC V8 / LEON3 (big-endian, FPU), code generated for -mcpu=leon3, run as a
-# static 32-bit Linux image under qemu-sparc32plus USER MODE (not bare metal on leon3_generic: no
-# APBUART startup yet). Record format: see cortex-m3.cmake.
+# fleetlab CPU target: SPARC V8 / LEON3 (big-endian, FPU), BARE METAL on QEMU's leon3_generic board:
+# own startup (firmware_c/target/startup_leon3.c) and linker script, text on the APBUART, exit through a
+# software trap (QEMU's LEON3 shutdown). Code for -mcpu=leon3 with -mflat: no register-window
+# save/restore, so the images need no window trap handlers (a flight build under an RTOS would use the
+# windows; the kernels' arithmetic is the same). Instructions are counted from QEMU's exec trace.
+# Record format: see cortex-m3.cmake.
 set(SLIPEST_TARGET_NAME sparc-leon3)
-set(SLIPEST_TARGET_DESCRIPTION "SPARC V8 LEON3 (big-endian, FPU; user-mode QEMU)")
+set(SLIPEST_TARGET_DESCRIPTION "SPARC V8 LEON3 (big-endian, FPU; bare metal)")
 set(SLIPEST_TARGET_COMPILER sparc64-linux-gnu-gcc)
 set(SLIPEST_TARGET_ENDIAN big)
 set(SLIPEST_TARGET_FPU ON)
 set(SLIPEST_TARGET_INTEGER_ONLY OFF)
-set(SLIPEST_TARGET_QEMU qemu-sparc32plus)
-set(SLIPEST_TARGET_QEMU_MODE user)
-set(SLIPEST_TARGET_QEMU_MACHINE none)
+set(SLIPEST_TARGET_QEMU qemu-system-sparc)
+set(SLIPEST_TARGET_QEMU_MODE system)
+set(SLIPEST_TARGET_QEMU_MACHINE leon3_generic)
 set(SLIPEST_TARGET_QEMU_CPU "")
-set(SLIPEST_TARGET_REPORT stdio)
-set(SLIPEST_TARGET_VECTORS file)
+set(SLIPEST_TARGET_REPORT uart)
+set(SLIPEST_TARGET_VECTORS embed)
 set(SLIPEST_TARGET_COUNTER trace)
-set(SLIPEST_TARGET_STARTUP "")
-set(SLIPEST_TARGET_LINKER_SCRIPT "")
-set(SLIPEST_TRIPLET sparc64-linux-gnu)
-set(SLIPEST_CPU_FLAGS "-m32 -mcpu=leon3")
-include("${CMAKE_CURRENT_LIST_DIR}/linux-user-common.cmake")
+set(SLIPEST_TARGET_STARTUP startup_leon3.c leon3_uart_io.c freestanding_libc.c sparc_v8_helpers.c)
+set(SLIPEST_TARGET_LINKER_SCRIPT leon3.ld)
+set(SLIPEST_APBUART_BASE 0x80000100u)  # the board's APBUART (QEMU hw/sparc/leon3.c)
+# -fno-math-errno: sqrtf is the FPU's fsqrts (no libm on bare metal; IEEE results unchanged)
+set(SLIPEST_CPU_FLAGS "-m32 -mcpu=leon3 -mflat -fno-math-errno")
+set(CMAKE_SYSTEM_NAME Generic)
+set(CMAKE_SYSTEM_PROCESSOR sparc)
+set(CMAKE_C_COMPILER ${SLIPEST_TARGET_COMPILER})
+set(CMAKE_TRY_COMPILE_TARGET_TYPE STATIC_LIBRARY)
+find_program(SLIPEST_TARGET_NM_PATH sparc64-linux-gnu-nm REQUIRED)
+find_program(SLIPEST_TARGET_SIZE_PATH sparc64-linux-gnu-size REQUIRED)
+set(CMAKE_FIND_ROOT_PATH_MODE_PROGRAM NEVER)
+set(CMAKE_FIND_ROOT_PATH_MODE_LIBRARY ONLY)
+set(CMAKE_FIND_ROOT_PATH_MODE_INCLUDE ONLY)
+# -fno-pie/-no-pie: Debian's compiler makes position-independent code by default; the image is linked at 0x40000000
+set(CMAKE_C_FLAGS_INIT "${SLIPEST_CPU_FLAGS} -fno-pie -ffunction-sections -fdata-sections")
+# no C library (freestanding_libc.c) and no libgcc (sparc_v8_helpers.c: Debian's is V8+)
+set(CMAKE_EXE_LINKER_FLAGS_INIT "${SLIPEST_CPU_FLAGS} -static -no-pie -nostdlib -nostartfiles -Wl,--gc-sections -Wl,-z,noexecstack")

@@ -18,8 +18,9 @@ per target for the given bundle, then measures in one run:
   the same measure on the CAN-native example firmware of docs/integrating_slipest.md.
 
 The reference target's figures keep their `m4_*` keys; every target's figures are under `cpu_targets`.
-On targets without a known counter (user-mode QEMU: PowerPC, SPARC; RISC-V virt) instruction counts
-and stack are reported as null with the reason, never estimated.
+Where the guest has no counter QEMU drives (user-mode PowerPC, bare-metal SPARC), the cost image is run
+under QEMU's one-instruction-per-block exec trace and the instructions between marks are counted; a
+target with no counter at all (link-only) reports null with the reason, never an estimate.
 """
 
 from __future__ import annotations
@@ -233,7 +234,7 @@ def target_figures(t: Target, build_dir: Path) -> dict:
             "stack_bytes_node_window": cost["stack_node_window"],
             "counted_by": {"systick": "SysTick under qemu -icount shift=0",
                            "instret": "minstret under qemu -icount shift=0",
-                           "trace": "qemu user-mode exec trace, one instruction per block"}[t.counter],
+                           "trace": "qemu exec trace, one instruction per block"}[t.counter],
         })
     else:
         row.update({k: None for k in ("instructions_per_inference_q", "instructions_per_inference_f32",

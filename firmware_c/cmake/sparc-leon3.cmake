@@ -1,8 +1,8 @@
 # fleetlab CPU target: SPARC V8 / LEON3 (big-endian, FPU), BARE METAL on QEMU's leon3_generic board:
 # own startup (firmware_c/target/startup_leon3.c) and linker script, text on the APBUART, exit through a
-# software trap (QEMU's LEON3 shutdown). Code for -mcpu=leon3 with -mflat: no register-window
-# save/restore, so the images need no window trap handlers (a flight build under an RTOS would use the
-# windows; the kernels' arithmetic is the same). Instructions are counted from QEMU's exec trace.
+# software trap (QEMU's LEON3 shutdown). Ordinary register-window code (-mcpu=leon3): the startup's trap
+# table spills and reloads windows, and checks that it does before main. Instructions are counted from
+# QEMU's exec trace.
 # Record format: see cortex-m3.cmake.
 set(SLIPEST_TARGET_NAME sparc-leon3)
 set(SLIPEST_TARGET_DESCRIPTION "SPARC V8 LEON3 (big-endian, FPU; bare metal)")
@@ -21,7 +21,7 @@ set(SLIPEST_TARGET_STARTUP startup_leon3.c leon3_uart_io.c freestanding_libc.c s
 set(SLIPEST_TARGET_LINKER_SCRIPT leon3.ld)
 set(SLIPEST_APBUART_BASE 0x80000100u)  # the board's APBUART (QEMU hw/sparc/leon3.c)
 # -fno-math-errno: sqrtf is the FPU's fsqrts (no libm on bare metal; IEEE results unchanged)
-set(SLIPEST_CPU_FLAGS "-m32 -mcpu=leon3 -mflat -fno-math-errno")
+set(SLIPEST_CPU_FLAGS "-m32 -mcpu=leon3 -fno-math-errno")
 set(CMAKE_SYSTEM_NAME Generic)
 set(CMAKE_SYSTEM_PROCESSOR sparc)
 set(CMAKE_C_COMPILER ${SLIPEST_TARGET_COMPILER})

@@ -79,8 +79,38 @@ static unsigned bitlen32(uint32_t m)
 #endif
 }
 
+/* a b mod 2^64. ARMv6-M has no 32x32->64 multiply: the product from 16-bit pieces inline (exact,
+ * the same bits as the compiler's __aeabi_lmul call, without the call); elsewhere the compiler's.
+ * Low words: alo blo = a1 b1 2^32 + (p01 + p10) 2^16 + p00 in full; the high words only add
+ * alo bhi + ahi blo to the upper 32 bits (mod 2^64). */
+#if defined(__ARM_ARCH_6M__)
+HOT uint64_t mul64(uint64_t a, uint64_t b)
+{
+    uint32_t alo = (uint32_t)a;
+    uint32_t blo = (uint32_t)b;
+    uint32_t a0 = alo & 0xFFFFu;
+    uint32_t a1 = alo >> 16;
+    uint32_t b0 = blo & 0xFFFFu;
+    uint32_t b1 = blo >> 16;
+    uint32_t p00 = a0 * b0;
+    uint32_t p01 = a0 * b1;
+    uint32_t p10 = a1 * b0;
+    uint32_t mid = (p00 >> 16) + (p01 & 0xFFFFu) + (p10 & 0xFFFFu); /* < 3 2^16 */
+    uint32_t lo = (mid << 16) | (p00 & 0xFFFFu);
+    uint32_t hi = (a1 * b1) + (p01 >> 16) + (p10 >> 16) + (mid >> 16) + (alo * (uint32_t)(b >> 32)) +
+                  ((uint32_t)(a >> 32) * blo);
+    return ((uint64_t)hi << 32) | lo;
+}
+#else
+HOT uint64_t mul64(uint64_t a, uint64_t b)
+{
+    return a * b;
+}
+#endif
+
 /* M ~ sqrt(30) 2^28 / sqrt(v) for v > 0 (M = 0 for v = 0), so that z = rsr(e M, 16) is Q12:
- * seed table + 2 Newton steps on non-negative 64-bit values (UMULL on Cortex-M3/M4), no division. */
+ * seed table + 2 Newton steps on non-negative 64-bit values (UMULL on Cortex-M3/M4, mul64 on the M0),
+ * no division. */
 static int32_t rsqrt_mult(const slipest_model_q_t *m, uint32_t v)
 {
     unsigned a;
@@ -96,12 +126,12 @@ static int32_t rsqrt_mult(const slipest_model_q_t *m, uint32_t v)
     y = m->rsqrt_seed[(w >> 27) - 8u];                  /* Q30 of 1/sqrt(w / 2^32), <= 2^31 */
     w30 = (uint64_t)(w >> 2);                           /* < 2^30 */
     for (it = 0; it < 2; ++it) {
-        uint64_t y2 = (y * y) >> 30;                    /* y^2 <= 2^62 */
-        uint64_t t = (w30 * y2) >> 30;                  /* < 2^62 before the shift */
-        y = (y * ((UINT64_C(3) << 30) - t)) >> 31;      /* t <= 3 2^30: y <= 1/sqrt(w) after a step */
+        uint64_t y2 = mul64(y, y) >> 30;                /* y^2 <= 2^62 */
+        uint64_t t = mul64(w30, y2) >> 30;              /* < 2^62 before the shift */
+        y = mul64(y, (UINT64_C(3) << 30) - t) >> 31;    /* t <= 3 2^30: y <= 1/sqrt(w) after a step */
     }
     /* y C30 < 2^48, << a (a <= 15) < 2^63; result <= sqrt(30) 2^28 < 2^31 */
-    return (int32_t)((((y * (uint64_t)m->c30) << a) + (UINT64_C(1) << 31)) >> 32);
+    return (int32_t)(((mul64(y, (uint64_t)m->c30) << a) + (UINT64_C(1) << 31)) >> 32);
 }
 
 /* GELU in Q(FY): max(u, 0) + GELU(-|u|), the latter from the table by linear interpolation

@@ -47,9 +47,9 @@ class Target:
     qemu_mode: str  # "system" (bare metal) | "user" (static Linux image)
     qemu_machine: str  # board in system mode; "none" in user mode
     qemu_cpu: str
-    report: str  # how the image reports: "semihosting" | "stdio"
+    report: str  # how the image reports: "semihosting" | "stdio" | "uart" (bare metal, QEMU serial on stdio)
     vectors: str  # how it gets vectors.bin: "semihosting" | "file" | "embed"
-    counter: str  # instruction counter of the cost image: "systick" | "none"
+    counter: str  # instruction counter of the cost image: "systick" | "instret" | "trace" | "none"
     reference: bool = False  # the target whose figures are quoted first (bench c's m4_* keys, the demo)
     cpu_flags: tuple[str, ...] = ()  # SLIPEST_CPU_FLAGS: the compiler's CPU/FPU/ABI options (stack analysis reuses them)
 

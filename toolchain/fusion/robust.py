@@ -56,7 +56,7 @@ def fit_acomerge_robust(inp: FusionInputs, config: AcoMergeConfig) -> FusedModel
     tuned = finetuned_experts(inp)
     buffer = make_buffer(tuned, copies=config.copies, sigma=config.sigma, seed=inp.buffer_seed)
     res = acomerge(tuned, inp.arch, inp.x_cal, inp.y_cal, config=config, seed=inp.seed, buffer=buffer)
-    details = {"config": config.to_dict(), "best_fitness": res.best_fitness, "best_origin": res.best_origin,
+    details = {"config": config.to_dict(), "best_fitness": res.best_fitness, "best_origin": res.best_origin.replace("expert", "fine-tuned expert"),
                "evaluations": res.evaluations, "finetuned_expert_fitness": res.expert_fitness,
                "finetune_steps_per_expert": inp.budget.steps, "history": res.history}
     return FusedModel(method=NAME, arch=inp.arch, flat=torch.as_tensor(res.best_flat, dtype=torch.float32),

@@ -7,8 +7,13 @@ recombination carries over to the other traverses worse than plain gradient fine
 Earth expert does. Here every aligned expert first gets the same gradient fine-tuning as
 Earth + FullFinetune (`budget.steps` Adam steps at `budget.finetune_lr` on D_Cal), and AcoMerge
 then searches a buffer built around those fine-tuned experts (their perturbed copies, σ as
-usual). The search starts from models that already sit in the target's basin, so its
-per-parameter recombination moves less far from solutions that gradient descent reached.
+usual), so the recombination starts from models that gradient descent already brought to the
+target rover.
+
+Measured on the real files (docs/paper_table.md, 30 runs, |D_Cal| = 150): under the paper protocol
+it matches AcoMerge (0.674 vs 0.669 balanced accuracy); under the traverse protocol it ties AcoMerge
+(0.492 vs 0.491) and stays below Earth + FullFinetune (0.530), i.e. the issue's goal is not met.
+It is kept as the best of the variants measured, not as a solution.
 
 What stays the same as `acomerge` (which remains the paper's algorithm): the search itself
 (`acomerge.acomerge`, MMAS + IWOA, 130 generations x 300 ants), the fitness (class-weighted CE

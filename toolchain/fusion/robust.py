@@ -1,7 +1,7 @@
 """`acomerge-robust`: AcoMerge searching among experts that were first fine-tuned on D_Cal.
 
 Why (issue 17, item 4): under the leakage-free `traverse` protocol, D_Cal comes from one or two
-traverses. AcoMerge over the raw experts fits those rows hard (balanced accuracy ~0.93 on D_Cal)
+traverses. AcoMerge over the raw experts fits those rows hard (balanced accuracy about 0.9 on D_Cal)
 by recombining parameters of models that never saw the target rover's lunar data, and that
 recombination carries over to the other traverses worse than plain gradient fine-tuning of the
 Earth expert does. Here every aligned expert first gets the same gradient fine-tuning as

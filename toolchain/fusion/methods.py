@@ -15,6 +15,7 @@ from . import baselines as bl
 from .acomerge import AcoMergeConfig, acomerge
 from .buffer import make_buffer
 from .registry import Budget, FusedModel, FusionInputs, register
+from .robust import fit_acomerge_robust
 
 
 def make_run_buffer(aligned: torch.Tensor, kind: str, seed: int, sigma: float = Budget.sigma,
@@ -108,6 +109,10 @@ def _aco_on_buffer(name: str, kind: str = "experts", phases: tuple[str, ...] | N
     return fit
 
 
+def _acomerge_robust(inp: FusionInputs) -> FusedModel:
+    return fit_acomerge_robust(inp, aco_config(inp.budget))
+
+
 def _aco_fleet_ablation(name: str):
     def fit(inp: FusionInputs) -> FusedModel:
         kept, buffer = fleet_ablation_buffer(name, inp.aligned, inp.buffer_seed, inp.budget.sigma, inp.budget.copies)
@@ -124,6 +129,8 @@ register("adamerging", _adamerging, "AdaMerging", "Merging")
 register("evomerge", _evomerge, "Evolutionary Merge", "Merging")
 register("modelswarm", _modelswarm, "ModelSwarm", "Merging")
 register("acomerge", _aco_on_buffer("acomerge"), "AcoMerge", "Merging")
+# not in the paper: AcoMerge over experts fine-tuned on D_Cal first (issue 17, fusion/robust.py)
+register("acomerge-robust", _acomerge_robust, "AcoMerge-robust", "Merging")
 register("distill", _distill, "Ensemble distillation", "Distillation")
 register("mmas-only", _aco_on_buffer("mmas-only", phases=("mmas",)), "MMAS only", "Ablation")
 # whole-model IWOA over the buffer (ModelSwarm's search, PSO replaced)

@@ -33,8 +33,12 @@ extern "C" {
 #define SLIPEST_IMAGE_TRAILER_SIZE 36u
 /** Header flag: the image carries the float32 model after the fixed-point one. */
 #define SLIPEST_IMAGE_FLAG_F32 0x0001u
-/** Largest valid image (with the float32 model), for sizing a receive buffer. */
-#define SLIPEST_IMAGE_MAX_SIZE 3842u
+/** Header flag: an HMAC-SHA256 tag over header and payload follows the trailer. */
+#define SLIPEST_IMAGE_FLAG_HMAC 0x0002u
+/** Bytes of the HMAC-SHA256 tag (present when SLIPEST_IMAGE_FLAG_HMAC is set). */
+#define SLIPEST_IMAGE_HMAC_SIZE 32u
+/** Largest valid image (with the float32 model and an HMAC tag), for sizing a receive buffer. */
+#define SLIPEST_IMAGE_MAX_SIZE 3874u
 
 /** Storage of a fixed-point model read from an image (the model struct points into it). */
 typedef struct {

@@ -10,6 +10,9 @@
  *                                                     boot from A/B model slots kept in FILE (emu_nvm.c;
  *                                                     the built-in model when no slot is valid), upload
  *                                                     an image into the inactive slot, activate it
+ *   --profile canopen [--node-id N] (serving modes)   the CANopen node (slipest_co.h) instead of the plain
+ *                                                     DBC profile: NMT, heartbeat, SDO (model upload into
+ *                                                     the --nvm slots), PDOs; frames on the same links
  *
  * Frames in, estimate and status frames out (host_tools/slipest.dbc). Non-blocking I/O
  * with an output queue: when the queue is full the loop stops reading input until it
@@ -37,6 +40,7 @@
 #include "slipest_store.h"
 #include "slipest_vectors.h"
 #include "emu_nvm.h"
+#include "emu_canopen.h"
 #ifdef SLIPEST_HMAC_KEY
 #include "slipest_hmac_key.h" /* generated from -DSLIPEST_HMAC_KEY_FILE=... */
 #endif
@@ -59,6 +63,7 @@ typedef struct {
 } emu_t;
 
 static volatile sig_atomic_t stop_requested = 0;
+static int profile_canopen = 0; /* --profile canopen */
 
 /* the model served: the built-in bundle's, or one read from a model image (--model) */
 static const slipest_model_q_t *model_q;
@@ -192,8 +197,9 @@ static void queue_frames(emu_t *e, const slipest_frame_t *f, int n)
 
 static void handle_frame(emu_t *e, const slipest_frame_t *in)
 {
-    slipest_frame_t out[SLIPEST_NODE_MAX_OUT];
-    int n = slipest_node_handle(&e->node, in, out, SLIPEST_NODE_MAX_OUT);
+    slipest_frame_t out[SLIPEST_NODE_MAX_OUT > SLIPEST_CO_MAX_OUT ? SLIPEST_NODE_MAX_OUT : SLIPEST_CO_MAX_OUT];
+    int n = profile_canopen ? emu_co_handle(in, out, SLIPEST_CO_MAX_OUT)
+                            : slipest_node_handle(&e->node, in, out, SLIPEST_NODE_MAX_OUT);
     if (n > 0) queue_frames(e, out, n);
 }
 
@@ -271,11 +277,15 @@ static int serve(emu_t *e)
                 out_idx = np++;
             }
         }
-        r = poll(p, (nfds_t)np, 200);
+        r = poll(p, (nfds_t)np, profile_canopen ? 2 : 200); /* CANopen: a 2 ms tick for heartbeat/timeouts */
         if (r < 0) {
             if (errno == EINTR) continue;
             perror("slipest_emu: poll");
             return 1;
+        }
+        if (profile_canopen) {
+            slipest_frame_t t[2];
+            queue_frames(e, t, emu_co_tick(t, 2u));
         }
         if (out_idx >= 0 && (p[out_idx].revents & (POLLOUT | POLLERR))) {
             if (flush_some(e) != 0) {
@@ -373,6 +383,8 @@ static void usage(FILE *to)
             "  --model IMG    use the model of a model image (model.img) instead of the built-in bundle\n"
             "  --vectors F    check every test vector (fixed-point logits exact, float within 1e-5*max(1,|logit|))\n"
             "  --version      print library version and model hash\n"
+            "  --profile P    dbc (the plain profile, default) or canopen (CANopen node, see slipest_co.h)\n"
+            "  --node-id N    CANopen node id, 1..127 (default 5)\n"
             "  --nvm FILE     boot from the A/B model slots in FILE (created erased when absent)\n"
             "  --nvm-sector N NVM sector size of FILE (default 256)\n"
             "  --upload IMG   write a model image into the inactive slot and validate it (needs --nvm)\n"
@@ -386,7 +398,9 @@ int main(int argc, char **argv)
     const char *port = NULL, *vectors = NULL, *nvm_path = NULL, *upload = NULL;
     int use_stdio = 0, use_pty = 0, verbose = 0, i, rc, slave_keep = -1, activate = 0, rollback = 0;
     int print_version = 0;
-    unsigned long sector = 256ul, cut_after = 0ul;
+    const slipest_model_q_t *boot_q;
+    const slipest_model_f32_t *boot_f;
+    unsigned long sector = 256ul, cut_after = 0ul, node_id = 5ul;
     int torn = 0;
     struct sigaction sa;
 
@@ -407,6 +421,20 @@ int main(int argc, char **argv)
         else if (strcmp(argv[i], "--upload") == 0 && i + 1 < argc) upload = argv[++i];
         else if (strcmp(argv[i], "--activate") == 0) activate = 1;
         else if (strcmp(argv[i], "--rollback") == 0) rollback = 1;
+        else if (strcmp(argv[i], "--profile") == 0 && i + 1 < argc) {
+            const char *k = argv[++i];
+            if (strcmp(k, "canopen") == 0) profile_canopen = 1;
+            else if (strcmp(k, "dbc") != 0) {
+                fprintf(stderr, "slipest_emu: unknown profile '%s' (dbc or canopen)\n", k);
+                return 2;
+            }
+        } else if (strcmp(argv[i], "--node-id") == 0 && i + 1 < argc) {
+            node_id = strtoul(argv[++i], NULL, 10);
+            if (node_id < 1ul || node_id > 127ul) {
+                fprintf(stderr, "slipest_emu: --node-id must be 1..127\n");
+                return 2;
+            }
+        }
         else if (strcmp(argv[i], "--model") == 0 && i + 1 < argc) {
             if (load_model_image(argv[++i]) != 0) return 2;
         }
@@ -429,6 +457,8 @@ int main(int argc, char **argv)
             return 2;
         }
     }
+    boot_q = model_q; /* the built-in (or --model) model, before a slot's replaces it */
+    boot_f = model_f32;
     if (nvm_path != NULL) {
         if (sector < SLIPEST_STORE_SECTOR_MIN || sector > SLIPEST_STORE_SECTOR_MAX) {
             fprintf(stderr, "slipest_emu: --nvm-sector %lu outside %u..%u\n", sector, SLIPEST_STORE_SECTOR_MIN,
@@ -519,10 +549,21 @@ int main(int argc, char **argv)
         }
         e.in_fd = e.out_fd = fd;
     }
-    fprintf(stderr, "slipest_emu: ready link=%s model=%s lib=%u.%u\n", e.link == LINK_SLCAN ? "slcan" : "cobs",
-            model_hex, slipest_lib_version() >> 8, slipest_lib_version() & 0xFFu);
+    if (profile_canopen) {
+        slipest_frame_t boot;
+        rc = emu_co_start((uint8_t)node_id, nvm_path != NULL ? &store : NULL, boot_q, boot_f, &boot, 1u);
+        if (rc < 0) {
+            fprintf(stderr, "slipest_emu: CANopen node: %s\n", slipest_status_str(rc));
+            return 2;
+        }
+        queue_frames(&e, &boot, rc); /* the boot-up message */
+    }
+    fprintf(stderr, "slipest_emu: ready link=%s profile=%s model=%s lib=%u.%u\n",
+            e.link == LINK_SLCAN ? "slcan" : "cobs", profile_canopen ? "canopen" : "dbc", model_hex,
+            slipest_lib_version() >> 8, slipest_lib_version() & 0xFFu);
     rc = serve(&e);
-    print_counters(&e);
+    if (profile_canopen) emu_co_print_counters();
+    else print_counters(&e);
     if (slave_keep >= 0) close(slave_keep);
     return rc;
 }

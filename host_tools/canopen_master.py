@@ -141,6 +141,8 @@ class SlipestMaster:
         self.network.connect()
         self.node = canopen.RemoteNode(node_id, str(eds))
         self.network.add_node(self.node)
+        # telemetry shares the bus with the SDO transfer: answers may queue behind RPDOs
+        self.node.sdo.RESPONSE_TIMEOUT = 1.0
         self.node_id = node_id
 
     # -- NMT / identity / model -------------------------------------------------------------

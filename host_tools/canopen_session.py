@@ -87,7 +87,7 @@ class CanopenSession:
 
     def __init__(self, link: str, eds: Path, node_id: int = 5, lib: Path | None = None, emulator: Path | None = None,
                  nvm_file: Path | None = None, builtin_image: Path | None = None, bus: can.BusABC | None = None,
-                 nvm: RamNvm | None = None) -> None:
+                 nvm: RamNvm | None = None, wrap_bus: Callable[[can.BusABC], can.BusABC] | None = None) -> None:
         self.link, self.node_id = link, node_id
         self.bridge: CanopenBridge | None = None
         self.proc: subprocess.Popen | None = None
@@ -122,6 +122,8 @@ class CanopenSession:
             master_bus = bus
         else:
             raise ValueError(f"unknown CANopen link {link!r} (inproc, slcan, cobs or bus)")
+        if wrap_bus is not None:  # e.g. fault injection between master and node
+            master_bus = wrap_bus(master_bus)
         self.master = SlipestMaster(master_bus, eds, node_id)
         self.node_remote = self.master.node
 

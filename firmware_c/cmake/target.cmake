@@ -167,8 +167,10 @@ if(NOT SLIPEST_TARGET_FPU AND NOT SLIPEST_TARGET_INTEGER_ONLY)
            COMMAND ${CMAKE_COMMAND} -DNM=${SLIPEST_TARGET_NM_PATH} -DIMAGE=$<TARGET_FILE:slipest_test_vectors> -DEXPECT=present
                    -P ${FW}/cmake/check_softfloat.cmake)
 endif()
-# size matters more than speed outside the inference kernels (per-frame code, run at 150 Hz)
+# size matters more than speed outside the inference kernels (per-frame code, run at 150 Hz; the model
+# store runs at boot and per upload)
 set_source_files_properties(${FW}/src/slipest_node.c ${FW}/src/slipest_slcan.c ${FW}/src/slipest_cobs.c
                             ${FW}/src/slipest_crc.c ${FW}/src/slipest_status.c ${FW}/src/slipest_features.c
+                            ${FW}/src/slipest_store.c ${FW}/src/slipest_sha256.c
                             "${GEN}/slipest_dbc.c"
                             PROPERTIES COMPILE_OPTIONS -Os)

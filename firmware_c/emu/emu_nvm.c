@@ -22,13 +22,23 @@ static int put(const emu_nvm_t *e, uint32_t addr, const uint8_t *buf, uint32_t l
     return w == (ssize_t)len ? 0 : -1;
 }
 
-/* the power-loss hook: called at the start of every write/erase with the bytes it would put */
-static void maybe_die(emu_nvm_t *e, uint32_t addr, const uint8_t *buf, uint32_t len)
+/* The power-loss hook around every write/erase, which would put len bytes of buf at addr:
+ * 1 when the op is the cut one and the caller dies after doing it (mode after). */
+static int cut_before(emu_nvm_t *e, uint32_t addr, const uint8_t *buf, uint32_t len)
 {
     e->ops++;
-    if (e->cut_after == 0u || e->ops != e->cut_after) return;
-    if (e->torn) (void)put(e, addr, buf, len / 2u);
+    if (e->cut_after == 0u || e->ops != e->cut_after) return 0;
+    if (e->mode == EMU_CUT_AFTER) return 1;
+    if (e->mode == EMU_CUT_TORN) (void)put(e, addr, buf, len / 2u);
     raise(SIGKILL); /* a real process death: nothing after this point runs */
+    return 0;
+}
+
+static slipest_status_t put_then_maybe_die(emu_nvm_t *e, int die, uint32_t addr, const uint8_t *buf, uint32_t len)
+{
+    int r = put(e, addr, buf, len);
+    if (die) raise(SIGKILL);
+    return r == 0 ? SLIPEST_OK : SLIPEST_E_NVM;
 }
 
 static slipest_status_t nvm_read(void *ctx, uint32_t addr, uint8_t *buf, uint32_t len)
@@ -42,8 +52,7 @@ static slipest_status_t nvm_write(void *ctx, uint32_t addr, const uint8_t *buf, 
 {
     emu_nvm_t *e = ctx;
     if (len != e->sector || addr % e->sector != 0u || !in_area(e, addr, len)) return SLIPEST_E_RANGE;
-    maybe_die(e, addr, buf, len);
-    return put(e, addr, buf, len) == 0 ? SLIPEST_OK : SLIPEST_E_NVM;
+    return put_then_maybe_die(e, cut_before(e, addr, buf, len), addr, buf, len);
 }
 
 static slipest_status_t nvm_erase(void *ctx, uint32_t addr)
@@ -52,8 +61,7 @@ static slipest_status_t nvm_erase(void *ctx, uint32_t addr)
     uint8_t ff[SLIPEST_STORE_SECTOR_MAX];
     if (addr % e->sector != 0u || !in_area(e, addr, e->sector)) return SLIPEST_E_RANGE;
     memset(ff, 0xFF, e->sector);
-    maybe_die(e, addr, ff, e->sector);
-    return put(e, addr, ff, e->sector) == 0 ? SLIPEST_OK : SLIPEST_E_NVM;
+    return put_then_maybe_die(e, cut_before(e, addr, ff, e->sector), addr, ff, e->sector);
 }
 
 int emu_nvm_open(emu_nvm_t *e, const char *path, uint32_t sector, uint32_t n_sectors, slipest_nvm_t *nvm)

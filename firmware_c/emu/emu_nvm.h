@@ -1,6 +1,7 @@
 /* File-backed NVM for the emulator (slipest_nvm_t over a regular file), with the power-loss
- * test hook: the process kills itself with SIGKILL from inside the K-th write or erase,
- * optionally after doing only the first half of it (a torn write). */
+ * test hook: the process kills itself with SIGKILL from inside the K-th write or erase: before
+ * it touches the file, after only the first half of the sector (a torn write), or right after
+ * completing it (before the store sees the result). */
 #ifndef EMU_NVM_H
 #define EMU_NVM_H
 
@@ -14,8 +15,10 @@ typedef struct {
     uint32_t sector;     /* sector size */
     uint32_t ops;        /* writes + erases so far */
     uint32_t cut_after;  /* 0: never; K: die inside the K-th write/erase */
-    int torn;            /* when dying: first half of the sector done */
+    int mode;            /* EMU_CUT_BEFORE, EMU_CUT_TORN or EMU_CUT_AFTER */
 } emu_nvm_t;
+
+enum { EMU_CUT_BEFORE = 0, EMU_CUT_TORN = 1, EMU_CUT_AFTER = 2 };
 
 /* Open (create, erased to 0xFF, when absent or of another size) path as an area of n_sectors
  * sectors of sector bytes and fill nvm. Returns 0, or -1 with errno set. */

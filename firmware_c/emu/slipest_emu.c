@@ -389,7 +389,8 @@ static void usage(FILE *to)
             "  --nvm-sector N NVM sector size of FILE (default 256)\n"
             "  --upload IMG   write a model image into the inactive slot and validate it (needs --nvm)\n"
             "  --activate     activate the uploaded image; --rollback: re-activate the previous slot\n"
-            "  test hook: --nvm-cut-after K [--nvm-torn] dies by SIGKILL inside the K-th NVM write/erase\n");
+            "  test hook: --nvm-cut-after K [--nvm-cut-mode before|torn|after] dies by SIGKILL inside the\n"
+            "             K-th NVM write/erase (before it, after half a sector, or after all of it)\n");
 }
 
 int main(int argc, char **argv)
@@ -401,7 +402,7 @@ int main(int argc, char **argv)
     const slipest_model_q_t *boot_q;
     const slipest_model_f32_t *boot_f;
     unsigned long sector = 256ul, cut_after = 0ul, node_id = 5ul;
-    int torn = 0;
+    int cut_mode = EMU_CUT_BEFORE;
     struct sigaction sa;
 
     e.link = LINK_SLCAN;
@@ -417,7 +418,16 @@ int main(int argc, char **argv)
         else if (strcmp(argv[i], "--nvm") == 0 && i + 1 < argc) nvm_path = argv[++i];
         else if (strcmp(argv[i], "--nvm-sector") == 0 && i + 1 < argc) sector = strtoul(argv[++i], NULL, 10);
         else if (strcmp(argv[i], "--nvm-cut-after") == 0 && i + 1 < argc) cut_after = strtoul(argv[++i], NULL, 10);
-        else if (strcmp(argv[i], "--nvm-torn") == 0) torn = 1;
+        else if (strcmp(argv[i], "--nvm-cut-mode") == 0 && i + 1 < argc) {
+            const char *m = argv[++i];
+            if (strcmp(m, "before") == 0) cut_mode = EMU_CUT_BEFORE;
+            else if (strcmp(m, "torn") == 0) cut_mode = EMU_CUT_TORN;
+            else if (strcmp(m, "after") == 0) cut_mode = EMU_CUT_AFTER;
+            else {
+                fprintf(stderr, "slipest_emu: unknown --nvm-cut-mode '%s' (before, torn, after)\n", m);
+                return 2;
+            }
+        }
         else if (strcmp(argv[i], "--upload") == 0 && i + 1 < argc) upload = argv[++i];
         else if (strcmp(argv[i], "--activate") == 0) activate = 1;
         else if (strcmp(argv[i], "--rollback") == 0) rollback = 1;
@@ -468,7 +478,7 @@ int main(int argc, char **argv)
         rc = open_store(nvm_path, (uint32_t)sector);
         if (rc != 0) return rc;
         nvm_file.cut_after = (uint32_t)cut_after; /* armed after boot: the hook cuts an upload/activation */
-        nvm_file.torn = torn;
+        nvm_file.mode = cut_mode;
         if (upload != NULL && (rc = upload_image(upload, activate)) != 0) return rc;
         if (rollback) {
             rc = slipest_store_rollback(&store);

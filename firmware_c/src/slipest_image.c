@@ -34,8 +34,9 @@ static int16_t s16(uint16_t u)
     return (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): v fits int16_t (see above) */
 }
 
-uint32_t slipest_crc32_update(uint32_t crc, const uint8_t *data, size_t len)
+uint32_t slipest_crc32_update(uint32_t crc_in, const uint8_t *data, size_t len)
 {
+    uint32_t crc = crc_in;
     size_t i;
     int b;
     if (data == NULL) {
@@ -111,7 +112,10 @@ slipest_status_t slipest_image_check_header(const uint8_t *img, size_t len, uint
     /* the payload size must be the one SN-S layout with or without the float model */
     payload = le32(img + 42);
     if (payload != Q_PAYLOAD + ((f & SLIPEST_IMAGE_FLAG_F32) ? F32_PAYLOAD : 0u)) return SLIPEST_E_LENGTH;
-    tail = SLIPEST_IMAGE_TRAILER_SIZE + ((f & SLIPEST_IMAGE_FLAG_HMAC) ? SLIPEST_IMAGE_HMAC_SIZE : 0u);
+    tail = SLIPEST_IMAGE_TRAILER_SIZE;
+    if ((f & SLIPEST_IMAGE_FLAG_HMAC) != 0u) {
+        tail += SLIPEST_IMAGE_HMAC_SIZE;
+    }
     if (len != SLIPEST_IMAGE_HEADER_SIZE + (size_t)payload + tail) return SLIPEST_E_LENGTH;
     *flags = f;
     *body = SLIPEST_IMAGE_HEADER_SIZE + (size_t)payload;

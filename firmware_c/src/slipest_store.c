@@ -24,7 +24,7 @@
 #endif
 
 /* ------------------------------------------------------------------ byte order helpers */
-static uint32_t le32(const uint8_t *p)
+static uint32_t get_le32(const uint8_t *p)
 {
     return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
 }
@@ -37,9 +37,9 @@ static void put_le32(uint8_t *p, uint32_t v)
     p[3] = (uint8_t)(v >> 24);
 }
 
-static int32_t s32(uint32_t u) { return u > 0x7FFFFFFFu ? -(int32_t)(~u) - 1 : (int32_t)u; }
+static int32_t to_s32(uint32_t u) { return u > 0x7FFFFFFFu ? -(int32_t)(~u) - 1 : (int32_t)u; }
 
-static int16_t s16(uint32_t u)
+static int16_t to_s16(uint32_t u)
 {
     int32_t v = u > 0x7FFFu ? -(int32_t)(uint16_t)~u - 1 : (int32_t)u; /* u < 2^16 here */
     return (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): v is in int16_t range */
@@ -81,15 +81,22 @@ static slipest_status_t nvm_erase(slipest_store_t *s, uint32_t addr)
 /* ------------------------------------------------------------------ streaming image walk
  * The payload is a fixed sequence of little-endian arrays (docs/fixed_point.md "Model image");
  * each element is checked as it arrives and, when loading, stored. */
-enum { K_W1, K_B1, K_GAMMA, K_BETA, K_W2, K_B2, K_GELU, K_RSQRT, K_FEPS, K_FW1, K_FB1, K_FGAMMA, K_FBETA, K_FW2,
-       K_FB2, K_END };
-
-static const uint16_t seg_n[K_END] = {SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES, SLIPEST_N_HIDDEN, SLIPEST_N_HIDDEN,
-                                      SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES * SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES,
-                                      SLIPEST_Q_GELU_N, SLIPEST_Q_RSQRT_SEED_N, 1u,
-                                      SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES, SLIPEST_N_HIDDEN, SLIPEST_N_HIDDEN,
-                                      SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES * SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES};
-static const uint8_t seg_size[K_END] = {2u, 4u, 2u, 4u, 2u, 4u, 2u, 4u, 4u, 4u, 4u, 4u, 4u, 4u, 4u};
+#define K_W1 0u
+#define K_B1 1u
+#define K_GAMMA 2u
+#define K_BETA 3u
+#define K_W2 4u
+#define K_B2 5u
+#define K_GELU 6u
+#define K_RSQRT 7u
+#define K_FEPS 8u /* the float model: ln_eps, then its arrays */
+#define K_FW1 9u
+#define K_FB1 10u
+#define K_FGAMMA 11u
+#define K_FBETA 12u
+#define K_FW2 13u
+#define K_FB2 14u
+#define K_END 15u
 
 typedef struct {
     slipest_store_t *s;
@@ -120,11 +127,12 @@ static float *f32_dst(slipest_store_t *s, unsigned seg)
     case K_FGAMMA: return s->fs.gamma;
     case K_FBETA: return s->fs.beta;
     case K_FW2: return s->fs.w2;
+    case K_FB2: /* fall through: the last float array */
     default: return s->fs.b2;
     }
 }
 
-static float f32_of(uint32_t bits)
+static float bits_to_f32(uint32_t bits)
 {
     float f;
     memcpy(&f, &bits, sizeof f); /* bit pattern assembled byte-order-independently */
@@ -139,60 +147,102 @@ static void visit(walk_t *w, unsigned seg, unsigned i, uint32_t raw)
     slipest_status_t bad = SLIPEST_OK;
     switch (seg) {
     case K_W1: {
-        int16_t v = s16(raw);
+        int16_t v = to_s16(raw);
         w->row_abs[i / (unsigned)SLIPEST_N_FEATURES] += abs16(v);
-        if (w->load) s->qs.w1[i] = v;
+        if (w->load != 0) {
+            s->qs.w1[i] = v;
+        }
         break;
     }
     case K_B1:
-        if (!slipest_model_row_ok((int64_t)w->row_abs[i], s32(raw), SLIPEST_Q_ACC1_LIMIT)) bad = SLIPEST_E_RANGE;
-        if (w->load) s->qs.b1[i] = s32(raw);
+        if (0 == slipest_model_row_ok((int64_t)w->row_abs[i], to_s32(raw), SLIPEST_Q_ACC1_LIMIT)) {
+            bad = SLIPEST_E_RANGE;
+        }
+        if (w->load != 0) {
+            s->qs.b1[i] = to_s32(raw);
+        }
         break;
     case K_GAMMA:
-        if (w->load) s->qs.gamma[i] = s16(raw);
+        if (w->load != 0) {
+            s->qs.gamma[i] = to_s16(raw);
+        }
         break;
     case K_BETA:
-        if (s32(raw) < -32768 || s32(raw) > 32767) bad = SLIPEST_E_RANGE;
-        if (w->load) s->qs.beta[i] = s32(raw);
+        if (to_s32(raw) < -32768 || to_s32(raw) > 32767) {
+            bad = SLIPEST_E_RANGE;
+        }
+        if (w->load != 0) {
+            s->qs.beta[i] = to_s32(raw);
+        }
         break;
     case K_W2: {
-        int16_t v = s16(raw);
+        int16_t v = to_s16(raw);
         w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i / (unsigned)SLIPEST_N_HIDDEN] += abs16(v);
-        if (w->load) s->qs.w2[i] = v;
+        if (w->load != 0) {
+            s->qs.w2[i] = v;
+        }
         break;
     }
     case K_B2:
-        if (!slipest_model_row_ok((int64_t)w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i], s32(raw), SLIPEST_Q_ACC2_LIMIT)) {
+        if (slipest_model_row_ok((int64_t)w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i], to_s32(raw), SLIPEST_Q_ACC2_LIMIT) == 0) {
             bad = SLIPEST_E_RANGE;
         }
-        if (w->load) s->qs.b2[i] = s32(raw);
+        if (w->load != 0) {
+            s->qs.b2[i] = to_s32(raw);
+        }
         break;
     case K_GELU:
-        if (w->load) s->qs.gelu[i] = s16(raw);
+        if (w->load != 0) {
+            s->qs.gelu[i] = to_s16(raw);
+        }
         break;
     case K_RSQRT:
-        if (raw > SLIPEST_Q_RSQRT_SEED_MAX) bad = SLIPEST_E_RANGE;
-        if (w->load) s->qs.rsqrt_seed[i] = raw;
+        if (raw > SLIPEST_Q_RSQRT_SEED_MAX) {
+            bad = SLIPEST_E_RANGE;
+        }
+        if (w->load != 0) {
+            s->qs.rsqrt_seed[i] = raw;
+        }
         break;
     default: /* the float model: finite parameters, positive finite LayerNorm eps */
-        if (!f32_bits_finite(raw) || (seg == K_FEPS && (raw == 0u || raw > 0x7F7FFFFFu))) bad = SLIPEST_E_NONFINITE;
+        if ((f32_bits_finite(raw) == 0) || ((seg == K_FEPS) && ((raw == 0u) || (raw > 0x7F7FFFFFu)))) {
+            bad = SLIPEST_E_NONFINITE;
+        }
 #ifndef SLIPEST_Q_ONLY
-        if (w->load && seg == K_FEPS) s->mf.ln_eps = f32_of(raw);
-        else if (w->load) f32_dst(s, seg)[i] = f32_of(raw);
+        if (w->load != 0) {
+            if (seg == K_FEPS) {
+                s->mf.ln_eps = bits_to_f32(raw);
+            } else {
+                f32_dst(s, seg)[i] = bits_to_f32(raw);
+            }
+        }
 #endif
         break;
     }
-    if (bad != SLIPEST_OK && w->deferred == SLIPEST_OK) w->deferred = bad;
+    if (bad != SLIPEST_OK && w->deferred == SLIPEST_OK) {
+        w->deferred = bad;
+    }
 }
 
 /* one payload byte: assemble elements in layout order */
 static void payload_byte(walk_t *w, uint8_t b)
 {
-    unsigned last = (w->flags & SLIPEST_IMAGE_FLAG_F32) ? (unsigned)K_END : (unsigned)K_FEPS;
+    static const uint16_t seg_n[K_END] = {SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES, SLIPEST_N_HIDDEN, SLIPEST_N_HIDDEN,
+                                          SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES * SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES,
+                                          SLIPEST_Q_GELU_N, SLIPEST_Q_RSQRT_SEED_N, 1u,
+                                          SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES, SLIPEST_N_HIDDEN, SLIPEST_N_HIDDEN,
+                                          SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES * SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES};
+    static const uint8_t seg_size[K_END] = {2u, 4u, 2u, 4u, 2u, 4u, 2u, 4u, 4u, 4u, 4u, 4u, 4u, 4u, 4u};
+    unsigned last = K_FEPS;
+    if ((w->flags & SLIPEST_IMAGE_FLAG_F32) != 0u) {
+        last = K_END;
+    }
     if (w->seg >= last) return; /* cannot happen: the payload size was checked against the layout */
     w->acc |= (uint32_t)b << (8u * w->nb);
     w->nb += 1u;
-    if (w->nb < seg_size[w->seg]) return;
+    if (w->nb < seg_size[w->seg]) {
+        return;
+    }
     visit(w, w->seg, w->idx, w->acc);
     w->acc = 0u;
     w->nb = 0u;
@@ -221,19 +271,25 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
     w.s = s;
     w.load = load;
     w.crc = 0xFFFFFFFFu;
-    if (s->key != NULL) slipest_hmac_sha256_init(&w.mac, s->key, s->key_len);
+    if (s->key != NULL) {
+        slipest_hmac_sha256_init(&w.mac, s->key, s->key_len);
+    }
     /* len <= SLIPEST_IMAGE_MAX_SIZE, so at most SLIPEST_STORE_SLOT_SECTORS(S) iterations */
     while (pos < len) {
         n = (len - pos < S) ? len - pos : S;
         st = nvm_read(s, base + pos, s->buf, n);
-        if (st != SLIPEST_OK) return st;
+        if (st != SLIPEST_OK) {
+            return st;
+        }
         for (i = 0; i < n; ++i, ++pos) {
             uint8_t b = s->buf[i];
             if (pos < SLIPEST_IMAGE_HEADER_SIZE) {
                 w.hdr[pos] = b;
                 if (pos + 1u == SLIPEST_IMAGE_HEADER_SIZE) {
                     st = slipest_image_check_header(w.hdr, len, &w.flags, &w.body);
-                    if (st != SLIPEST_OK) return st;
+                    if (st != SLIPEST_OK) {
+                        return st;
+                    }
                 }
             } else if (pos >= w.body) {
                 w.tail[pos - w.body] = b; /* len == body + trailer (+ tag): checked with the header */
@@ -242,26 +298,40 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
                 payload_byte(&w, b);
             }
             w.crc = slipest_crc32_update(w.crc, &b, 1u);
-            if (s->key != NULL) slipest_hmac_sha256_update(&w.mac, &b, 1u);
+            if (s->key != NULL) {
+                slipest_hmac_sha256_update(&w.mac, &b, 1u);
+            }
         }
     }
-    if (le32(w.tail) != (w.crc ^ 0xFFFFFFFFu)) return SLIPEST_E_CRC;
+    if (get_le32(w.tail) != (w.crc ^ 0xFFFFFFFFu)) {
+        return SLIPEST_E_CRC;
+    }
     /* the header's hash32 is the first 4 bytes (big-endian) of the trailer's sha256 */
-    if (le32(w.hdr + 38) != (((uint32_t)w.tail[4] << 24) | ((uint32_t)w.tail[5] << 16) |
+    if (get_le32(&w.hdr[38]) != (((uint32_t)w.tail[4] << 24) | ((uint32_t)w.tail[5] << 16) |
                              ((uint32_t)w.tail[6] << 8) | (uint32_t)w.tail[7])) {
         return SLIPEST_E_HASH;
     }
     if (s->key != NULL) {
-        if (!(w.flags & SLIPEST_IMAGE_FLAG_HMAC)) return SLIPEST_E_AUTH;
+        if ((w.flags & SLIPEST_IMAGE_FLAG_HMAC) == 0u) {
+            return SLIPEST_E_AUTH;
+        }
         slipest_hmac_sha256_final(&w.mac, tag);
-        if (!slipest_ct_equal(tag, w.tail + SLIPEST_IMAGE_TRAILER_SIZE, SLIPEST_SHA256_SIZE)) return SLIPEST_E_AUTH;
+        if (0 == slipest_ct_equal(tag, &w.tail[SLIPEST_IMAGE_TRAILER_SIZE], SLIPEST_SHA256_SIZE)) {
+            return SLIPEST_E_AUTH;
+        }
     }
     slipest_image_header_scalars(w.hdr, &q);
     st = slipest_model_q_check_scalars(&q);
-    if (st != SLIPEST_OK) return st;
-    if (w.deferred != SLIPEST_OK) return w.deferred;
-    *crc_out = le32(w.tail);
-    if (!load) return SLIPEST_OK;
+    if (st != SLIPEST_OK) {
+        return st;
+    }
+    if (w.deferred != SLIPEST_OK) {
+        return w.deferred;
+    }
+    *crc_out = get_le32(w.tail);
+    if (load == 0) {
+        return SLIPEST_OK;
+    }
 
     /* loaded: point the model at the storage and run the full check once more on RAM */
     q.w1 = s->qs.w1;
@@ -273,12 +343,14 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
     q.gelu = s->qs.gelu;
     q.rsqrt_seed = s->qs.rsqrt_seed;
     st = slipest_model_q_check(&q);
-    if (st != SLIPEST_OK) return st;
+    if (st != SLIPEST_OK) {
+        return st;
+    }
     s->mq = q;
     memcpy(s->sha256, w.tail + 4, sizeof s->sha256);
 #ifndef SLIPEST_Q_ONLY
     s->have_f32 = 0u;
-    if (w.flags & SLIPEST_IMAGE_FLAG_F32) {
+    if ((w.flags & SLIPEST_IMAGE_FLAG_F32) != 0u) {
         s->mf.w1 = s->fs.w1;
         s->mf.b1 = s->fs.b1;
         s->mf.gamma = s->fs.gamma;
@@ -291,7 +363,9 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
         s->mf.version = q.version;
         s->mf.hash32 = q.hash32;
         st = slipest_model_f32_check(&s->mf);
-        if (st != SLIPEST_OK) return st;
+        if (st != SLIPEST_OK) {
+            return st;
+        }
         s->have_f32 = 1u;
     }
 #endif
@@ -306,7 +380,9 @@ static slipest_status_t load_slot(slipest_store_t *s, unsigned slot)
     s->have_model = 0u;
     st = walk_slot(s, slot, s->rec.length[slot], 1, &crc);
     if (st == SLIPEST_OK && crc != s->rec.crc[slot]) st = SLIPEST_E_CRC; /* not the image the record names */
-    if (st == SLIPEST_OK) s->have_model = 1u;
+    if (st == SLIPEST_OK) {
+        s->have_model = 1u;
+    }
     return st;
 }
 
@@ -336,38 +412,38 @@ static void record_encode(const slipest_store_record_t *r, uint8_t *p)
     p[5] = 0u;
     p[6] = 0u;
     p[7] = 0u;
-    put_le32(p + 8, r->seq);
+    put_le32(&p[8], r->seq);
     p[12] = r->active == NO_SLOT ? 0xFFu : (uint8_t)r->active;
     p[13] = r->prev == NO_SLOT ? 0xFFu : (uint8_t)r->prev;
     p[14] = 0u;
     p[15] = 0u;
     for (k = 0; k < SLIPEST_STORE_N_SLOTS; ++k) {
-        put_le32(p + 16u + 16u * k, r->length[k]);
-        put_le32(p + 20u + 16u * k, r->crc[k]);
-        put_le32(p + 24u + 16u * k, r->version[k]);
-        put_le32(p + 28u + 16u * k, r->hash32[k]);
+        put_le32(&p[16u + 16u * k], r->length[k]);
+        put_le32(&p[20u + 16u * k], r->crc[k]);
+        put_le32(&p[24u + 16u * k], r->version[k]);
+        put_le32(&p[28u + 16u * k], r->hash32[k]);
     }
-    put_le32(p + REC_BODY, slipest_crc32(p, REC_BODY));
+    put_le32(&p[REC_BODY], slipest_crc32(p, REC_BODY));
 }
 
 /* 1 and *r filled when p holds a valid record */
 static int record_decode(const uint8_t *p, slipest_store_record_t *r)
 {
     unsigned k;
-    if (memcmp(p, REC_MAGIC, 4) != 0 || p[4] != REC_LAYOUT || le32(p + REC_BODY) != slipest_crc32(p, REC_BODY)) {
+    if (memcmp(p, REC_MAGIC, 4) != 0 || p[4] != REC_LAYOUT || get_le32(&p[REC_BODY]) != slipest_crc32(p, REC_BODY)) {
         return 0;
     }
     if (p[12] >= SLIPEST_STORE_N_SLOTS || (p[13] != 0xFFu && (p[13] >= SLIPEST_STORE_N_SLOTS || p[13] == p[12]))) {
         return 0;
     }
-    r->seq = le32(p + 8);
+    r->seq = get_le32(&p[8]);
     r->active = (int8_t)p[12];
     r->prev = p[13] == 0xFFu ? NO_SLOT : (int8_t)p[13];
     for (k = 0; k < SLIPEST_STORE_N_SLOTS; ++k) {
-        r->length[k] = le32(p + 16u + 16u * k);
-        r->crc[k] = le32(p + 20u + 16u * k);
-        r->version[k] = le32(p + 24u + 16u * k);
-        r->hash32[k] = le32(p + 28u + 16u * k);
+        r->length[k] = get_le32(&p[16u + 16u * k]);
+        r->crc[k] = get_le32(&p[20u + 16u * k]);
+        r->version[k] = get_le32(&p[24u + 16u * k]);
+        r->hash32[k] = get_le32(&p[28u + 16u * k]);
     }
     return r->seq != 0u;
 }
@@ -381,8 +457,12 @@ static slipest_status_t record_commit(slipest_store_t *s, const slipest_store_re
     memset(s->buf, 0xFF, s->nvm.sector_size);
     record_encode(r, s->buf);
     st = nvm_erase(s, addr);
-    if (st == SLIPEST_OK) st = nvm_write(s, addr, s->buf);
-    if (st != SLIPEST_OK) return st;
+    if (st == SLIPEST_OK) {
+        st = nvm_write(s, addr, s->buf);
+    }
+    if (st != SLIPEST_OK) {
+        return st;
+    }
     s->rec = *r;
     s->rec_sector = target;
     return SLIPEST_OK;
@@ -392,9 +472,15 @@ static slipest_status_t record_commit(slipest_store_t *s, const slipest_store_re
 static void derive_slot_states(slipest_store_t *s)
 {
     unsigned k;
-    for (k = 0; k < SLIPEST_STORE_N_SLOTS; ++k) s->slot_state[k] = SLIPEST_SLOT_EMPTY;
-    if (s->have_model) s->slot_state[(unsigned)s->rec.active] = SLIPEST_SLOT_ACTIVE;
-    if (s->rec.seq != 0u && s->rec.prev != NO_SLOT) s->slot_state[(unsigned)s->rec.prev] = SLIPEST_SLOT_PREVIOUS;
+    for (k = 0; k < SLIPEST_STORE_N_SLOTS; ++k) {
+        s->slot_state[k] = SLIPEST_SLOT_EMPTY;
+    }
+    if (s->have_model != 0u) {
+        s->slot_state[(unsigned)s->rec.active] = SLIPEST_SLOT_ACTIVE;
+    }
+    if (s->rec.seq != 0u && s->rec.prev != NO_SLOT) {
+        s->slot_state[(unsigned)s->rec.prev] = SLIPEST_SLOT_PREVIOUS;
+    }
 }
 
 /* ------------------------------------------------------------------ public API */
@@ -428,17 +514,24 @@ slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t 
         memset(&cand[k], 0, sizeof cand[k]);
         if (nvm_read(store, k * nvm->sector_size, raw, sizeof raw) == SLIPEST_OK) {
             valid[k] = record_decode(raw, &cand[k]);
-            if (!valid[k] && raw[0] != 0xFFu) store->c.boot_fallbacks++; /* torn or corrupt, not blank */
+            if ((valid[k] == 0) && (raw[0] != 0xFFu)) { /* torn or corrupt, not blank */
+                store->c.boot_fallbacks++;
+            }
         } else {
             st = SLIPEST_E_NVM;
         }
     }
     /* newest first; a record whose active slot no longer validates gives way to the older one */
-    order[0] = (valid[1] && (!valid[0] || cand[1].seq > cand[0].seq)) ? 1u : 0u;
+    order[0] = 0u;
+    if ((valid[1] != 0) && ((valid[0] == 0) || (cand[1].seq > cand[0].seq))) {
+        order[0] = 1u;
+    }
     order[1] = 1u - order[0];
     for (k = 0; k < 2u; ++k) {
         unsigned r = order[k];
-        if (!valid[r]) continue;
+        if (valid[r] == 0) {
+            continue;
+        }
         store->rec = cand[r];
         store->rec_sector = (uint8_t)r;
         if (load_slot(store, (unsigned)cand[r].active) == SLIPEST_OK) {
@@ -449,7 +542,7 @@ slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t 
     }
     if (st != SLIPEST_OK && store->have_model == 0u) {
         /* no record validates: keep the newest valid one (if any) only to place the next record */
-        if (valid[order[0]]) {
+        if (valid[order[0]] != 0) {
             store->rec = cand[order[0]];
             store->rec_sector = (uint8_t)order[0];
         }
@@ -457,7 +550,9 @@ slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t 
     derive_slot_states(store);
     if (store->have_model == 0u) {
         unsigned j;
-        for (j = 0; j < SLIPEST_STORE_N_SLOTS; ++j) store->slot_state[j] = SLIPEST_SLOT_EMPTY;
+        for (j = 0; j < SLIPEST_STORE_N_SLOTS; ++j) {
+            store->slot_state[j] = SLIPEST_SLOT_EMPTY;
+        }
     }
     return st;
 }
@@ -466,15 +561,24 @@ slipest_status_t slipest_store_begin(slipest_store_t *store, uint32_t total_len,
 {
     unsigned slot, k;
     slipest_status_t st;
-    if (store == NULL) return SLIPEST_E_NULL;
-    if (store->upload == SLIPEST_UPLOAD_RECEIVING) return SLIPEST_E_STATE;
-    if (flags != 0u) return SLIPEST_E_RANGE;
+    if (store == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (store->upload == SLIPEST_UPLOAD_RECEIVING) {
+        return SLIPEST_E_STATE;
+    }
+    if (flags != 0u) {
+        return SLIPEST_E_RANGE;
+    }
     if (total_len < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE || total_len > SLIPEST_IMAGE_MAX_SIZE) {
         store->c.refused_length++;
         return SLIPEST_E_LENGTH;
     }
     /* the inactive slot: never the one the newest record names active */
-    slot = (store->rec.seq != 0u && store->rec.active == 0) ? 1u : 0u;
+    slot = 0u;
+    if ((store->rec.seq != 0u) && (store->rec.active == 0)) {
+        slot = 1u;
+    }
     store->upload = SLIPEST_UPLOAD_IDLE;
     store->upload_slot = (int8_t)slot;
     store->slot_state[slot] = SLIPEST_SLOT_RECEIVING; /* the rollback target, if it was one, is gone */
@@ -507,10 +611,18 @@ slipest_status_t slipest_store_write(slipest_store_t *store, uint32_t offset, co
     size_t i;
     uint32_t S;
     slipest_status_t st;
-    if (store == NULL || (data == NULL && len > 0u)) return SLIPEST_E_NULL;
-    if (store->upload != SLIPEST_UPLOAD_RECEIVING) return SLIPEST_E_STATE;
-    if (offset != store->received) return SLIPEST_E_ORDER;
-    if (len > (size_t)(store->total_len - store->received)) return SLIPEST_E_LENGTH;
+    if (store == NULL || (data == NULL && len > 0u)) {
+        return SLIPEST_E_NULL;
+    }
+    if (store->upload != SLIPEST_UPLOAD_RECEIVING) {
+        return SLIPEST_E_STATE;
+    }
+    if (offset != store->received) {
+        return SLIPEST_E_ORDER;
+    }
+    if (len > (size_t)(store->total_len - store->received)) {
+        return SLIPEST_E_LENGTH;
+    }
     S = store->nvm.sector_size;
     for (i = 0; i < len; ++i) { /* len <= total_len <= SLIPEST_IMAGE_MAX_SIZE */
         store->buf[store->buf_fill] = data[i];
@@ -534,8 +646,12 @@ slipest_status_t slipest_store_finish(slipest_store_t *store)
     uint32_t crc = 0u, S;
     unsigned slot;
     slipest_status_t st;
-    if (store == NULL) return SLIPEST_E_NULL;
-    if (store->upload != SLIPEST_UPLOAD_RECEIVING) return SLIPEST_E_STATE;
+    if (store == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (store->upload != SLIPEST_UPLOAD_RECEIVING) {
+        return SLIPEST_E_STATE;
+    }
     slot = (unsigned)store->upload_slot;
     if (store->received != store->total_len) {
         store->c.refused_length++;
@@ -557,8 +673,8 @@ slipest_status_t slipest_store_finish(slipest_store_t *store)
     if (st == SLIPEST_OK) {
         uint8_t hdr[SLIPEST_IMAGE_HEADER_SIZE];
         st = nvm_read(store, slot_addr(store, slot), hdr, sizeof hdr);
-        store->ready.version = le32(hdr + 34);
-        store->ready.hash32 = le32(hdr + 38);
+        store->ready.version = get_le32(&hdr[34]);
+        store->ready.hash32 = get_le32(&hdr[38]);
         /* anti-rollback: only a newer model replaces the active one (rollback is its own command) */
         if (st == SLIPEST_OK && store->have_model != 0u && store->ready.version <= store->mq.version) {
             st = SLIPEST_E_STALE;
@@ -601,8 +717,12 @@ slipest_status_t slipest_store_activate(slipest_store_t *store)
     slipest_store_record_t r;
     unsigned slot;
     slipest_status_t st;
-    if (store == NULL) return SLIPEST_E_NULL;
-    if (store->upload != SLIPEST_UPLOAD_READY) return SLIPEST_E_STATE;
+    if (store == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (store->upload != SLIPEST_UPLOAD_READY) {
+        return SLIPEST_E_STATE;
+    }
     slot = (unsigned)store->upload_slot;
     r = store->rec;
     r.seq = store->rec.seq + 1u;
@@ -623,7 +743,9 @@ slipest_status_t slipest_store_activate(slipest_store_t *store)
     if (st == SLIPEST_E_NVM && store->rec.seq != r.seq) return st; /* record not written: still READY */
     store->upload = SLIPEST_UPLOAD_IDLE;
     store->upload_slot = NO_SLOT;
-    if (st == SLIPEST_OK) store->c.activations++;
+    if (st == SLIPEST_OK) {
+        store->c.activations++;
+    }
     return st;
 }
 
@@ -633,16 +755,24 @@ slipest_status_t slipest_store_rollback(slipest_store_t *store)
     unsigned prev;
     uint32_t crc = 0u;
     slipest_status_t st;
-    if (store == NULL) return SLIPEST_E_NULL;
+    if (store == NULL) {
+        return SLIPEST_E_NULL;
+    }
     if (store->upload != SLIPEST_UPLOAD_IDLE || store->have_model == 0u || store->rec.prev == NO_SLOT) {
         return SLIPEST_E_STATE;
     }
     prev = (unsigned)store->rec.prev;
-    if (store->slot_state[prev] != SLIPEST_SLOT_PREVIOUS) return SLIPEST_E_STATE;
+    if (store->slot_state[prev] != SLIPEST_SLOT_PREVIOUS) {
+        return SLIPEST_E_STATE;
+    }
     st = walk_slot(store, prev, store->rec.length[prev], 0, &crc);
-    if (st == SLIPEST_OK && crc != store->rec.crc[prev]) st = SLIPEST_E_CRC;
+    if (st == SLIPEST_OK && crc != store->rec.crc[prev]) {
+        st = SLIPEST_E_CRC;
+    }
     if (st != SLIPEST_OK) {
-        if (st != SLIPEST_E_NVM) store->slot_state[prev] = SLIPEST_SLOT_INVALID;
+        if (st != SLIPEST_E_NVM) {
+            store->slot_state[prev] = SLIPEST_SLOT_INVALID;
+        }
         return st;
     }
     r = store->rec;
@@ -650,14 +780,20 @@ slipest_status_t slipest_store_rollback(slipest_store_t *store)
     r.active = (int8_t)prev;
     r.prev = store->rec.active;
     st = switch_to(store, &r);
-    if (st == SLIPEST_OK) store->c.rollbacks++;
+    if (st == SLIPEST_OK) {
+        store->c.rollbacks++;
+    }
     return st;
 }
 
 slipest_status_t slipest_store_abort(slipest_store_t *store)
 {
-    if (store == NULL) return SLIPEST_E_NULL;
-    if (store->upload == SLIPEST_UPLOAD_IDLE) return SLIPEST_E_STATE;
+    if (store == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (store->upload == SLIPEST_UPLOAD_IDLE) {
+        return SLIPEST_E_STATE;
+    }
     store->c.uploads_aborted++;
     upload_failed(store, SLIPEST_SLOT_EMPTY);
     return SLIPEST_OK;
@@ -697,8 +833,12 @@ int slipest_store_active_slot(const slipest_store_t *store)
 
 slipest_status_t slipest_store_slot_info(const slipest_store_t *store, unsigned slot, slipest_slot_info_t *info)
 {
-    if (store == NULL || info == NULL) return SLIPEST_E_NULL;
-    if (slot >= SLIPEST_STORE_N_SLOTS) return SLIPEST_E_RANGE;
+    if (store == NULL || info == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (slot >= SLIPEST_STORE_N_SLOTS) {
+        return SLIPEST_E_RANGE;
+    }
     info->state = store->slot_state[slot];
     if (info->state == SLIPEST_SLOT_READY) {
         *info = store->ready;

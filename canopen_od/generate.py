@@ -3,6 +3,7 @@ source, objects.py. Stdlib only: CMake runs it at build time like cantools for t
 
     python canopen_od/generate.py c OUTDIR     -> OUTDIR/slipest_co_od.h, OUTDIR/slipest_co_od.c
     python canopen_od/generate.py eds FILE     -> the EDS (node id left as $NODEID)
+    python canopen_od/generate.py md           -> the object dictionary as a Markdown table
 """
 
 from __future__ import annotations
@@ -199,7 +200,40 @@ def _eds_var(section: str, e, name: str) -> list[str]:
     return lines
 
 
+_TYPE_NAMES = {od.BOOLEAN: "BOOLEAN", od.INTEGER8: "INTEGER8", od.INTEGER16: "INTEGER16", od.INTEGER32: "INTEGER32",
+               od.UNSIGNED8: "UNSIGNED8", od.UNSIGNED16: "UNSIGNED16", od.UNSIGNED32: "UNSIGNED32",
+               od.OCTET_STRING: "OCTET_STRING (32)", od.DOMAIN: "DOMAIN"}
+
+
+_MEANING = {"hb_time": "0 = off", "err_reg": "bit 0 generic, 4 communication, 7 manufacturer (image refused)",
+            "serial": "given to slipest_co_init()", "pdo": "last PDO payload", "model": "the active model",
+            "counter": "node counter", "slot": "from the store", "store_cnt": "store counter",
+            "upload": "upload progress", "command": "write 1 to execute",
+            "domain": "model.img, written into the inactive slot"}
+
+
+def markdown_table() -> str:
+    """The object dictionary as a Markdown table (docs/model_update.md embeds it; a test keeps it equal)."""
+    rows = ["| index | sub | name | type | access | default / meaning | PDO |", "|---|---:|---|---|---|---|---|"]
+    for e in od.objects():
+        name = f"{e.parent}: {e.name}" if e.parent else e.name
+        if isinstance(e.default, str):
+            default = e.default
+        elif e.kind == "const":
+            default = f"0x{int(e.default):X}" if int(e.default) > 9 else str(e.default)
+        else:
+            default = _MEANING[e.kind]
+            if e.kind == "hb_time":
+                default = f"{e.default} ms; " + default
+        rows.append(f"| 0x{e.index:04X} | {e.sub} | {name} | {_TYPE_NAMES[e.dtype]} | {e.access} | {default} | "
+                    f"{'yes' if e.mappable else ''} |")
+    return "\n".join(rows) + "\n"
+
+
 def main(argv: list[str]) -> int:
+    if len(argv) == 1 and argv[0] == "md":
+        sys.stdout.write(markdown_table())
+        return 0
     if len(argv) != 2 or argv[0] not in ("c", "eds"):
         print(__doc__, file=sys.stderr)
         return 2

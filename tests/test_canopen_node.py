@@ -198,3 +198,11 @@ def test_new_model_survives_a_power_cycle_inproc(bdir, tmp_path, new_bundle):
         s.power_cycle()
         s.master.node.nmt.wait_for_bootup(3)
         assert s.master.active_model()["version"] == 2
+
+
+def test_docs_object_dictionary_table_is_the_generated_one():
+    from fleetlab.canopen_od.generate import markdown_table
+
+    doc = (REPO / "docs" / "model_update.md").read_text()
+    start = doc.index("\n", doc.index("<!-- od-table:start")) + 1
+    assert doc[start:doc.index("<!-- od-table:end")] == markdown_table()

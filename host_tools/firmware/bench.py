@@ -244,6 +244,40 @@ def target_figures(t: Target, build_dir: Path) -> dict:
     return row
 
 
+# the CANopen node with two model slots (firmware_c/target/co_node_target.c), by part
+CANOPEN_PARTS = {
+    "canopen": ("slipest_co", "slipest_co_sdo", "slipest_co_od_access", "slipest_co_od"),
+    "store": ("slipest_store", "slipest_sha256", "slipest_image", "slipest_model"),
+}
+CANOPEN_GOALS = {"ram_bytes": 4096, "flash_bytes": 12288}  # issue 20: the whole CANopen node on the M4
+
+
+def canopen_node_figures(build_dir: Path) -> dict:
+    """RAM and flash of the CANopen node with two model slots, as linked and run in its target image
+    (upload by SDO block download, activation, one window): flash = library objects kept in the image
+    (node, CANopen, store, kernel, built-in model); RAM = their static data + the node context + the
+    store (one model in RAM, one sector buffer) + the peak stack of the heaviest call. The NVM area is
+    the integrator's flash and is not counted."""
+    out = run_image(build_dir, "slipest_co_node.elf")
+    if "PASS" not in out:
+        raise OSError(f"{build_dir}/slipest_co_node.elf did not pass:\n{out[-1000:]}")
+    kv = parse_kv(out)
+    lib = _by_source(library_footprint(build_dir / "slipest_co_node.elf.map", "libslipest_q.a"))
+    flash = sum(o["flash"] for o in lib.values())
+    static_ram = sum(o["ram"] for o in lib.values())
+    stack = max(kv["stack_co_window"], kv["stack_co_upload_end"], kv["stack_co_activate"])
+    by_part = {part: sum(lib.get(k, {"flash": 0})["flash"] for k in objs) for part, objs in CANOPEN_PARTS.items()}
+    by_part["estimator, kernel and built-in model"] = flash - sum(by_part.values())
+    return {
+        "flash_bytes": flash,
+        "ram_bytes": static_ram + kv["co_node_bytes"] + kv["store_bytes"] + stack,
+        "flash_bytes_by_part": by_part,
+        "ram_parts": {"static": static_ram, "node_context": kv["co_node_bytes"], "store": kv["store_bytes"],
+                      "peak_stack": stack},
+        "goals": CANOPEN_GOALS,
+    }
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bundle", type=Path, default=DEFAULT_BUNDLE, help="export bundle (default: the example bundle)")
     parser.add_argument("--build-dir", type=Path, default=REPO / "build" / "bench",
@@ -307,6 +341,7 @@ def run(args: argparse.Namespace) -> int:
     lib = library_footprint(m4 / "slipest_bench_target_q.elf.map", "libslipest_q.a")
     # a CAN-attached flight firmware: the integration guide's main loop, no serial codec linked
     can_fw = library_footprint(m4 / "example_minimal_can_loop.elf.map", "libslipest_q.a")
+    co_node = canopen_node_figures(m4)
     steps.close()
     flash = sum(o["flash"] for o in lib.values())
     static_ram = sum(o["ram"] for o in lib.values())
@@ -338,6 +373,10 @@ def run(args: argparse.Namespace) -> int:
         "m4_instructions_per_sample_node_slcan": round(cost["node_instructions_per_sample"], 1),
         "m4_instructions_per_systick": cost["instructions_per_tick"],
         "m4_label": found[ref].label,
+        # the CANopen node with two model slots (issue 20 goal: <= 4 KB RAM, <= 12 KB flash)
+        "m4_canopen_node_ram_bytes": co_node["ram_bytes"],
+        "m4_canopen_node_flash_bytes": co_node["flash_bytes"],
+        "m4_canopen_node": co_node,
         "cpu_targets": rows,
         "targets": {"m4_instructions_q": 3000, "m4_flash_bytes": 6144, "m4_ram_bytes": 1024, "speedup_vs_onnxruntime": 20},
         "bundle": str(bundle),
@@ -349,6 +388,9 @@ def run(args: argparse.Namespace) -> int:
         for key, value in result.items():
             if not isinstance(value, dict):
                 print(f"{key:42s} {value:.1f}" if isinstance(value, float) else f"{key:42s} {value}")
+        parts = ", ".join(f"{k} {v}" for k, v in co_node["flash_bytes_by_part"].items())
+        print(f"{'m4_canopen_node_flash_by_part':42s} {parts}")
+        print(f"{'m4_canopen_node_ram_parts':42s} " + ", ".join(f"{k} {v}" for k, v in co_node["ram_parts"].items()))
         print()
         print(format_table(rows))
     return 0

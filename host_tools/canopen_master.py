@@ -87,6 +87,7 @@ class EstimateCollector:
 
     def __init__(self, node: canopen.RemoteNode) -> None:
         self.estimates: list[Estimate] = []
+        self.arrival: list[float] = []  # time.monotonic() of each estimate's last frame
         self.model_status: list[tuple[int, int]] = []
         self._head: dict | None = None
         self._l01: tuple[int, int] | None = None
@@ -117,6 +118,7 @@ class EstimateCollector:
         with self._lock:
             self.estimates.append(Estimate(h["window_counter"], h["slip_class"], h["slip_class_f32"], h["flags"],
                                            h["n_samples"], h["saturations"], (l01[0], l01[1], v["logit_2"])))
+            self.arrival.append(time.monotonic())
 
     def _status(self, m) -> None:
         v = self._values(m)

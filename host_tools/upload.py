@@ -118,3 +118,69 @@ def read_image(bundle: Path) -> bytes:
     if not img.is_file():
         raise OSError(f"{bundle}: no model.img (export the bundle with `fleetlab export` first)")
     return img.read_bytes()
+
+
+def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Path, boot_bundle: Path,
+             windows: int, seed: int = 1, scale: float = 0.3, block: bool = True,
+             progress: Callable[[int], None] | None = None) -> dict:
+    """The after-landing update on a running node, checked: telemetry windows stream while the image
+    is uploaded (every window must be answered, by the boot model, bit-exact), the image is activated
+    between two windows, then the next windows must equal the new model's torch integer reference."""
+    import numpy as np
+
+    from fleetlab.data import features_int as fi
+
+    from .canopen_master import EstimateCollector
+    from .canopen_session import stream_telemetry
+    from .sources import sim_source
+    from .verify.reference import Reference
+
+    samples = sim_source(seed, scale).samples_q
+    if len(samples) < 2 * windows * fi.SAMPLES_PER_WINDOW:
+        raise ValueError(f"the simulator gave {len(samples) // fi.SAMPLES_PER_WINDOW} windows at scale {scale}; "
+                         f"{2 * windows} needed")
+    first = samples[: windows * fi.SAMPLES_PER_WINDOW]
+    second = samples[windows * fi.SAMPLES_PER_WINDOW: 2 * windows * fi.SAMPLES_PER_WINDOW]
+    m = session.master
+    m.node.tpdo.read()
+    col = EstimateCollector(m.node)
+    m.node.nmt.state = "OPERATIONAL"
+    time.sleep(0.05)
+    before = m.active_model()
+    sent: list[int] = []
+    streamer = threading.Thread(target=lambda: sent.append(stream_telemetry(session, first, col)), daemon=True)
+    streamer.start()
+    if not col.wait_for(2, 20):
+        raise OSError("the node sends no estimates (is it operational?)")
+    t0 = time.monotonic()
+    report = upload_image(session, tap, image, activate=False, block=block, progress=progress)
+    t1 = time.monotonic()
+    streamer.join(60)
+    if not sent or not col.wait_for(sent[0], 20):
+        raise OSError(f"windows lost during the upload: {col.count()} estimates for {sent[0] if sent else '?'} windows")
+    during = sum(1 for t in col.arrival if t0 <= t <= t1)
+    phase1 = np.array([e.logits for e in col.estimates])
+    exact1 = phase1.shape == (windows, 3) and bool(np.array_equal(
+        phase1, Reference.load(boot_bundle).q_logits(fi.featurise_int(first).features)[0]))
+    try:
+        m.activate()  # between two frames: the next window is the new model's
+    except canopen.SdoAbortedError as e:
+        raise OSError(explain(e)) from None
+    after = m.active_model()
+    n1 = col.count()
+    n = stream_telemetry(session, second, col, first_counter=len(first))
+    if not col.wait_for(n1 + n, 20):
+        raise OSError(f"windows lost after activation: {col.count() - n1} of {n}")
+    phase2 = np.array([e.logits for e in col.estimates[n1:]])
+    ref2 = Reference.load(new_bundle).q_logits(fi.featurise_int(second).features)[0]
+    return {
+        "upload": report.as_dict() | {"windows_during_upload": during},
+        "before": {"version": before["version"], "hash32": f"{before['hash32']:08x}"},
+        "after": {"version": after["version"], "hash32": f"{after['hash32']:08x}", "sha256": after["sha256"]},
+        "windows_streamed_during_upload_phase": windows,
+        "windows_answered_during_upload_phase": n1,
+        "boot_model_bit_exact": exact1,
+        "windows_after_activation": int(len(phase2)),
+        "new_model_bit_exact": bool(np.array_equal(phase2, ref2)),
+        "store_counters": m.store_counters(),
+    }

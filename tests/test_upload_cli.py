@@ -13,7 +13,7 @@ from fleetlab.cli import main
 from fleetlab.export.bundle import load_bundle
 from fleetlab.host_tools.verify.faults import faulty_image
 
-from test_canopen_node import bdir, new_bundle  # noqa: F401
+from test_canopen_node import EXAMPLE, bdir, new_bundle  # noqa: F401
 
 
 @pytest.mark.parametrize("link", ["canopen", "serial"])
@@ -45,3 +45,16 @@ def test_upload_errors_are_one_clear_line(bdir, new_bundle, tmp_path, capsys):
     assert "SDO abort 0x08000020" in capsys.readouterr().err
     assert main(["upload", "--bundle", str(new_bundle)]) == 1
     assert "--channel" in capsys.readouterr().err
+
+
+def test_rehearsal_streams_through_the_upload_and_switches_bit_exact(bdir, new_bundle, tmp_path, capsys):
+    """--rehearse: windows stream during the upload (all answered by the boot model, bit-exact), the image is
+    activated between two windows, and the next windows equal the new model's torch integer reference."""
+    report = tmp_path / "landing.json"
+    assert main(["upload", "--bundle", str(new_bundle), "--emulate", "--boot-bundle", str(EXAMPLE),
+                 "--rehearse", "6", "--scale", "0.1", "--report", str(report)]) == 0
+    r = json.loads(report.read_text())
+    assert r["boot_model_bit_exact"] and r["new_model_bit_exact"]
+    assert r["windows_answered_during_upload_phase"] == r["windows_streamed_during_upload_phase"] == 6
+    assert r["before"]["version"] == 1 and r["after"]["version"] == 2 and r["windows_after_activation"] == 6
+    assert "bit-exact with the new model: True" in capsys.readouterr().out

@@ -37,8 +37,12 @@ uint32_t slipest_co_counter(const slipest_co_t *co, unsigned n)
 int slipest_co_emcy(slipest_co_t *co, uint16_t code, uint8_t reg_bits, int status, slipest_frame_t *out)
 {
     co->err_reg |= reg_bits;
-    if (reg_bits != 0u) co->err_reg |= SLIPEST_CO_ERR_GENERIC;
-    if (co->nmt == SLIPEST_CO_NMT_STOPPED) return 0; /* a stopped node sends no EMCY */
+    if (reg_bits != 0u) {
+        co->err_reg |= SLIPEST_CO_ERR_GENERIC;
+    }
+    if (co->nmt == SLIPEST_CO_NMT_STOPPED) {
+        return 0; /* a stopped node sends no EMCY */
+    }
     out->id = 0x080u + co->node_id;
     out->dlc = 8u;
     (void)memset(out->data, 0, sizeof out->data);
@@ -62,7 +66,7 @@ uint32_t slipest_co_store_failed(slipest_co_t *co, int status, slipest_frame_t *
     }
     /* the image was refused (length, format, version, arch, CRC, hash, range, HMAC, stale) */
     *n += slipest_co_emcy(co, SLIPEST_CO_EMCY_DATA_SET, SLIPEST_CO_ERR_MANUFACTURER, status, out);
-    return (status == SLIPEST_E_LENGTH) ? SLIPEST_CO_ABORT_LENGTH : SLIPEST_CO_ABORT_STORE;
+    return (status == (int)SLIPEST_E_LENGTH) ? SLIPEST_CO_ABORT_LENGTH : SLIPEST_CO_ABORT_STORE;
 }
 
 void slipest_co_use_store_model(slipest_co_t *co)
@@ -162,7 +166,9 @@ static int to_tpdo(slipest_co_t *co, const slipest_frame_t *f, slipest_frame_t *
     unsigned k;
     for (k = SLIPEST_CO_N_RPDO; k < SLIPEST_CO_N_PDO; k++) {
         const slipest_co_pdo_t *p = &slipest_co_pdos[k];
-        if (p->dbc_id != f->id) continue;
+        if (p->dbc_id != f->id) {
+            continue;
+        }
         out->id = (uint32_t)p->cob_base + co->node_id;
         out->dlc = p->dlc;
         (void)memset(out->data, 0, sizeof out->data);

@@ -14,10 +14,17 @@ const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32
         uint32_t mid = lo + (hi - lo) / 2u;
         const slipest_co_entry_t *e = &slipest_co_od[mid];
         uint32_t k = ((uint32_t)e->index << 8) | e->sub;
-        if (e->index == index) index_seen = 1;
-        if (k == key) return e;
-        if (k < key) lo = mid + 1u;
-        else hi = mid;
+        if (e->index == index) {
+            index_seen = 1;
+        }
+        if (k == key) {
+            return e;
+        }
+        if (k < key) {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
     }
     /* the search may have skipped the index's other sub-indices: look at the neighbours */
     if (!index_seen) {
@@ -136,9 +143,13 @@ uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e,
         v = store_counter(slipest_store_counters(co->store), e->arg);
         break;
     case SLIPEST_CO_KIND_UPLOAD:
-        if (e->arg == 0u) v = (co->store == NULL) ? 0u : (uint32_t)slipest_store_upload_state(co->store);
-        else if (e->arg == 1u) v = (uint32_t)(uint8_t)co->last_store_status; /* two's complement byte */
-        else v = co->sdo.done;
+        if (e->arg == 0u) {
+            v = (co->store == NULL) ? 0u : (uint32_t)slipest_store_upload_state(co->store);
+        } else if (e->arg == 1u) {
+            v = (uint32_t)(uint8_t)co->last_store_status; /* two's complement byte */
+        } else {
+            v = co->sdo.done;
+        }
         break;
     default: return SLIPEST_CO_ABORT_GENERAL;
     }

@@ -15,8 +15,9 @@
 
 /* CRC-16 of CiA 301 block transfers: polynomial 0x1021, initial value 0 (XMODEM), bitwise:
  * a few bytes of code instead of a 512-byte table */
-static uint16_t crc16_update(uint16_t crc, const uint8_t *data, uint32_t len)
+static uint16_t crc16_update(uint16_t crc_in, const uint8_t *data, uint32_t len)
 {
+    uint16_t crc = crc_in;
     uint32_t i;
     unsigned b;
     for (i = 0; i < len; i++) {
@@ -129,7 +130,7 @@ static int download_initiate(slipest_co_t *co, const slipest_frame_t *in, slipes
     if ((cmd & 0x02u) != 0u) { /* expedited: 4 - n bytes in the frame */
         uint32_t len = ((cmd & 0x01u) != 0u) ? 4u - ((uint32_t)(cmd >> 2) & 3u) : 4u;
         if (e->kind == SLIPEST_CO_KIND_DOMAIN) return abort_frame(co, index, sub, SLIPEST_CO_ABORT_TOO_LOW, out);
-        code = slipest_co_od_write(co, e, &in->data[4], len, out + 1, &n);
+        code = slipest_co_od_write(co, e, &in->data[4], len, &out[1], &n);
         if (code != 0u) {
             (void)abort_frame(co, index, sub, code, out);
             return n;
@@ -145,7 +146,7 @@ static int download_initiate(slipest_co_t *co, const slipest_frame_t *in, slipes
     co->sdo.done = 0u;
     co->sdo.toggle = 0u;
     if (e->kind == SLIPEST_CO_KIND_DOMAIN) {
-        code = domain_begin(co, co->sdo.size, out + 1, &n);
+        code = domain_begin(co, co->sdo.size, &out[1], &n);
     } else if (co->sdo.size > slipest_co_od_size(e)) {
         code = SLIPEST_CO_ABORT_TOO_HIGH;
     } else {
@@ -175,8 +176,8 @@ static int download_segment(slipest_co_t *co, const slipest_frame_t *in, slipest
         return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_TOGGLE, out);
     }
     if (e->kind == SLIPEST_CO_KIND_DOMAIN) {
-        code = domain_write(co, &in->data[1], len, out + 1, &n);
-        if (code == 0u && (cmd & 0x01u) != 0u) code = domain_finish(co, out + 1, &n);
+        code = domain_write(co, &in->data[1], len, &out[1], &n);
+        if (code == 0u && (cmd & 0x01u) != 0u) code = domain_finish(co, &out[1], &n);
     } else if (co->sdo.done + len > co->sdo.size) {
         code = SLIPEST_CO_ABORT_TOO_HIGH;
     } else {
@@ -184,7 +185,7 @@ static int download_segment(slipest_co_t *co, const slipest_frame_t *in, slipest
         co->sdo.done += len;
         code = 0u;
         if ((cmd & 0x01u) != 0u) {
-            code = (co->sdo.done == co->sdo.size) ? slipest_co_od_write(co, e, co->sdo.buf, co->sdo.done, out + 1, &n)
+            code = (co->sdo.done == co->sdo.size) ? slipest_co_od_write(co, e, co->sdo.buf, co->sdo.done, &out[1], &n)
                                                  : SLIPEST_CO_ABORT_TOO_LOW;
         }
     }
@@ -195,7 +196,9 @@ static int download_segment(slipest_co_t *co, const slipest_frame_t *in, slipest
     frame8(co, out);
     out->data[0] = (uint8_t)(0x20u | (co->sdo.toggle << 4));
     co->sdo.toggle ^= 1u;
-    if ((cmd & 0x01u) != 0u) co->sdo.state = SLIPEST_CO_SDO_IDLE;
+    if ((cmd & 0x01u) != 0u) {
+        co->sdo.state = SLIPEST_CO_SDO_IDLE;
+    }
     return n;
 }
 
@@ -239,7 +242,9 @@ static int upload_segment(slipest_co_t *co, const slipest_frame_t *in, slipest_f
         return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_TOGGLE, out);
     }
     len = co->sdo.size - co->sdo.done;
-    if (len > 7u) len = 7u;
+    if (len > 7u) {
+        len = 7u;
+    }
     frame8(co, out);
     (void)memcpy(&out->data[1], &co->sdo.buf[co->sdo.done], len);
     co->sdo.done += len;
@@ -269,7 +274,7 @@ static int block_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_f
     if ((cmd & 0x02u) == 0u) return abort_frame(co, index, sub, SLIPEST_CO_ABORT_LENGTH, out);
     co->sdo.size = slipest_co_get_le(&in->data[4], 4u);
     co->sdo.done = 0u;
-    code = domain_begin(co, co->sdo.size, out + 1, &n);
+    code = domain_begin(co, co->sdo.size, &out[1], &n);
     if (code != 0u) {
         (void)abort_frame(co, index, sub, code, out);
         return n;
@@ -291,29 +296,35 @@ static int block_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_f
 static int block_segment(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_t *out)
 {
     uint8_t seq = (uint8_t)(in->data[0] & 0x7Fu);
-    int last = (in->data[0] & 0x80u) != 0u;
+    uint8_t last = ((in->data[0] & 0x80u) != 0u) ? 1u : 0u;
     int n = 0;
-    if (seq == (uint8_t)(co->sdo.seq_ok + 1u) && !co->sdo.seq_bad) {
+    if (seq == (uint8_t)(co->sdo.seq_ok + 1u) && co->sdo.seq_bad == 0u) {
         uint32_t left = co->sdo.size - co->sdo.done;
         uint32_t len = left < 7u ? left : 7u;
         uint32_t code;
-        if (!last && left <= 7u) {
+        if (last == 0u && left <= 7u) {
             /* more segments announced than the indicated size holds */
             return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_TOO_HIGH, out);
         }
-        code = domain_write(co, &in->data[1], len, out + 1, &n);
+        code = domain_write(co, &in->data[1], len, &out[1], &n);
         if (code != 0u) {
             (void)abort_frame(co, co->sdo.index, co->sdo.sub, code, out);
             return 1 + n;
         }
         co->sdo.crc = crc16_update(co->sdo.crc, &in->data[1], len);
         co->sdo.seq_ok = seq;
-        if (last) co->sdo.state = SLIPEST_CO_SDO_BLOCK_END;
+        if (last != 0u) {
+            co->sdo.state = SLIPEST_CO_SDO_BLOCK_END;
+        }
     } else {
-        if (!co->sdo.seq_bad) co->cnt[SLIPEST_CO_CNT_BLOCK_SEQUENCE_ERRORS]++;
+        if (co->sdo.seq_bad == 0u) {
+            co->cnt[SLIPEST_CO_CNT_BLOCK_SEQUENCE_ERRORS]++;
+        }
         co->sdo.seq_bad = 1u;
     }
-    if (seq != SLIPEST_CO_BLKSIZE && !last) return 0; /* the block goes on */
+    if (seq != SLIPEST_CO_BLKSIZE && last == 0u) {
+        return 0; /* the block goes on */
+    }
     /* end of the sub-block (its last number, or the last segment of the transfer, even out of
      * order): acknowledge the last segment taken in order; the client repeats the rest */
     frame8(co, out);
@@ -338,10 +349,10 @@ static int block_end(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_
         ((co->sdo.size % 7u) == 0u && unused != 0u)) {
         return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_LENGTH, out);
     }
-    if (co->sdo.crc_on && (uint16_t)slipest_co_get_le(&in->data[1], 2u) != co->sdo.crc) {
+    if (co->sdo.crc_on != 0u && (uint16_t)slipest_co_get_le(&in->data[1], 2u) != co->sdo.crc) {
         return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_CRC, out);
     }
-    code = domain_finish(co, out + 1, &n);
+    code = domain_finish(co, &out[1], &n);
     if (code != 0u) {
         (void)abort_frame(co, co->sdo.index, co->sdo.sub, code, out);
         return n;

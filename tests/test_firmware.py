@@ -158,7 +158,7 @@ def test_fuzzers_run_clean(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr[-4000:]
     execs = dict(re.findall(r"^(fuzz_\w+) executions=(\d+)", proc.stdout, flags=re.M))
     assert set(execs) == {"fuzz_slcan", "fuzz_cobs", "fuzz_push", "fuzz_image", "fuzz_node_frames", "fuzz_payload",
-                          "fuzz_store"}
+                          "fuzz_store", "fuzz_co_frames"}
     assert all(int(v) > 1000 for v in execs.values()), execs
     print(proc.stdout)
 

@@ -18,8 +18,9 @@
 #define SLIPEST_CO_ERR_COMM 0x10u
 #define SLIPEST_CO_ERR_MANUFACTURER 0x80u
 
-/* The OD entry of (index, sub), or NULL with *abort set (no object / no sub-index). */
-const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32_t *abort_code);
+/* The OD entry of (index, sub) and its position in slipest_co_od (*entry), or NULL with *abort_code
+ * set (no object / no sub-index; *entry untouched). */
+const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32_t *abort_code, uint16_t *entry);
 
 /* Bytes of an entry's value (0 for a DOMAIN). */
 uint32_t slipest_co_od_size(const slipest_co_entry_t *e);

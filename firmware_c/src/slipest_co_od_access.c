@@ -4,7 +4,7 @@
 
 #include "slipest_co_internal.h"
 
-const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32_t *abort_code)
+const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32_t *abort_code, uint16_t *entry)
 {
     /* binary search over the table sorted by (index, sub): at most log2(N)+1 steps */
     uint32_t key = ((uint32_t)index << 8) | sub;
@@ -18,6 +18,7 @@ const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32
             index_seen = 1;
         }
         if (k == key) {
+            *entry = (uint16_t)mid; /* < SLIPEST_CO_OD_N */
             return e;
         }
         if (k < key) {

@@ -120,10 +120,9 @@ static int download_initiate(slipest_co_t *co, const slipest_frame_t *in, slipes
     uint8_t sub = in->data[3], cmd = in->data[0];
     uint32_t code = 0u;
     int n = 1; /* the response first, an EMCY maybe after it */
-    const slipest_co_entry_t *e = slipest_co_od_find(index, sub, &code);
+    const slipest_co_entry_t *e = slipest_co_od_find(index, sub, &code, &co->sdo.entry);
     end_transfer(co, 1);
     if (e == NULL) return abort_frame(co, index, sub, code, out);
-    co->sdo.entry = (uint16_t)(e - slipest_co_od);
     co->sdo.index = index;
     co->sdo.sub = sub;
     if ((e->flags & SLIPEST_CO_ACC_W) == 0u) return abort_frame(co, index, sub, SLIPEST_CO_ABORT_READ_ONLY, out);
@@ -207,7 +206,7 @@ static int upload_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_
     uint16_t index = (uint16_t)slipest_co_get_le(&in->data[1], 2u);
     uint8_t sub = in->data[3];
     uint32_t code = 0u, len = 0u;
-    const slipest_co_entry_t *e = slipest_co_od_find(index, sub, &code);
+    const slipest_co_entry_t *e = slipest_co_od_find(index, sub, &code, &co->sdo.entry);
     end_transfer(co, 1);
     if (e == NULL) return abort_frame(co, index, sub, code, out);
     code = slipest_co_od_read(co, e, co->sdo.buf, &len);
@@ -222,7 +221,6 @@ static int upload_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_
     }
     out->data[0] = 0x41u; /* segmented, size indicated */
     slipest_co_put_le(&out->data[4], len, 4u);
-    co->sdo.entry = (uint16_t)(e - slipest_co_od);
     co->sdo.index = index;
     co->sdo.sub = sub;
     co->sdo.size = len;
@@ -263,10 +261,9 @@ static int block_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_f
     uint8_t sub = in->data[3], cmd = in->data[0];
     uint32_t code = 0u;
     int n = 1;
-    const slipest_co_entry_t *e = slipest_co_od_find(index, sub, &code);
+    const slipest_co_entry_t *e = slipest_co_od_find(index, sub, &code, &co->sdo.entry);
     end_transfer(co, 1);
     if (e == NULL) return abort_frame(co, index, sub, code, out);
-    co->sdo.entry = (uint16_t)(e - slipest_co_od);
     co->sdo.index = index;
     co->sdo.sub = sub;
     /* block transfers carry the model image only; small values go expedited */

@@ -357,6 +357,60 @@ int main(void)
     CHECK(wr(0x2002u, 3u, 1u, 1u) == 0u); /* abandon the validated upload */
     CHECK((rd(0x2006u, 1u, &code) & 0xFFu) == 0u && wr(0x2002u, 1u, 1u, 1u) == SLIPEST_CO_ABORT_STATE);
 
+    /* protocol errors */
+    sdo8(0xC1u, 0u, 0u, 0u); /* end of a block download that never started */
+    CHECK(aborted() == SLIPEST_CO_ABORT_COMMAND);
+    sdo8(0x21u, 0x1017u, 0u, 2u);
+    send(0x600u + ID, 8u, (const uint8_t[]){0x01u, 1, 2, 3, 4, 5, 6, 7}); /* 7 bytes for a 2-byte value */
+    CHECK(aborted() == SLIPEST_CO_ABORT_TOO_HIGH);
+    sdo8(0xC6u, 0x2000u, 0u, 100u);
+    {
+        unsigned k;
+        uint8_t d[8] = {0};
+        for (k = 1; k <= 15u && aborted() == 0u; k++) {
+            d[0] = (uint8_t)k; /* never flagged last: more than 100 bytes */
+            send(0x600u + ID, 8u, d);
+        }
+        CHECK(aborted() == SLIPEST_CO_ABORT_TOO_HIGH && k == 16u);
+    }
+    put_version(bad, 6u);
+    fix_crc(bad, img_len);
+    {
+        /* a whole image, then an end request with the wrong count of unused bytes, then a bad command */
+        size_t off = 0;
+        unsigned seq = 0;
+        sdo8(0xC6u, 0x2000u, 0u, (uint32_t)img_len);
+        while (off < img_len) {
+            uint8_t d[8] = {0};
+            size_t k = img_len - off < 7u ? img_len - off : 7u;
+            seq = seq % SLIPEST_CO_BLKSIZE + 1u;
+            d[0] = (uint8_t)(seq | (off + k >= img_len ? 0x80u : 0u));
+            memcpy(&d[1], bad + off, k);
+            send(0x600u + ID, 8u, d);
+            off += k;
+        }
+        sdo8(0xC3u, 0u, 0u, 0u);
+        CHECK(aborted() == SLIPEST_CO_ABORT_COMMAND);
+        CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == 0u && wr(0x2002u, 3u, 1u, 1u) == 0u);
+    }
+    {
+        /* the NVM fails in the middle of an upload */
+        size_t off = 0;
+        unsigned t = 0;
+        sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
+        nvm_fail = 1;
+        while (off < img_len && aborted() == 0u) {
+            uint8_t d[8] = {0};
+            d[0] = (uint8_t)(t << 4);
+            memcpy(&d[1], bad + off, 7);
+            send(0x600u + ID, 8u, d);
+            t ^= 1u;
+            off += 7u;
+        }
+        nvm_fail = 0;
+        CHECK(aborted() == SLIPEST_CO_ABORT_HARDWARE && off <= 2u * SECTOR);
+    }
+
     /* PDOs: pre-operational ignores them; operational: a wrong length gives one EMCY; one window */
     send(0x200u + ID, 6u, (const uint8_t[]){0, 0, 1, 0, 2, 0});
     CHECK(n == 0 && slipest_co_counter(&co, SLIPEST_CO_CNT_RPDO_RECEIVED) == 0u);
@@ -386,6 +440,23 @@ int main(void)
         CHECK(windows == 10 && status == 1);
         CHECK(slipest_co_counter(&co, SLIPEST_CO_CNT_WINDOWS_DONE) == 10u);
         CHECK(rd(0x2110u, 1u, &code) == 9u); /* last TPDO1 payload: window counter 9 */
+    }
+    {
+        /* every counter, slot field, store counter and upload field reads back (values checked above) */
+        static const struct {
+            uint16_t index;
+            uint8_t subs;
+        } recs[] = {{0x2003u, 12u}, {0x2004u, 8u}, {0x2005u, 15u}, {0x2006u, 3u}, {0x2110u, 6u}, {0x2111u, 2u},
+                    {0x2112u, 2u}, {0x2113u, 2u}, {0x2101u, 4u}, {0x2001u, 2u}};
+        unsigned r, k;
+        for (r = 0; r < sizeof recs / sizeof recs[0]; r++) {
+            for (k = 1; k <= recs[r].subs; k++) {
+                (void)rd(recs[r].index, (uint8_t)k, &code);
+                CHECK(code == 0u);
+            }
+        }
+        CHECK(rd(0x2003u, 5u, &code) == 10u && rd(0x2003u, 7u, &code) >= 3000u);
+        CHECK(rd(0x2005u, 12u, &code) == 2u && rd(0x2005u, 13u, &code) == 1u); /* activations, rollbacks */
     }
     send(0x181u, 8u, (const uint8_t[]){0}); /* another node's TPDO: ignored */
     CHECK(n == 0);

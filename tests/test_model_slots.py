@@ -1,7 +1,8 @@
 """A/B model slots in the real emulator process (slipest_emu --nvm FILE): power loss at every NVM write and
 erase of an upload, an activation and a rollback, done by SIGKILL from inside the NVM callback: before the
-write, after half a sector (a torn write) or right after it. After each death the emulator is restarted on the same file; it must
-serve the old model or the new one, never neither, with every vector of the model it serves bit-exact.
+write, after half a sector (a torn write) or right after it. After each death the emulator is restarted on
+the same file; it must serve the old model or the new one, never neither, with every vector of the model it
+serves bit-exact.
 
 CI runs every write/erase of an upload + activation with 256-byte sectors in the three modes (>= 50 cut
 points), a second-generation upload that overwrites the rollback target, and a rollback. FLEETLAB_LONG=1

@@ -184,7 +184,8 @@ static void visit(walk_t *w, unsigned seg, unsigned i, uint32_t raw)
         break;
     }
     case K_B2:
-        if (slipest_model_row_ok((int64_t)w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i], to_s32(raw), SLIPEST_Q_ACC2_LIMIT) == 0) {
+        if (0 == slipest_model_row_ok((int64_t)w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i], to_s32(raw),
+                                      SLIPEST_Q_ACC2_LIMIT)) {
             bad = SLIPEST_E_RANGE;
         }
         if (w->load != 0) {

@@ -150,7 +150,8 @@ static void test_boot_upload_activate_rollback(void)
     n = make_image(img, 3u, NULL);
     CHECK(upload(img, n) == SLIPEST_OK);
     CHECK(slipest_store_upload_state(&st) == SLIPEST_UPLOAD_READY);
-    CHECK(slipest_store_slot_info(&st, 0, &info) == SLIPEST_OK && info.state == SLIPEST_SLOT_READY && info.version == 3u);
+    CHECK(slipest_store_slot_info(&st, 0, &info) == SLIPEST_OK && info.state == SLIPEST_SLOT_READY &&
+          info.version == 3u);
     CHECK(slipest_store_model_q(&st) == NULL); /* not active before activation */
     CHECK(slipest_store_activate(&st) == SLIPEST_OK);
     CHECK(slipest_store_active_slot(&st) == 0 && slipest_store_active_version(&st) == 3u);

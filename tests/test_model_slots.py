@@ -202,8 +202,16 @@ def test_hmac_provisioned_build_refuses_unsigned_and_wrongly_signed_images(keyed
         assert res.returncode == 3 and "upload refused: model image authentication failed" in res.stderr, \
             (name, res.stderr)
         assert "store boot: built-in model" in res.stderr  # still the built-in (old) model
-    img = tmp_path / "signed.img"
-    img.write_bytes(model_image.sign_image(new, key))
+    # the image `fleetlab export --hmac-key` writes (export_bundle(hmac_key=...)) is accepted
+    from test_export_bundle import small_model
+
+    from fleetlab.export.bundle import check_bundle
+
+    signed = tmp_path / "signed_bundle"
+    export_bundle(small_model(seed=9), signed, inputs=draw_inputs(1000, None, seed=3), model_version=2, hmac_key=key)
+    check_bundle(signed)
+    img = signed / "model.img"
+    assert model_image.read_image(img.read_bytes(), hmac_key=key).content_hash[:8] == models["new"][2]
     res = run(emu_k, "--nvm", str(nvm), "--upload", str(img), "--activate")
     assert res.returncode == 0 and "activated: slot 0" in res.stderr, res.stderr
     res = run(emu_k, "--nvm", str(nvm), "--vectors", str(models["new"][1]))

@@ -127,7 +127,8 @@ def test_bench_c_prints_one_json_object(builds, capsys):
     out = json.loads(capsys.readouterr().out)
     for key in ("host_ns_per_inference_q", "host_ns_per_inference_f32", "onnxruntime_ns_per_inference",
                 "torch_ns_per_inference", "speedup_vs_onnxruntime", "m4_instructions_per_inference_q",
-                "m4_instructions_per_inference_f32", "m4_flash_bytes", "m4_ram_bytes", "m4_canopen_node_ram_bytes",
+                "m4_instructions_per_inference_f32", "m4_flash_bytes", "m4_ram_bytes", "m4_flash_bytes_model_slots",
+                "m4_ram_bytes_model_slots", "m4_flash_bytes_can_node_with_slots", "m4_canopen_node_ram_bytes",
                 "m4_canopen_node_flash_bytes"):
         assert out[key] > 0, key
     assert out["speedup_vs_onnxruntime"] == pytest.approx(out["onnxruntime_ns_per_inference"] / out["host_ns_per_inference_q"])

@@ -1,7 +1,8 @@
 """A/B model slots in the real emulator process (slipest_emu --nvm FILE): power loss at every NVM write and
 erase of an upload, an activation and a rollback, done by SIGKILL from inside the NVM callback: before the
-write, after half a sector (a torn write) or right after it. After each death the emulator is restarted on the same file; it must
-serve the old model or the new one, never neither, with every vector of the model it serves bit-exact.
+write, after half a sector (a torn write) or right after it. After each death the emulator is restarted on
+the same file; it must serve the old model or the new one, never neither, with every vector of the model it
+serves bit-exact.
 
 CI runs every write/erase of an upload + activation with 256-byte sectors in the three modes (>= 50 cut
 points), a second-generation upload that overwrites the rollback target, and a rollback. FLEETLAB_LONG=1
@@ -201,8 +202,16 @@ def test_hmac_provisioned_build_refuses_unsigned_and_wrongly_signed_images(keyed
         assert res.returncode == 3 and "upload refused: model image authentication failed" in res.stderr, \
             (name, res.stderr)
         assert "store boot: built-in model" in res.stderr  # still the built-in (old) model
-    img = tmp_path / "signed.img"
-    img.write_bytes(model_image.sign_image(new, key))
+    # the image `fleetlab export --hmac-key` writes (export_bundle(hmac_key=...)) is accepted
+    from test_export_bundle import small_model
+
+    from fleetlab.export.bundle import check_bundle
+
+    signed = tmp_path / "signed_bundle"
+    export_bundle(small_model(seed=9), signed, inputs=draw_inputs(1000, None, seed=3), model_version=2, hmac_key=key)
+    check_bundle(signed)
+    img = signed / "model.img"
+    assert model_image.read_image(img.read_bytes(), hmac_key=key).content_hash[:8] == models["new"][2]
     res = run(emu_k, "--nvm", str(nvm), "--upload", str(img), "--activate")
     assert res.returncode == 0 and "activated: slot 0" in res.stderr, res.stderr
     res = run(emu_k, "--nvm", str(nvm), "--vectors", str(models["new"][1]))

@@ -184,7 +184,8 @@ static void visit(walk_t *w, unsigned seg, unsigned i, uint32_t raw)
         break;
     }
     case K_B2:
-        if (slipest_model_row_ok((int64_t)w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i], to_s32(raw), SLIPEST_Q_ACC2_LIMIT) == 0) {
+        if (0 == slipest_model_row_ok((int64_t)w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i], to_s32(raw),
+                                      SLIPEST_Q_ACC2_LIMIT)) {
             bad = SLIPEST_E_RANGE;
         }
         if (w->load != 0) {
@@ -438,7 +439,10 @@ static int record_decode(const uint8_t *p, slipest_store_record_t *r)
     }
     r->seq = get_le32(&p[8]);
     r->active = (int8_t)p[12];
-    r->prev = p[13] == 0xFFu ? NO_SLOT : (int8_t)p[13];
+    r->prev = NO_SLOT;
+    if (p[13] != 0xFFu) {
+        r->prev = (int8_t)p[13]; /* checked above: 0 or 1 */
+    }
     for (k = 0; k < SLIPEST_STORE_N_SLOTS; ++k) {
         r->length[k] = get_le32(&p[16u + 16u * k]);
         r->crc[k] = get_le32(&p[20u + 16u * k]);
@@ -698,7 +702,10 @@ slipest_status_t slipest_store_finish(slipest_store_t *store)
 static slipest_status_t switch_to(slipest_store_t *s, const slipest_store_record_t *r)
 {
     slipest_status_t st;
-    int8_t old = s->have_model != 0u ? s->rec.active : NO_SLOT;
+    int8_t old = NO_SLOT;
+    if (s->have_model != 0u) {
+        old = s->rec.active;
+    }
     st = record_commit(s, r);
     if (st != SLIPEST_OK) return st; /* the old record stands: nothing changed */
     st = load_slot(s, (unsigned)r->active);
@@ -726,7 +733,10 @@ slipest_status_t slipest_store_activate(slipest_store_t *store)
     slot = (unsigned)store->upload_slot;
     r = store->rec;
     r.seq = store->rec.seq + 1u;
-    r.prev = store->have_model != 0u ? store->rec.active : NO_SLOT;
+    r.prev = NO_SLOT;
+    if (store->have_model != 0u) {
+        r.prev = store->rec.active;
+    }
     r.active = (int8_t)slot;
     r.length[slot] = store->ready.length;
     r.crc[slot] = store->ready_crc;

@@ -98,6 +98,30 @@ static void test_hmac_rfc4231(void)
     CHECK(equals_hex(tag, "9b09ffa71b942fcb27635fbcd5b0e944bfdc63644f0713938a7f51535c3a35e2", 32));
 }
 
+static void test_null_arguments(void)
+{
+    slipest_sha256_t c;
+    slipest_hmac_sha256_t h;
+    uint8_t d[32];
+    /* every entry point ignores NULL instead of dereferencing it */
+    slipest_sha256_init(NULL);
+    slipest_sha256_update(NULL, d, 1);
+    slipest_sha256_final(NULL, d);
+    slipest_sha256_init(&c);
+    slipest_sha256_update(&c, NULL, 5); /* no bytes taken */
+    slipest_sha256_final(&c, NULL);
+    slipest_sha256_init(&c);
+    slipest_sha256_final(&c, d);
+    CHECK(equals_hex(d, "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855", 32));
+    slipest_hmac_sha256_init(NULL, d, 1);
+    slipest_hmac_sha256_update(NULL, d, 1);
+    slipest_hmac_sha256_final(NULL, d);
+    /* HMAC with an empty key (RFC 2104 pads it with zeros): as Python's hmac.new(b"", b"", sha256) */
+    slipest_hmac_sha256_init(&h, NULL, 0);
+    slipest_hmac_sha256_final(&h, d);
+    CHECK(equals_hex(d, "b613679a0814d9ec772f95d778c35fc5ff1697c493715653c6c712144292c5ad", 32));
+}
+
 static void test_ct_equal(void)
 {
     const uint8_t a[4] = {1, 2, 3, 4}, b[4] = {1, 2, 3, 5};
@@ -111,6 +135,7 @@ int main(void)
 {
     test_sha256();
     test_hmac_rfc4231();
+    test_null_arguments();
     test_ct_equal();
     CHECK_DONE();
 }

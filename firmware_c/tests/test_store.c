@@ -150,7 +150,8 @@ static void test_boot_upload_activate_rollback(void)
     n = make_image(img, 3u, NULL);
     CHECK(upload(img, n) == SLIPEST_OK);
     CHECK(slipest_store_upload_state(&st) == SLIPEST_UPLOAD_READY);
-    CHECK(slipest_store_slot_info(&st, 0, &info) == SLIPEST_OK && info.state == SLIPEST_SLOT_READY && info.version == 3u);
+    CHECK(slipest_store_slot_info(&st, 0, &info) == SLIPEST_OK && info.state == SLIPEST_SLOT_READY &&
+          info.version == 3u);
     CHECK(slipest_store_model_q(&st) == NULL); /* not active before activation */
     CHECK(slipest_store_activate(&st) == SLIPEST_OK);
     CHECK(slipest_store_active_slot(&st) == 0 && slipest_store_active_version(&st) == 3u);
@@ -331,6 +332,92 @@ static void test_nvm_errors_and_torn_record(void)
     ram.fail_reads = 0;
 }
 
+/* every parameter check of the streaming validation refuses what slipest_model_q_check() refuses */
+static void test_parameter_refusals(void)
+{
+    static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
+    const slipest_store_counters_t *c;
+    size_t n, body;
+    const size_t b1 = 64u + 720u, beta = b1 + 120u + 60u, rsqrt = 64u + 1566u - 96u, f32 = 64u + 1566u;
+    fresh();
+    (void)reboot(NULL);
+    c = slipest_store_counters(&st);
+    n = make_image(img, 1u, NULL);
+    body = body_of(n);
+    put_le32(img + b1, 0x7FFFFFFFu); /* b1[0]: layer-1 accumulator bound */
+    recrc(img, n, body);
+    CHECK(upload(img, n) == SLIPEST_E_RANGE);
+    n = make_image(img, 1u, NULL);
+    put_le32(img + beta, 40000u); /* beta[0] outside int16 */
+    recrc(img, n, body);
+    CHECK(upload(img, n) == SLIPEST_E_RANGE);
+    n = make_image(img, 1u, NULL);
+    put_le32(img + rsqrt, 0x80000001u); /* a seed above 2^31 */
+    recrc(img, n, body);
+    CHECK(upload(img, n) == SLIPEST_E_RANGE);
+    n = make_image(img, 1u, NULL);
+    put_le32(img + 30, 1u); /* eps_cap */
+    recrc(img, n, body);
+    CHECK(upload(img, n) == SLIPEST_E_RANGE && c->refused_range == 4u);
+    n = make_image(img, 1u, NULL);
+    put_le32(img + f32 + 8u, 0x7FC00000u); /* a NaN float weight */
+    recrc(img, n, body);
+    CHECK(upload(img, n) == SLIPEST_E_NONFINITE && c->refused_range == 5u);
+    n = make_image(img, 1u, NULL);
+    put_le32(img + f32, 0u); /* ln_eps = 0 */
+    recrc(img, n, body);
+    CHECK(upload(img, n) == SLIPEST_E_NONFINITE && c->refused_range == 6u);
+    n = make_image(img, 1u, NULL);
+    img[4] = 2u; /* image format version */
+    recrc(img, n, body);
+    CHECK(upload(img, n) == SLIPEST_E_VERSION && c->refused_format == 1u);
+    CHECK(slipest_store_model_q(&st) == NULL && c->images_accepted == 0u);
+}
+
+/* activation whose new slot no longer reads back as validated (changed between finish and
+ * activate): the record is written, the previous model keeps serving, the next boot falls back */
+static void test_activation_load_failure_and_flush_error(void)
+{
+    static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
+    slipest_slot_info_t info;
+    size_t n;
+    fresh();
+    (void)reboot(NULL);
+    n = make_image(img, 1u, NULL);
+    CHECK(upload(img, n) == SLIPEST_OK && slipest_store_activate(&st) == SLIPEST_OK);
+    n = make_image(img, 2u, NULL);
+    CHECK(upload(img, n) == SLIPEST_OK);
+    ram.mem[(2u + SLIPEST_STORE_SLOT_SECTORS(SECTOR)) * SECTOR + 500u] ^= 0x01u; /* slot 1 changes */
+    CHECK(slipest_store_activate(&st) == SLIPEST_E_CRC);
+    CHECK(slipest_store_active_version(&st) == 1u && slipest_store_active_slot(&st) == 0);
+    CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_active_version(&st) == 1u);
+    CHECK(slipest_store_counters(&st)->boot_fallbacks == 1u);
+    /* a write error on the last, partial sector (flushed by finish) aborts the upload */
+    CHECK(slipest_store_begin(&st, (uint32_t)n, 0u) == SLIPEST_OK);
+    CHECK(slipest_store_write(&st, 0u, img, n) == SLIPEST_OK);
+    ram.fail_at = 1;
+    CHECK(slipest_store_finish(&st) == SLIPEST_E_NVM && slipest_store_upload_state(&st) == SLIPEST_UPLOAD_IDLE);
+    /* a read error while validating refuses the image without blaming it */
+    CHECK(slipest_store_begin(&st, (uint32_t)n, 0u) == SLIPEST_OK);
+    CHECK(slipest_store_write(&st, 0u, img, n) == SLIPEST_OK);
+    ram.fail_reads = 1;
+    CHECK(slipest_store_finish(&st) == SLIPEST_E_NVM);
+    ram.fail_reads = 0;
+    CHECK(slipest_store_slot_info(&st, 1, &info) == SLIPEST_OK && info.state == SLIPEST_SLOT_INVALID &&
+          info.version == 0u);
+    CHECK(slipest_store_finish(&st) == SLIPEST_E_STATE);
+    CHECK(slipest_store_slot_info(&st, 2, &info) == SLIPEST_E_RANGE);
+}
+
+static void test_status_names(void)
+{
+    int code;
+    for (code = SLIPEST_E_NULL; code >= SLIPEST_E_STALE; --code) {
+        CHECK(strcmp(slipest_status_str(code), "unknown error") != 0);
+    }
+    CHECK(strcmp(slipest_status_str(SLIPEST_E_STALE - 1), "unknown error") == 0);
+}
+
 static void test_arguments(void)
 {
     slipest_nvm_t bad = nvm;
@@ -347,6 +434,12 @@ static void test_arguments(void)
     CHECK(slipest_store_begin(NULL, 100, 0) == SLIPEST_E_NULL && slipest_store_finish(NULL) == SLIPEST_E_NULL);
     CHECK(slipest_store_model_q(NULL) == NULL && slipest_store_counters(NULL) == NULL);
     CHECK(slipest_store_active_slot(NULL) == SLIPEST_STORE_NO_SLOT);
+    CHECK(slipest_store_write(NULL, 0, NULL, 0) == SLIPEST_E_NULL && slipest_store_activate(NULL) == SLIPEST_E_NULL);
+    CHECK(slipest_store_rollback(NULL) == SLIPEST_E_NULL && slipest_store_abort(NULL) == SLIPEST_E_NULL);
+    CHECK(slipest_store_slot_info(NULL, 0, NULL) == SLIPEST_E_NULL);
+    CHECK(slipest_store_active_version(NULL) == 0u && slipest_store_active_hash32(NULL) == 0u);
+    CHECK(slipest_store_active_sha256(NULL) == NULL && slipest_store_upload_state(NULL) == SLIPEST_UPLOAD_IDLE);
+    CHECK(slipest_model_q_check(NULL) == SLIPEST_E_NULL);
 }
 
 int main(void)
@@ -369,6 +462,9 @@ int main(void)
     test_version_rule_and_refusals();
     test_hmac();
     test_nvm_errors_and_torn_record();
+    test_parameter_refusals();
+    test_activation_load_failure_and_flush_error();
+    test_status_names();
     test_arguments();
     CHECK_DONE();
 }

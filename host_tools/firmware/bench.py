@@ -16,6 +16,9 @@ per target for the given bundle, then measures in one run:
   frame that closes a window (extraction + fixed-point inference + output frames). The
   cost image links both serial codecs (SLCAN and COBS); `m4_flash_bytes_can_firmware` is
   the same measure on the CAN-native example firmware of docs/integrating_slipest.md.
+  `m4_*_model_slots` are what A/B model slots on NVM add (docs/model_slots.md): the flash of the
+  store, SHA-256, image-reader and model-check objects linked into the store test image, and the RAM of its
+  `slipest_store_t` (its symbol size in that image); `*_can_node_with_slots` add them to the CAN node.
 
 The reference target's figures keep their `m4_*` keys; every target's figures are under `cpu_targets`.
 On targets without a known counter (user-mode QEMU: PowerPC, SPARC; RISC-V virt) instruction counts
@@ -39,7 +42,7 @@ from typing import Callable
 import numpy as np
 
 from . import targets as target_registry
-from .build import cmake_build, run, run_image
+from .build import cmake_build, run, run_image, run_record
 from ...paths import default_bundle, repo_root
 
 REPO = repo_root()
@@ -341,6 +344,7 @@ def run(args: argparse.Namespace) -> int:
     lib = library_footprint(m4 / "slipest_bench_target_q.elf.map", "libslipest_q.a")
     # a CAN-attached flight firmware: the integration guide's main loop, no serial codec linked
     can_fw = library_footprint(m4 / "example_minimal_can_loop.elf.map", "libslipest_q.a")
+    slots = model_slots_footprint(m4)
     co_node = canopen_node_figures(m4)
     steps.close()
     flash = sum(o["flash"] for o in lib.values())
@@ -365,6 +369,11 @@ def run(args: argparse.Namespace) -> int:
         # library + model as linked into docs/integrating_slipest.md's CAN main loop (CAN peripheral, no serial link)
         "m4_flash_bytes_can_firmware": sum(o["flash"] for o in can_fw.values()),
         "m4_flash_bytes_by_object": {k: v["flash"] for k, v in sorted(lib.items())},
+        # A/B model slots on NVM (docs/model_slots.md): store + SHA-256 + image reader, and slipest_store_t
+        "m4_flash_bytes_model_slots": slots["flash"],
+        "m4_ram_bytes_model_slots": slots["ram"],
+        "m4_flash_bytes_can_node_with_slots": sum(o["flash"] for k, o in can_fw.items() if k not in STORE_OBJECTS)
+        + slots["flash"],
         "m4_static_ram_bytes": static_ram,
         "m4_node_context_bytes": cost["node_bytes"],
         "m4_stack_bytes_q": cost["stack_q"],
@@ -394,6 +403,23 @@ def run(args: argparse.Namespace) -> int:
         print()
         print(format_table(rows))
     return 0
+
+
+STORE_OBJECTS = ("slipest_store.c.obj", "slipest_sha256.c.obj", "slipest_image.c.obj", "slipest_model.c.obj")
+
+
+def model_slots_footprint(build_dir: Path) -> dict[str, int]:
+    """Flash of the model-store objects and RAM of the store state, from the store test image
+    (firmware_c/target/store_target.c) of a cross build."""
+    image = Path(build_dir) / "slipest_store_target.elf"
+    objs = library_footprint(Path(f"{image}.map"), "libslipest_q.a")
+    nm = run_record(build_dir)["nm"]
+    out = subprocess.run([nm, "-S", str(image)], capture_output=True, text=True, check=True).stdout
+    m = re.search(r"^[0-9a-f]+ ([0-9a-f]+) [bB] store$", out, flags=re.M)
+    if m is None:
+        raise ValueError(f"{image}: no 'store' symbol (slipest_store_t) in the symbol table")
+    return {"flash": sum(o["flash"] for k, o in objs.items() if k in STORE_OBJECTS), "ram": int(m.group(1), 16),
+            "objects": {k: v["flash"] for k, v in objs.items() if k in STORE_OBJECTS}}
 
 
 def _cell(v) -> str:

@@ -86,3 +86,36 @@ def test_upload_fault_keeps_the_old_model_and_every_window(bdir, tmp_path, sampl
                 m.abort_upload()
                 m.activate()
         assert m.active_model() == old
+
+
+@pytest.fixture(scope="module")
+def keyed(tmp_path_factory) -> tuple[Path, bytes]:
+    """A node built with an HMAC key provisioned (-DSLIPEST_HMAC_KEY_FILE): its build dir and the key."""
+    from fleetlab.host_tools.firmware.build import cmake_build
+
+    root = tmp_path_factory.mktemp("keyed")
+    key = bytes(range(40, 72))
+    (root / "key.bin").write_bytes(key)
+    bdir = cmake_build(root / "build", EXAMPLE, options={"SLIPEST_HMAC_KEY_FILE": str(root / "key.bin")}, jobs=2,
+                       targets=(EMULATOR_TARGET,))
+    return bdir, key
+
+
+@pytest.mark.parametrize("kind", ["unsigned_image", "wrong_hmac"])
+def test_keyed_node_refuses_images_without_the_right_tag_then_takes_a_signed_one(keyed, tmp_path, new_bundle, kind):
+    from fleetlab.export.model_image import sign_image
+
+    bdir, key = keyed
+    effect = UPLOAD_EFFECTS[kind]
+    img = (new_bundle / "model.img").read_bytes()
+    with CanopenSession("slcan", eds_for(bdir), NODE_ID, emulator=find_artifact(bdir, EMULATOR_TARGET),
+                        nvm_file=tmp_path / "nvm.bin") as s:
+        m = s.master
+        old = m.active_model()
+        with pytest.raises(canopen.SdoAbortedError) as e:
+            m.upload(faulty_image(kind, img))
+        assert e.value.code == effect.abort_code and wait_emcy(m.node, effect.emcy)
+        assert m.store_counters()["refused_hmac"] == 1 and m.active_model() == old
+        m.upload(sign_image(img, key))
+        m.activate()
+        assert m.active_model()["version"] == 2

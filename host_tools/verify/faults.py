@@ -270,6 +270,9 @@ UPLOAD_IMAGE_FAULTS = ("corrupt_image", "wrong_arch", "truncated", "stale_versio
 UPLOAD_WIRE_FAULTS = ("drop_segment", "duplicate_segment", "reorder_segments", "corrupt_segment", "wrong_block_crc",
                       "abort_midway")
 UPLOAD_FAULTS = UPLOAD_IMAGE_FAULTS + UPLOAD_WIRE_FAULTS
+# only on a node built with an HMAC key (cmake -DSLIPEST_HMAC_KEY_FILE=...): the image is unsigned, or
+# signed under another key
+UPLOAD_KEYED_FAULTS = ("unsigned_image", "wrong_hmac")
 
 
 @dataclass(frozen=True)
@@ -285,6 +288,8 @@ UPLOAD_EFFECTS: dict[str, UploadEffect] = {
     "wrong_arch": UploadEffect(True, 0x08000020, 0x6300, ("store", "refused_arch")),
     "truncated": UploadEffect(True, 0x06070010, 0x6300, ("store", "refused_length")),
     "stale_version": UploadEffect(True, 0x08000020, 0x6300, ("store", "refused_version")),
+    "unsigned_image": UploadEffect(True, 0x08000020, 0x6300, ("store", "refused_hmac")),
+    "wrong_hmac": UploadEffect(True, 0x08000020, 0x6300, ("store", "refused_hmac")),
     # the block protocol repeats what a sequence error lost: counted, and the image arrives intact
     "drop_segment": UploadEffect(False, None, None, ("node", "block_sequence_errors")),
     "duplicate_segment": UploadEffect(False, None, None, ("node", "block_sequence_errors")),
@@ -313,6 +318,10 @@ def faulty_image(kind: str, image: bytes) -> bytes:
         return bytes(b)
     if kind == "truncated":
         return image[:-50]
+    if kind == "wrong_hmac":  # signed, but not under the key the node was provisioned with
+        from fleetlab.export.model_image import sign_image
+
+        return sign_image(image, bytes(32))
     return image
 
 

@@ -11,7 +11,7 @@
 #include "slipest_co.h"
 #include "slipest_store.h"
 
-#define SECTOR 256u
+#define SECTOR 64u /* small sectors: the NVM area fits the smallest target RAM (16 KiB) */
 #define PAINT 0xC5C5C5C5u
 #define NODE_ID 5u
 

@@ -49,7 +49,7 @@ IDX_UPLOAD = 0x2006
 
 COUNTERS = ("frames_received", "frames_rejected", "samples_dropped", "windows_flagged", "windows_done",
             "saturations", "rpdo_received", "sdo_aborts_sent", "sdo_aborts_received", "emcy_sent",
-            "block_sequence_errors", "nmt_commands")
+            "block_sequence_errors", "nmt_commands", "frames_ignored")
 STORE_COUNTERS = ("uploads_started", "uploads_aborted", "images_accepted", "refused_length", "refused_format",
                   "refused_arch", "refused_crc", "refused_hash", "refused_range", "refused_hmac", "refused_version",
                   "activations", "rollbacks", "nvm_errors", "boot_fallbacks")

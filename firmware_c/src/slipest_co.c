@@ -81,6 +81,14 @@ void slipest_co_use_store_model(slipest_co_t *co)
     }
 }
 
+/* A frame this node does not take (another node's COB-ID, a PDO outside operational, anything
+ * but NMT while stopped): nothing is answered, but it is counted (0x2003 frames_ignored). */
+static int ignored(slipest_co_t *co)
+{
+    co->cnt[SLIPEST_CO_CNT_FRAMES_IGNORED]++;
+    return 0;
+}
+
 static int bootup(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
 {
     co->hb_ms = (uint16_t)SLIPEST_CO_HEARTBEAT_DEFAULT_MS;
@@ -138,7 +146,9 @@ int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_
 
 static int nmt(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, slipest_frame_t *out)
 {
-    if (in->dlc != 2u || (in->data[1] != 0u && in->data[1] != co->node_id)) return 0;
+    if (in->dlc != 2u || (in->data[1] != 0u && in->data[1] != co->node_id)) {
+        return ignored(co);
+    }
     co->cnt[SLIPEST_CO_CNT_NMT_COMMANDS]++;
     switch (in->data[0]) {
     case NMT_START: co->nmt = SLIPEST_CO_NMT_OPERATIONAL; return 0;
@@ -155,7 +165,7 @@ static int nmt(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, sli
         return bootup(co, now_ms, out);
     }
     case NMT_RESET_COMMUNICATION: return bootup(co, now_ms, out);
-    default: return 0; /* unknown command: ignored (NMT has no answer) */
+    default: return ignored(co); /* unknown command (NMT has no answer) */
     }
 }
 
@@ -191,7 +201,9 @@ static int rpdo(slipest_co_t *co, unsigned k, const slipest_frame_t *in, slipest
     slipest_frame_t dbc;
     slipest_frame_t est_out[SLIPEST_NODE_MAX_OUT];
     int r, i, n = 0;
-    if (co->nmt != SLIPEST_CO_NMT_OPERATIONAL) return 0; /* PDOs only when operational */
+    if (co->nmt != SLIPEST_CO_NMT_OPERATIONAL) {
+        return ignored(co); /* PDOs only when operational */
+    }
     co->cnt[SLIPEST_CO_CNT_RPDO_RECEIVED]++;
     if (in->dlc != p->dlc) {
         (void)slipest_node_link_error(&co->est); /* counted as received and rejected */
@@ -218,14 +230,18 @@ int slipest_co_handle(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_
     unsigned k;
     if (co == NULL || in == NULL || out == NULL) return SLIPEST_E_NULL;
     if (cap < SLIPEST_CO_MAX_OUT) return SLIPEST_E_OVERFLOW;
-    if ((in->id & SLIPEST_FRAME_EXT) != 0u) return 0; /* CANopen uses 11-bit identifiers */
+    if ((in->id & SLIPEST_FRAME_EXT) != 0u) {
+        return ignored(co); /* CANopen uses 11-bit identifiers */
+    }
     if (in->id == 0u) return nmt(co, in, now_ms, out);
-    if (co->nmt == SLIPEST_CO_NMT_STOPPED) return 0; /* stopped: NMT only */
+    if (co->nmt == SLIPEST_CO_NMT_STOPPED) {
+        return ignored(co); /* stopped: NMT only */
+    }
     if (in->id == 0x600u + co->node_id) return slipest_co_sdo_request(co, in, now_ms, out);
     for (k = 0; k < SLIPEST_CO_N_RPDO; k++) {
         if (in->id == (uint32_t)slipest_co_pdos[k].cob_base + co->node_id) return rpdo(co, k, in, out);
     }
-    return 0; /* another node's traffic */
+    return ignored(co); /* another node's traffic */
 }
 
 int slipest_co_tick(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out, size_t cap)

@@ -363,7 +363,11 @@ static int block_end(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_
 int slipest_co_sdo_request(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, slipest_frame_t *out)
 {
     unsigned ccs;
-    if (in->dlc != 8u) return 0; /* CiA 301: SDO frames have 8 bytes; anything else is not an SDO */
+    if (in->dlc != 8u) {
+        /* CiA 301: SDO frames have 8 bytes; anything else is not an SDO (counted, not answered) */
+        co->cnt[SLIPEST_CO_CNT_FRAMES_IGNORED]++;
+        return 0;
+    }
     co->sdo.last_ms = now_ms;
     if (co->sdo.state == SLIPEST_CO_SDO_BLOCK) {
         /* inside a sub-block every frame is a segment, except an abort request */

@@ -446,7 +446,7 @@ int main(void)
         static const struct {
             uint16_t index;
             uint8_t subs;
-        } recs[] = {{0x2003u, 12u}, {0x2004u, 8u}, {0x2005u, 15u}, {0x2006u, 3u}, {0x2110u, 6u}, {0x2111u, 2u},
+        } recs[] = {{0x2003u, 13u}, {0x2004u, 8u}, {0x2005u, 15u}, {0x2006u, 3u}, {0x2110u, 6u}, {0x2111u, 2u},
                     {0x2112u, 2u}, {0x2113u, 2u}, {0x2101u, 4u}, {0x2001u, 2u}};
         unsigned r, k;
         for (r = 0; r < sizeof recs / sizeof recs[0]; r++) {
@@ -458,8 +458,9 @@ int main(void)
         CHECK(rd(0x2003u, 5u, &code) == 10u && rd(0x2003u, 7u, &code) >= 3000u);
         CHECK(rd(0x2005u, 12u, &code) == 2u && rd(0x2005u, 13u, &code) == 1u); /* activations, rollbacks */
     }
-    send(0x181u, 8u, (const uint8_t[]){0}); /* another node's TPDO: ignored */
-    CHECK(n == 0);
+    v = slipest_co_counter(&co, SLIPEST_CO_CNT_FRAMES_IGNORED);
+    send(0x181u, 8u, (const uint8_t[]){0}); /* another node's TPDO: not answered, counted */
+    CHECK(n == 0 && slipest_co_counter(&co, SLIPEST_CO_CNT_FRAMES_IGNORED) == v + 1u);
     {
         slipest_frame_t f = {(0x200u + ID) | SLIPEST_FRAME_EXT, 0u, {0}};
         CHECK(slipest_co_handle(&co, &f, now, out, SLIPEST_CO_MAX_OUT) == 0);

@@ -133,17 +133,36 @@ class CanopenSession:
         for line in iter(self.proc.stderr.readline, b""):
             self.stderr_tail = (self.stderr_tail + [line.decode(errors="replace").rstrip()])[-20:]
 
-    def reset_node(self, timeout: float = 3.0) -> None:
-        """NMT reset node; waits for the boot-up message."""
-        nmt = self.master.node.nmt
-        nmt.send_command(0x81)
-        nmt.wait_for_bootup(timeout)
+    def _expect_bootup(self, action: Callable[[], None], timeout: float) -> None:
+        """Run `action` and wait for the node's boot-up message. The listener is in place before the
+        action (canopen's wait_for_bootup starts listening only when called, so a fast node's boot-up
+        could come before it)."""
+        booted = threading.Event()
+        cob = 0x700 + self.node_id
 
-    def power_cycle(self) -> None:
-        """In-process only: the node restarts from its NVM as after a power loss."""
+        def on_heartbeat(_cob: int, data: bytearray, _ts: float) -> None:
+            if data and data[0] == 0x00:
+                booted.set()
+
+        net = self.master.network
+        net.subscribe(cob, on_heartbeat)
+        try:
+            action()
+            if not booted.wait(timeout):
+                raise OSError(f"node {self.node_id}: no boot-up message within {timeout} s")
+        finally:
+            net.unsubscribe(cob, on_heartbeat)
+
+    def reset_node(self, timeout: float = 3.0) -> None:
+        """NMT reset node; returns after the boot-up message."""
+        self._expect_bootup(lambda: self.master.node.nmt.send_command(0x81), timeout)
+
+    def power_cycle(self, timeout: float = 3.0) -> None:
+        """In-process only: the node restarts from its NVM as after a power loss; returns after its
+        boot-up message."""
         if self.bridge is None:
             raise ValueError("power_cycle needs the inproc link (kill and restart the emulator otherwise)")
-        self.bridge.power_cycle()
+        self._expect_bootup(self.bridge.power_cycle, timeout)
 
     def frames_in(self) -> int | None:
         return self.bridge.frames_in if self.bridge is not None else None

@@ -120,7 +120,7 @@ def test_nmt_heartbeat_and_sdo_reads(bdir, tmp_path, link):
         t0 = time.monotonic()
         for _ in range(3):
             node.nmt.wait_for_heartbeat(1)
-        assert time.monotonic() - t0 < 0.5  # 3 heartbeats at 50 ms, not at the default 1 s
+        assert time.monotonic() - t0 < 0.9  # 3 heartbeats at 50 ms, not at the default 1 s
         for cmd, state in (("OPERATIONAL", "OPERATIONAL"), ("STOPPED", "STOPPED"),
                            ("PRE-OPERATIONAL", "PRE-OPERATIONAL")):
             node.nmt.state = cmd
@@ -195,8 +195,7 @@ def test_new_model_survives_a_power_cycle_inproc(bdir, tmp_path, new_bundle):
     with open_session("inproc", bdir, tmp_path) as s:
         s.master.upload(img, block=False)  # segmented download this time
         s.master.activate()
-        s.power_cycle()
-        s.master.node.nmt.wait_for_bootup(3)
+        s.power_cycle()  # returns after the boot-up message
         assert s.master.active_model()["version"] == 2
 
 

@@ -459,7 +459,7 @@ int main(void)
         CHECK(rd(0x2005u, 12u, &code) == 2u && rd(0x2005u, 13u, &code) == 1u); /* activations, rollbacks */
     }
     v = slipest_co_counter(&co, SLIPEST_CO_CNT_FRAMES_IGNORED);
-    send(0x181u, 8u, (const uint8_t[]){0}); /* another node's TPDO: not answered, counted */
+    send(0x181u, 8u, (const uint8_t[8]){0}); /* another node's TPDO: not answered, counted */
     CHECK(n == 0 && slipest_co_counter(&co, SLIPEST_CO_CNT_FRAMES_IGNORED) == v + 1u);
     {
         slipest_frame_t f = {(0x200u + ID) | SLIPEST_FRAME_EXT, 0u, {0}};

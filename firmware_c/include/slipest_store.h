@@ -169,7 +169,8 @@ typedef struct {
  * @param[in]  nvm      NVM interface (copied)
  * @param[in]  key      HMAC-SHA256 key, or NULL for no authentication (then key_len is ignored);
  *                      must outlive the store
- * @param[in]  key_len  bytes of key (1..64 when key is not NULL)
+ * @param[in]  key_len  bytes of key (at least 1 when key is not NULL; a key longer than 64 bytes is
+ *                      hashed first, as RFC 2104 says; the CMake option takes 16..64 bytes)
  * @return SLIPEST_OK (a model is active); SLIPEST_E_STATE (no valid model on the NVM: the store
  *         is usable for an upload and the caller runs its built-in model); SLIPEST_E_NVM (a read
  *         failed: as E_STATE); SLIPEST_E_NULL; SLIPEST_E_RANGE (sector size, sector count or key

@@ -169,7 +169,8 @@ typedef struct {
  * @param[in]  nvm      NVM interface (copied)
  * @param[in]  key      HMAC-SHA256 key, or NULL for no authentication (then key_len is ignored);
  *                      must outlive the store
- * @param[in]  key_len  bytes of key (1..64 when key is not NULL)
+ * @param[in]  key_len  bytes of key (at least 1 when key is not NULL; a key longer than 64 bytes is
+ *                      hashed first, as RFC 2104 says; the CMake option takes 16..64 bytes)
  * @return SLIPEST_OK (a model is active); SLIPEST_E_STATE (no valid model on the NVM: the store
  *         is usable for an upload and the caller runs its built-in model); SLIPEST_E_NVM (a read
  *         failed: as E_STATE); SLIPEST_E_NULL; SLIPEST_E_RANGE (sector size, sector count or key
@@ -226,8 +227,12 @@ slipest_status_t slipest_store_finish(slipest_store_t *store);
  *        slipest_node_set_model().
  * @param[in,out] store  the store
  * @return SLIPEST_OK; SLIPEST_E_STATE (no READY image); SLIPEST_E_NVM (the record write failed:
- *         the old model stays active; or the load failed after the commit: the store reloads the
- *         previous slot, and the next boot uses the new one); SLIPEST_E_NULL
+ *         the old model stays active and the image stays READY); or, when the slot no longer reads
+ *         back as validated after the commit, that status (SLIPEST_E_NVM, SLIPEST_E_CRC...): the
+ *         store reloads the previous slot into RAM. After any failure, hand
+ *         slipest_store_model_q() to the node again before the next frame; when it is NULL (the
+ *         previous slot could not be reloaded either) the node must go back to its built-in model,
+ *         because the RAM model may be partly overwritten. SLIPEST_E_NULL
  */
 slipest_status_t slipest_store_activate(slipest_store_t *store);
 
@@ -236,7 +241,8 @@ slipest_status_t slipest_store_activate(slipest_store_t *store);
  *        while an upload is RECEIVING (it writes into that very slot).
  * @param[in,out] store  the store
  * @return SLIPEST_OK; SLIPEST_E_STATE (no valid previous image, or an upload is open); or as
- *         slipest_store_finish() when the previous image no longer validates; SLIPEST_E_NVM
+ *         slipest_store_finish() when the previous image no longer validates (nothing changed);
+ *         SLIPEST_E_NVM. After a failure, as for slipest_store_activate().
  */
 slipest_status_t slipest_store_rollback(slipest_store_t *store);
 

@@ -17,21 +17,28 @@ static void compress(uint32_t h[8], const uint8_t *p)
         0xa2bfe8a1u, 0xa81a664bu, 0xc24b8b70u, 0xc76c51a3u, 0xd192e819u, 0xd6990624u, 0xf40e3585u, 0x106aa070u,
         0x19a4c116u, 0x1e376c08u, 0x2748774cu, 0x34b0bcb5u, 0x391c0cb3u, 0x4ed8aa4au, 0x5b9cca4fu, 0x682e6ff3u,
         0x748f82eeu, 0x78a5636fu, 0x84c87814u, 0x8cc70208u, 0x90befffau, 0xa4506cebu, 0xbef9a3f7u, 0xc67178f2u};
-    uint32_t w[64];
-    uint32_t a, b, c, d, e, f, g, k, t1, t2;
+    /* the message schedule as a 16-word ring (W[t] only needs W[t-2], W[t-7], W[t-15], W[t-16]):
+     * 64 bytes of stack instead of 256 on the flight core */
+    uint32_t w[16];
+    uint32_t a, b, c, d, e, f, g, k, t1, t2, wt;
     unsigned i;
     for (i = 0; i < 16u; ++i) {
         w[i] = ((uint32_t)p[4u * i] << 24) | ((uint32_t)p[4u * i + 1u] << 16) | ((uint32_t)p[4u * i + 2u] << 8) |
                (uint32_t)p[4u * i + 3u];
     }
-    for (i = 16u; i < 64u; ++i) {
-        uint32_t s0 = rotr(w[i - 15u], 7u) ^ rotr(w[i - 15u], 18u) ^ (w[i - 15u] >> 3);
-        uint32_t s1 = rotr(w[i - 2u], 17u) ^ rotr(w[i - 2u], 19u) ^ (w[i - 2u] >> 10);
-        w[i] = w[i - 16u] + s0 + w[i - 7u] + s1;
-    }
     a = h[0]; b = h[1]; c = h[2]; d = h[3]; e = h[4]; f = h[5]; g = h[6]; k = h[7];
     for (i = 0; i < 64u; ++i) {
-        t1 = k + (rotr(e, 6u) ^ rotr(e, 11u) ^ rotr(e, 25u)) + ((e & f) ^ (~e & g)) + K256[i] + w[i];
+        if (i < 16u) {
+            wt = w[i];
+        } else {
+            uint32_t w15 = w[(i - 15u) & 15u];
+            uint32_t w2 = w[(i - 2u) & 15u];
+            uint32_t s0 = rotr(w15, 7u) ^ rotr(w15, 18u) ^ (w15 >> 3);
+            uint32_t s1 = rotr(w2, 17u) ^ rotr(w2, 19u) ^ (w2 >> 10);
+            wt = w[i & 15u] + s0 + w[(i - 7u) & 15u] + s1; /* w[i & 15] still holds W[i-16] */
+            w[i & 15u] = wt;
+        }
+        t1 = k + (rotr(e, 6u) ^ rotr(e, 11u) ^ rotr(e, 25u)) + ((e & f) ^ (~e & g)) + K256[i] + wt;
         t2 = (rotr(a, 2u) ^ rotr(a, 13u) ^ rotr(a, 22u)) + ((a & b) ^ (a & c) ^ (b & c));
         k = g; g = f; f = e; e = d + t1; d = c; c = b; b = a; a = t1 + t2;
     }

@@ -173,8 +173,16 @@ static uint32_t command(slipest_co_t *co, unsigned what, uint32_t value, slipest
     }
     co->last_store_status = (int8_t)st;
     if (st != SLIPEST_OK) {
-        /* an activate that failed after its commit reloads a valid model: follow the store */
-        if (what != 3u && slipest_store_model_q(co->store) != NULL) slipest_co_use_store_model(co);
+        /* a failed activate or rollback may have reloaded the previous slot (follow the store), or
+         * left no valid model in the store's RAM: then the built-in model serves */
+        if (what != 3u) {
+            if (slipest_store_model_q(co->store) != NULL) {
+                slipest_co_use_store_model(co);
+            } else {
+                (void)slipest_node_set_model(&co->est, co->builtin_q, co->builtin_f);
+                co->from_store = 0u;
+            }
+        }
         return slipest_co_store_failed(co, st, out, n);
     }
     if (what != 3u) {

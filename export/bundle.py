@@ -86,8 +86,10 @@ def export_bundle(
     vector_sources: dict | None = None,
     c_name: str = headers.DEFAULT_C_NAME,
     model_version: int = 1,
+    hmac_key: bytes | None = None,
 ) -> Bundle:
-    """Export `model` into directory `out` (created; existing bundle files are replaced)."""
+    """Export `model` into directory `out` (created; existing bundle files are replaced). With hmac_key,
+    model.img carries an HMAC-SHA256 tag (for a flight build provisioned with the same key)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     for name in BUNDLE_FILES:
@@ -116,7 +118,7 @@ def export_bundle(
         qp = quantize(fp)
         content = manifest.content_hash(qp, fp)
         names += [p.name for p in headers.write_headers(out, qp, fp, content, c_name, model_version)]
-        names.append(model_image.write_image(out, qp, fp, content, model_version).name)
+        names.append(model_image.write_image(out, qp, fp, content, model_version, hmac_key).name)
         steps.update()
         v = vectors.make_vectors(model, qp, inputs)
         names += [p.name for p in vectors.write_vectors(out, v)]
@@ -168,7 +170,8 @@ def export_bundle(
                         "model_q": f"slipest_{c_name}_q", "model_f32": f"slipest_{c_name}_f32"}
         m["model_version"] = int(model_version)
         m["model_image"] = {"file": model_image.IMAGE_FILE, "format_version": model_image.FORMAT_VERSION,
-                            "arch_id": model_image.ARCH_SN_S, "byte_order": "little-endian"}
+                            "arch_id": model_image.ARCH_SN_S, "byte_order": "little-endian",
+                            "hmac_sha256": hmac_key is not None}
         m["vectors"] = vec_info
     m["files"] = manifest.file_entries(out, names)
     manifest.write_manifest(out, m)

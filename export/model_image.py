@@ -10,6 +10,8 @@ specified in docs/fixed_point.md, "Model image"):
                         the float32 LayerNorm eps and arrays w1 b1 gamma beta w2 b2
     trailer  36 bytes   CRC-32 (IEEE 802.3, as zlib.crc32) of header + payload, then the bundle's
                         sha256 content hash (32 bytes; its first 4 bytes big-endian are hash32)
+    tag      32 bytes   only with flag HMAC: HMAC-SHA256 of header + payload under the key the
+                        flight build was provisioned with (firmware_c/src/slipest_store.c checks it)
 
 One writer (here) and one validating C reader (firmware_c/src/slipest_image.c). `read_image` is the
 Python reader used by tests and `fleetlab export --check-only`; it checks what the C reader checks.
@@ -17,6 +19,8 @@ Python reader used by tests and `fleetlab export --check-only`; it checks what t
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import struct
 import zlib
 from dataclasses import dataclass
@@ -33,6 +37,9 @@ ARCH_SN_S = 1  # 12 features -> Linear(30) -> LayerNorm -> GELU -> Linear(3), fi
 HEADER_SIZE = 64
 TRAILER_SIZE = 4 + 32
 FLAG_F32 = 0x0001
+FLAG_HMAC = 0x0002  # an HMAC-SHA256 tag over header + payload follows the trailer
+HMAC_SIZE = 32
+HMAC_KEY_BYTES = (16, 64)  # accepted key lengths (the C build refuses others too)
 # magic, version, arch, header size, flags, n_in, n_hidden, n_out, gelu_n, rsqrt_seed_n, h_bits, e_bits,
 # fz, fg, fy, gelu_step_log2, eps_e (int8), eps_m (int16), c30, eps_cap, model version, hash32, payload size
 HEADER = struct.Struct("<4sHHHH11BbhiiIII")
@@ -51,8 +58,31 @@ class ModelImage:
     content_hash: str
 
 
-def image_bytes(qp: QParams, fp: FloatParams | None, content_hash: str, model_version: int = 1) -> bytes:
-    """The image of a quantised model (and its float model when fp is given)."""
+def check_hmac_key(key: bytes) -> bytes:
+    if not HMAC_KEY_BYTES[0] <= len(key) <= HMAC_KEY_BYTES[1]:
+        raise ValueError(f"HMAC key of {len(key)} bytes; give {HMAC_KEY_BYTES[0]}..{HMAC_KEY_BYTES[1]} random bytes")
+    return key
+
+
+def _tag(key: bytes, body: bytes) -> bytes:
+    return hmac.new(check_hmac_key(key), body, hashlib.sha256).digest()
+
+
+def sign_image(data: bytes, key: bytes) -> bytes:
+    """An unsigned image with flag HMAC set, its CRC redone and the tag appended."""
+    read_image(data)  # only a valid image is signed
+    (flags,) = struct.unpack_from("<H", data, 10)
+    if flags & FLAG_HMAC:
+        raise ValueError("image is already signed")
+    body = bytearray(data[:-TRAILER_SIZE])
+    struct.pack_into("<H", body, 10, flags | FLAG_HMAC)
+    body = bytes(body)
+    return body + struct.pack("<I", zlib.crc32(body)) + data[-32:] + _tag(key, body)
+
+
+def image_bytes(qp: QParams, fp: FloatParams | None, content_hash: str, model_version: int = 1,
+                hmac_key: bytes | None = None) -> bytes:
+    """The image of a quantised model (and its float model when fp is given), signed when hmac_key is given."""
     if not 1 <= model_version < 2**31:
         raise ValueError(f"model version {model_version} outside 1 .. 2^31 - 1")
     sc = qp.scalars()
@@ -68,18 +98,21 @@ def image_bytes(qp: QParams, fp: FloatParams | None, content_hash: str, model_ve
         len(qp.rsqrt_seed), sc["h_bits"], sc["e_bits"], sc["fz"], sc["fg"], sc["fy"], sc["gelu_step_log2"],
         sc["eps_e"], sc["eps_m"], sc["c30"], sc["eps_cap"], model_version, int(content_hash[:8], 16), len(payload),
     ).ljust(HEADER_SIZE, b"\0")
-    body = header + payload
-    return body + struct.pack("<I", zlib.crc32(body)) + bytes.fromhex(content_hash)
+    data = header + payload
+    data += struct.pack("<I", zlib.crc32(data)) + bytes.fromhex(content_hash)
+    return sign_image(data, hmac_key) if hmac_key is not None else data
 
 
-def write_image(out_dir: Path, qp: QParams, fp: FloatParams | None, content_hash: str, model_version: int = 1) -> Path:
+def write_image(out_dir: Path, qp: QParams, fp: FloatParams | None, content_hash: str, model_version: int = 1,
+                hmac_key: bytes | None = None) -> Path:
     path = Path(out_dir) / IMAGE_FILE
-    path.write_bytes(image_bytes(qp, fp, content_hash, model_version))
+    path.write_bytes(image_bytes(qp, fp, content_hash, model_version, hmac_key))
     return path
 
 
-def read_image(data: bytes) -> ModelImage:
-    """Parse and validate an image; ValueError names the first problem found."""
+def read_image(data: bytes, hmac_key: bytes | None = None) -> ModelImage:
+    """Parse and validate an image; ValueError names the first problem found. With hmac_key the image must
+    carry a tag that verifies under it (without, a tag is length-checked only, as the C reader does)."""
     if len(data) < HEADER_SIZE + TRAILER_SIZE:
         raise ValueError(f"image of {len(data)} bytes is shorter than header + trailer")
     f = HEADER.unpack_from(data, 0)
@@ -96,7 +129,10 @@ def read_image(data: bytes) -> ModelImage:
     model_version, hash32, payload_len = f[20], f[21], f[22]
     q_len = sum(np.dtype(dt).itemsize * n for _, dt, n in Q_LAYOUT)
     f_len = 4 + 4 * sum(n for _, n in F32_LAYOUT) if flags & FLAG_F32 else 0
-    if payload_len != q_len + f_len or len(data) != HEADER_SIZE + payload_len + TRAILER_SIZE:
+    if flags & ~(FLAG_F32 | FLAG_HMAC):
+        raise ValueError(f"unknown flags 0x{flags:04x}")
+    tag_len = HMAC_SIZE if flags & FLAG_HMAC else 0
+    if payload_len != q_len + f_len or len(data) != HEADER_SIZE + payload_len + TRAILER_SIZE + tag_len:
         raise ValueError(f"payload size {payload_len} / image size {len(data)} disagree with the SN-S layout")
     body_end = HEADER_SIZE + payload_len
     (crc,) = struct.unpack_from("<I", data, body_end)
@@ -105,6 +141,11 @@ def read_image(data: bytes) -> ModelImage:
     sha = data[body_end + 4 : body_end + 36].hex()
     if int(sha[:8], 16) != hash32:
         raise ValueError("hash32 in the header is not the start of the trailer's sha256")
+    if hmac_key is not None:
+        if not flags & FLAG_HMAC:
+            raise ValueError("HMAC: the image carries no tag")
+        if not hmac.compare_digest(_tag(hmac_key, data[:body_end]), data[body_end + TRAILER_SIZE:]):
+            raise ValueError("HMAC: the tag does not verify under this key")
     off, arrays = HEADER_SIZE, {}
     for name, dt, n in Q_LAYOUT:
         arrays[name] = np.frombuffer(data, dtype=dt, count=n, offset=off).astype(np.dtype(dt).newbyteorder("="))

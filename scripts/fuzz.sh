@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Run the slipest libFuzzer targets (SLCAN parser, COBS decoder, sample push, model image, raw frames into
-# the node, payload parser) under ASan+UBSan and print the executions of each.
+# the node, payload parser, model-store operations, CANopen node operations) under ASan+UBSan and print the executions of each.
 #   scripts/fuzz.sh [SECONDS] [BUILD_DIR]     short mode: every target for SECONDS
 #                                             (default $FLEETLAB_FUZZ_SECONDS or 60), in parallel
 #   scripts/fuzz.sh --long [EXECS] [BUILD_DIR] long mode: every target until EXECS executions
@@ -17,7 +17,7 @@ else
   SECONDS_PER_TARGET="${1:-${FLEETLAB_FUZZ_SECONDS:-60}}"
 fi
 BUILD="${2:-$ROOT/build/fuzz}"
-TARGETS=(fuzz_payload fuzz_node_frames fuzz_image fuzz_cobs fuzz_slcan fuzz_push)
+TARGETS=(fuzz_payload fuzz_node_frames fuzz_image fuzz_cobs fuzz_slcan fuzz_push fuzz_store fuzz_co_frames)
 PY="${PYTHON:-$(command -v python3 || command -v python)}"
 
 command -v clang >/dev/null || { echo "fuzz.sh: clang not found (scripts/setup.sh installs it)" >&2; exit 2; }

@@ -25,6 +25,11 @@ def test_demo_quick_end_to_end(tmp_path):
     emu = json.loads((out / "emulate.json").read_text())
     assert emu["mismatches"] == 0 and emu["windows"] > 0 and emu["bit_exact"] == emu["windows"]
     assert f"| {emu['windows']} | {emu['bit_exact']} | 0 |" in report
+    # after landing: the fused model replaced the Earth-analog one over CANopen, bit-exact, no window lost
+    landing = json.loads((out / "after_landing.json").read_text())
+    assert landing["boot_model_bit_exact"] and landing["new_model_bit_exact"] and landing["after"]["version"] == 2
+    assert landing["windows_answered_during_upload_phase"] == landing["windows_streamed_during_upload_phase"]
+    assert "## After landing: model update over CANopen" in report
     rows = sum(len(f.table) for f in load_dataset(out / "data").files)
     assert f"{rows} windows" in report
     assert "100% tests passed" in report

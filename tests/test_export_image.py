@@ -54,3 +54,29 @@ def test_reader_refuses_a_hash32_that_is_not_the_trailers() -> None:
     d[-36:-32] = zlib.crc32(body).to_bytes(4, "little")
     with pytest.raises(ValueError, match="hash32"):
         model_image.read_image(bytes(d))
+
+
+KEY = bytes(range(1, 33))
+
+
+def test_signed_image_verifies_only_under_its_key() -> None:
+    """An HMAC-signed image (flag 0x0002, tag after the trailer) reads back with its key, is refused under
+    another key or when the tag is altered, and an unsigned image is refused when a key is required."""
+    b = load_bundle(EXAMPLE)
+    signed = model_image.image_bytes(b.qparams, b.fparams, b.content_hash, model_version=2, hmac_key=KEY)
+    assert len(signed) == 3842 + 32 and struct.unpack_from("<H", signed, 10)[0] == 0x0003
+    assert model_image.read_image(signed, hmac_key=KEY).model_version == 2
+    assert model_image.read_image(signed).model_version == 2  # no key: tag length-checked only
+    # the same as signing the unsigned image afterwards
+    unsigned = model_image.image_bytes(b.qparams, b.fparams, b.content_hash, model_version=2)
+    assert model_image.sign_image(unsigned, KEY) == signed
+    with pytest.raises(ValueError, match="does not verify"):
+        model_image.read_image(signed, hmac_key=bytes(32))
+    with pytest.raises(ValueError, match="does not verify"):
+        model_image.read_image(signed[:-1] + bytes([signed[-1] ^ 1]), hmac_key=KEY)
+    with pytest.raises(ValueError, match="no tag"):
+        model_image.read_image(unsigned, hmac_key=KEY)
+    with pytest.raises(ValueError, match="HMAC key of 3 bytes"):
+        model_image.sign_image(unsigned, b"abc")
+    with pytest.raises(ValueError, match="disagree"):
+        model_image.read_image(signed[:-32])  # flag set, tag cut off

@@ -127,9 +127,26 @@ def test_bench_c_prints_one_json_object(builds, capsys):
     out = json.loads(capsys.readouterr().out)
     for key in ("host_ns_per_inference_q", "host_ns_per_inference_f32", "onnxruntime_ns_per_inference",
                 "torch_ns_per_inference", "speedup_vs_onnxruntime", "m4_instructions_per_inference_q",
-                "m4_instructions_per_inference_f32", "m4_flash_bytes", "m4_ram_bytes"):
+                "m4_instructions_per_inference_f32", "m4_flash_bytes", "m4_ram_bytes", "m4_flash_bytes_model_slots",
+                "m4_ram_bytes_model_slots", "m4_flash_bytes_can_node_with_slots", "m4_canopen_node_ram_bytes",
+                "m4_canopen_node_flash_bytes"):
         assert out[key] > 0, key
     assert out["speedup_vs_onnxruntime"] == pytest.approx(out["onnxruntime_ns_per_inference"] / out["host_ns_per_inference_q"])
+
+
+def test_canopen_node_with_two_slots_on_m4(builds):
+    """The CANopen node image (firmware_c/target/co_node_target.c) under QEMU: the bundle's image by SDO
+    block download, activation, one window of RPDOs; its RAM within the issue's 4 KB goal, flash measured
+    by part (the 12 KB goal is reported, see docs/model_update.md)."""
+    from fleetlab.host_tools.firmware.bench import canopen_node_figures
+
+    out = ctest(builds["cortex-m4"], "co_node")
+    assert "PASS" in out and "image_bytes=" in out
+    fig = canopen_node_figures(builds["cortex-m4"])
+    assert fig["ram_parts"]["static"] == 0  # all state in caller-allocated contexts
+    assert fig["ram_bytes"] <= fig["goals"]["ram_bytes"]
+    assert fig["flash_bytes_by_part"]["canopen"] > 0 and fig["flash_bytes_by_part"]["store"] > 0
+    assert fig["flash_bytes"] == sum(fig["flash_bytes_by_part"].values())
 
 
 # --------------------------------------------------------------------------- fuzzing
@@ -141,7 +158,8 @@ def test_fuzzers_run_clean(tmp_path):
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr[-4000:]
     execs = dict(re.findall(r"^(fuzz_\w+) executions=(\d+)", proc.stdout, flags=re.M))
-    assert set(execs) == {"fuzz_slcan", "fuzz_cobs", "fuzz_push", "fuzz_image", "fuzz_node_frames", "fuzz_payload"}
+    assert set(execs) == {"fuzz_slcan", "fuzz_cobs", "fuzz_push", "fuzz_image", "fuzz_node_frames", "fuzz_payload",
+                          "fuzz_store", "fuzz_co_frames"}
     assert all(int(v) > 1000 for v in execs.values()), execs
     print(proc.stdout)
 

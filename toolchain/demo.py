@@ -99,7 +99,8 @@ def plan(out: Path, seed: int, prof: Profile, cortex_m: bool) -> list[Stage]:
                          "--epochs", prof.epochs, "--generations", prof.generations, "--ants", prof.ants,
                          "--methods", "acomerge,earth-ft,model-base", "--jobs", 2, "--out", ev, "--no-progress")]),
         Stage("export", "Export ONNX, C headers and test vectors",
-              [_fleetlab("export", fuse / "fused.pt", "--out", bundle, "--data", data, "--check")]),
+              # version 2: the fused model is the one that reaches the rover after landing (stage after_landing)
+              [_fleetlab("export", fuse / "fused.pt", "--out", bundle, "--data", data, "--check", "--model-version", 2)]),
         Stage("build_host", "Build the C estimator for the host and run ctest",
               [fw_build.configure_command(build_host, bundle), fw_build.build_command(build_host),
                ["ctest", "--test-dir", str(build_host), "--output-on-failure"]]),
@@ -111,6 +112,14 @@ def plan(out: Path, seed: int, prof: Profile, cortex_m: bool) -> list[Stage]:
     stages.append(Stage("emulate", "Host emulation loop over SLCAN, bit for bit against the torch reference",
                         [_fleetlab("emulate", "--bundle", bundle, "--source", "sim", "--link", "slcan", "--seed", seed,
                                    "--scale", prof.emulate_scale, "--json", out / "emulate.json")]))
+    # the method's defining moment: D_Cal exists only after landing, so the fused model reaches a
+    # node that already flies the Earth-analog model, over its bus (CANopen SDO), without a reflash
+    earth = out / "bundle_earth"
+    stages.append(Stage("after_landing", "After landing: the fused model replaces the Earth-analog one over CANopen",
+                        [_fleetlab("export", fuse / "experts" / "earth.pt", "--out", earth, "--builtin-vectors",
+                                   "--model-version", 1),
+                         _fleetlab("upload", "--bundle", bundle, "--emulate", "--boot-bundle", earth, "--rehearse", 10,
+                                   "--seed", seed, "--scale", prof.emulate_scale, "--report", out / "after_landing.json")]))
     if cortex_m:  # the cost figures are counted on the reference target's image under QEMU
         stages.append(Stage("bench_c", f"C estimator cost: host timing, {cpu.description} instructions and size",
                             [_fleetlab("bench", "c", "--bundle", bundle, "--build-dir", out / "build",

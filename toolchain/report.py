@@ -132,6 +132,26 @@ def _section_emulate(out: Path) -> list[str]:
               if not e.get("realtime", True) and "frames_per_s" in e else [])]
 
 
+def _section_after_landing(out: Path) -> list[str]:
+    a = json.loads((out / "after_landing.json").read_text())
+    up = a["upload"]
+    return ["## After landing: model update over CANopen", "",
+            "The node (the emulator, CANopen profile) boots with the Earth-analog model; the fused model, exported as "
+            "version 2, goes to its inactive slot by SDO block download while telemetry keeps streaming, is validated, "
+            "and is activated between two windows.", "",
+            "| image (B) | SDO frames | CAN bits | bus time at 500 kbit/s | windows answered / streamed | during the upload "
+            "| old model bit-exact | version | new model bit-exact (windows) |",
+            "|---:|---:|---:|---:|---:|---:|---|---|---|",
+            f"| {up['image_bytes']} | {up['sdo_frames']} | {up['bus_bits']} | {up['bus_time_s_at_500k'] * 1000:.1f} ms | "
+            f"{a['windows_answered_during_upload_phase']} / {a['windows_streamed_during_upload_phase']} | "
+            f"{up['windows_during_upload']} | {a['boot_model_bit_exact']} | {a['before']['version']} → "
+            f"{a['after']['version']} ({a['after']['hash32']}) | {a['new_model_bit_exact']} "
+            f"({a['windows_after_activation']}) |", "",
+            "Bus time: every frame's bits on a classic CAN bus (SOF to intermission, stuff bits counted exactly, "
+            "`fleetlab.host_tools.wire.can_bits`) divided by the bit rate; the emulator's pseudo-terminal itself is "
+            "faster, so the windows answered while the upload ran are a wall-clock count on this host.", ""]
+
+
 def _section_bench(stage) -> list[str]:
     b = json.loads(stage.outputs["stdout"])
     rows = [(k, v) for k, v in b.items() if isinstance(v, (int, float))]
@@ -161,6 +181,7 @@ def write_report(out: Path, stages: list, total_s: float, args, prof, cortex_not
         ("export", lambda: _section_export(out)),
         ("build_host", lambda: _section_c(out, by_name, cortex_note)),
         ("emulate", lambda: _section_emulate(out)),
+        ("after_landing", lambda: _section_after_landing(out)),
         ("bench_c", lambda: _section_bench(by_name["bench_c"])),
         ("assure", lambda: _section_assure(out)),
     ]

@@ -6,6 +6,13 @@
  *   slipest_emu --vectors vectors.bin [--verbose]     batch check of a bundle's vectors
  *   --model model.img (any mode)                      serve / check the model of that image instead
  *                                                     of the built-in bundle (no rebuild per bundle)
+ *   --nvm FILE [--upload model.img [--activate]] [--rollback] (any mode)
+ *                                                     boot from A/B model slots kept in FILE (emu_nvm.c;
+ *                                                     the built-in model when no slot is valid), upload
+ *                                                     an image into the inactive slot, activate it
+ *   --profile canopen [--node-id N] (serving modes)   the CANopen node (slipest_co.h) instead of the plain
+ *                                                     DBC profile: NMT, heartbeat, SDO (model upload into
+ *                                                     the --nvm slots), PDOs; frames on the same links
  *
  * Frames in, estimate and status frames out (host_tools/slipest.dbc). Non-blocking I/O
  * with an output queue: when the queue is full the loop stops reading input until it
@@ -30,7 +37,13 @@
 #include "slipest_image.h"
 #include "slipest_infer.h"
 #include "slipest_node.h"
+#include "slipest_store.h"
 #include "slipest_vectors.h"
+#include "emu_nvm.h"
+#include "emu_canopen.h"
+#ifdef SLIPEST_HMAC_KEY
+#include "slipest_hmac_key.h" /* generated from -DSLIPEST_HMAC_KEY_FILE=... */
+#endif
 
 #define OUT_QUEUE 65536u
 /* stop reading below this: one read chunk can complete ~40 frames of <= 9 x 23 output bytes */
@@ -50,6 +63,7 @@ typedef struct {
 } emu_t;
 
 static volatile sig_atomic_t stop_requested = 0;
+static int profile_canopen = 0; /* --profile canopen */
 
 /* the model served: the built-in bundle's, or one read from a model image (--model) */
 static const slipest_model_q_t *model_q;
@@ -85,6 +99,74 @@ static int load_model_image(const char *path)
     return 0;
 }
 
+/* --nvm: the model store over a file, as a flight node keeps its slots in flash */
+static emu_nvm_t nvm_file;
+static slipest_store_t store;
+
+static void use_store_model(void)
+{
+    if (slipest_store_model_q(&store) == NULL) return; /* no valid slot: the built-in model serves */
+    model_q = slipest_store_model_q(&store);
+    model_f32 = slipest_store_model_f32(&store);
+    snprintf(model_hex, sizeof model_hex, "%08lx", (unsigned long)slipest_model_hash32(model_q));
+}
+
+static int open_store(const char *path, uint32_t sector)
+{
+    slipest_nvm_t nvm;
+    const uint8_t *key = NULL;
+    size_t key_len = 0u;
+    int st;
+#ifdef SLIPEST_HMAC_KEY
+    key = slipest_hmac_key;
+    key_len = sizeof slipest_hmac_key;
+#endif
+    if (emu_nvm_open(&nvm_file, path, sector, SLIPEST_STORE_NVM_SECTORS(sector), &nvm) != 0) {
+        fprintf(stderr, "slipest_emu: cannot open NVM file %s: %s\n", path, strerror(errno));
+        return 2;
+    }
+    st = slipest_store_open(&store, &nvm, key, key_len);
+    if (st != SLIPEST_OK && st != SLIPEST_E_STATE && st != SLIPEST_E_NVM) {
+        fprintf(stderr, "slipest_emu: store: %s\n", slipest_status_str(st));
+        return 2;
+    }
+    use_store_model();
+    fprintf(stderr, "slipest_emu: store boot: %s, slot %d, model %s version %lu\n",
+            st == SLIPEST_OK ? "slot model" : "built-in model", slipest_store_active_slot(&store), model_hex,
+            (unsigned long)model_q->version);
+    return 0;
+}
+
+/* Send an image file through the store in chunks of 7 bytes (as CAN SDO segments would come),
+ * then validate it; activate when asked. Returns 0, or 3 with a message when refused. */
+static int upload_image(const char *path, int activate)
+{
+    static uint8_t buf[SLIPEST_IMAGE_MAX_SIZE + 1u];
+    size_t n, off;
+    int st;
+    FILE *fp = fopen(path, "rb");
+    if (fp == NULL) {
+        fprintf(stderr, "slipest_emu: cannot open %s: %s\n", path, strerror(errno));
+        return 2;
+    }
+    n = fread(buf, 1, sizeof buf, fp);
+    fclose(fp);
+    st = slipest_store_begin(&store, (uint32_t)n, 0u);
+    for (off = 0; st == SLIPEST_OK && off < n; off += 7u) {
+        st = slipest_store_write(&store, (uint32_t)off, buf + off, n - off < 7u ? n - off : 7u);
+    }
+    if (st == SLIPEST_OK) st = slipest_store_finish(&store);
+    if (st == SLIPEST_OK && activate) st = slipest_store_activate(&store);
+    if (st != SLIPEST_OK) {
+        fprintf(stderr, "slipest_emu: upload refused: %s (%d)\n", slipest_status_str(st), st);
+        return 3;
+    }
+    use_store_model();
+    fprintf(stderr, "slipest_emu: upload ok%s: slot %d, model %s version %lu\n", activate ? ", activated" : "",
+            slipest_store_active_slot(&store), model_hex, (unsigned long)model_q->version);
+    return 0;
+}
+
 static void on_signal(int sig)
 {
     (void)sig;
@@ -115,8 +197,9 @@ static void queue_frames(emu_t *e, const slipest_frame_t *f, int n)
 
 static void handle_frame(emu_t *e, const slipest_frame_t *in)
 {
-    slipest_frame_t out[SLIPEST_NODE_MAX_OUT];
-    int n = slipest_node_handle(&e->node, in, out, SLIPEST_NODE_MAX_OUT);
+    slipest_frame_t out[SLIPEST_NODE_MAX_OUT > SLIPEST_CO_MAX_OUT ? SLIPEST_NODE_MAX_OUT : SLIPEST_CO_MAX_OUT];
+    int n = profile_canopen ? emu_co_handle(in, out, SLIPEST_CO_MAX_OUT)
+                            : slipest_node_handle(&e->node, in, out, SLIPEST_NODE_MAX_OUT);
     if (n > 0) queue_frames(e, out, n);
 }
 
@@ -194,11 +277,15 @@ static int serve(emu_t *e)
                 out_idx = np++;
             }
         }
-        r = poll(p, (nfds_t)np, 200);
+        r = poll(p, (nfds_t)np, profile_canopen ? 2 : 200); /* CANopen: a 2 ms tick for heartbeat/timeouts */
         if (r < 0) {
             if (errno == EINTR) continue;
             perror("slipest_emu: poll");
             return 1;
+        }
+        if (profile_canopen) {
+            slipest_frame_t t[2];
+            queue_frames(e, t, emu_co_tick(t, 2u));
         }
         if (out_idx >= 0 && (p[out_idx].revents & (POLLOUT | POLLERR))) {
             if (flush_some(e) != 0) {
@@ -295,14 +382,27 @@ static void usage(FILE *to)
             "  --link KIND    slcan (ASCII tIIILDD..\\r, default) or cobs (COBS + CRC-16 packets)\n"
             "  --model IMG    use the model of a model image (model.img) instead of the built-in bundle\n"
             "  --vectors F    check every test vector (fixed-point logits exact, float within 1e-5*max(1,|logit|))\n"
-            "  --version      print library version and model hash\n");
+            "  --version      print library version and model hash\n"
+            "  --profile P    dbc (the plain profile, default) or canopen (CANopen node, see slipest_co.h)\n"
+            "  --node-id N    CANopen node id, 1..127 (default 5)\n"
+            "  --nvm FILE     boot from the A/B model slots in FILE (created erased when absent)\n"
+            "  --nvm-sector N NVM sector size of FILE (default 256)\n"
+            "  --upload IMG   write a model image into the inactive slot and validate it (needs --nvm)\n"
+            "  --activate     activate the uploaded image; --rollback: re-activate the previous slot\n"
+            "  test hook: --nvm-cut-after K [--nvm-cut-mode before|torn|after] dies by SIGKILL inside the\n"
+            "             K-th NVM write/erase (before it, after half a sector, or after all of it)\n");
 }
 
 int main(int argc, char **argv)
 {
     static emu_t e; /* 64 KB queue: not on the stack */
-    const char *port = NULL, *vectors = NULL;
-    int use_stdio = 0, use_pty = 0, verbose = 0, i, rc, slave_keep = -1;
+    const char *port = NULL, *vectors = NULL, *nvm_path = NULL, *upload = NULL;
+    int use_stdio = 0, use_pty = 0, verbose = 0, i, rc, slave_keep = -1, activate = 0, rollback = 0;
+    int print_version = 0;
+    const slipest_model_q_t *boot_q;
+    const slipest_model_f32_t *boot_f;
+    unsigned long sector = 256ul, cut_after = 0ul, node_id = 5ul;
+    int cut_mode = EMU_CUT_BEFORE;
     struct sigaction sa;
 
     e.link = LINK_SLCAN;
@@ -315,6 +415,36 @@ int main(int argc, char **argv)
         else if (strcmp(argv[i], "--pty") == 0) use_pty = 1;
         else if (strcmp(argv[i], "--vectors") == 0 && i + 1 < argc) vectors = argv[++i];
         else if (strcmp(argv[i], "--verbose") == 0) verbose = 1;
+        else if (strcmp(argv[i], "--nvm") == 0 && i + 1 < argc) nvm_path = argv[++i];
+        else if (strcmp(argv[i], "--nvm-sector") == 0 && i + 1 < argc) sector = strtoul(argv[++i], NULL, 10);
+        else if (strcmp(argv[i], "--nvm-cut-after") == 0 && i + 1 < argc) cut_after = strtoul(argv[++i], NULL, 10);
+        else if (strcmp(argv[i], "--nvm-cut-mode") == 0 && i + 1 < argc) {
+            const char *m = argv[++i];
+            if (strcmp(m, "before") == 0) cut_mode = EMU_CUT_BEFORE;
+            else if (strcmp(m, "torn") == 0) cut_mode = EMU_CUT_TORN;
+            else if (strcmp(m, "after") == 0) cut_mode = EMU_CUT_AFTER;
+            else {
+                fprintf(stderr, "slipest_emu: unknown --nvm-cut-mode '%s' (before, torn, after)\n", m);
+                return 2;
+            }
+        }
+        else if (strcmp(argv[i], "--upload") == 0 && i + 1 < argc) upload = argv[++i];
+        else if (strcmp(argv[i], "--activate") == 0) activate = 1;
+        else if (strcmp(argv[i], "--rollback") == 0) rollback = 1;
+        else if (strcmp(argv[i], "--profile") == 0 && i + 1 < argc) {
+            const char *k = argv[++i];
+            if (strcmp(k, "canopen") == 0) profile_canopen = 1;
+            else if (strcmp(k, "dbc") != 0) {
+                fprintf(stderr, "slipest_emu: unknown profile '%s' (dbc or canopen)\n", k);
+                return 2;
+            }
+        } else if (strcmp(argv[i], "--node-id") == 0 && i + 1 < argc) {
+            node_id = strtoul(argv[++i], NULL, 10);
+            if (node_id < 1ul || node_id > 127ul) {
+                fprintf(stderr, "slipest_emu: --node-id must be 1..127\n");
+                return 2;
+            }
+        }
         else if (strcmp(argv[i], "--model") == 0 && i + 1 < argc) {
             if (load_model_image(argv[++i]) != 0) return 2;
         }
@@ -327,9 +457,7 @@ int main(int argc, char **argv)
                 return 2;
             }
         } else if (strcmp(argv[i], "--version") == 0) {
-            printf("slipest %u.%u model %s version %lu\n", slipest_lib_version() >> 8,
-                   slipest_lib_version() & 0xFFu, model_hex, (unsigned long)model_q->version);
-            return 0;
+            print_version = 1;
         } else if (strcmp(argv[i], "--help") == 0 || strcmp(argv[i], "-h") == 0) {
             usage(stdout);
             return 0;
@@ -339,7 +467,41 @@ int main(int argc, char **argv)
             return 2;
         }
     }
+    boot_q = model_q; /* the built-in (or --model) model, before a slot's replaces it */
+    boot_f = model_f32;
+    if (nvm_path != NULL) {
+        if (sector < SLIPEST_STORE_SECTOR_MIN || sector > SLIPEST_STORE_SECTOR_MAX) {
+            fprintf(stderr, "slipest_emu: --nvm-sector %lu outside %u..%u\n", sector, SLIPEST_STORE_SECTOR_MIN,
+                    SLIPEST_STORE_SECTOR_MAX);
+            return 2;
+        }
+        rc = open_store(nvm_path, (uint32_t)sector);
+        if (rc != 0) return rc;
+        nvm_file.cut_after = (uint32_t)cut_after; /* armed after boot: the hook cuts an upload/activation */
+        nvm_file.mode = cut_mode;
+        if (upload != NULL && (rc = upload_image(upload, activate)) != 0) return rc;
+        if (rollback) {
+            rc = slipest_store_rollback(&store);
+            if (rc != SLIPEST_OK) {
+                fprintf(stderr, "slipest_emu: rollback refused: %s (%d)\n", slipest_status_str(rc), rc);
+                return 3;
+            }
+            use_store_model();
+            fprintf(stderr, "slipest_emu: rollback ok: slot %d, model %s version %lu\n",
+                    slipest_store_active_slot(&store), model_hex, (unsigned long)model_q->version);
+        }
+        fprintf(stderr, "slipest_emu: nvm ops=%lu\n", (unsigned long)nvm_file.ops);
+    } else if (upload != NULL || rollback) {
+        fprintf(stderr, "slipest_emu: --upload / --rollback need --nvm FILE\n");
+        return 2;
+    }
+    if (print_version) {
+        printf("slipest %u.%u model %s version %lu\n", slipest_lib_version() >> 8, slipest_lib_version() & 0xFFu,
+               model_hex, (unsigned long)model_q->version);
+        return 0;
+    }
     if (vectors != NULL) return run_vectors(vectors, verbose);
+    if (nvm_path != NULL && port == NULL && !use_stdio && !use_pty) return 0; /* store operations only */
     if ((port != NULL) + use_stdio + use_pty != 1) {
         usage(stderr);
         return 2;
@@ -397,10 +559,21 @@ int main(int argc, char **argv)
         }
         e.in_fd = e.out_fd = fd;
     }
-    fprintf(stderr, "slipest_emu: ready link=%s model=%s lib=%u.%u\n", e.link == LINK_SLCAN ? "slcan" : "cobs",
-            model_hex, slipest_lib_version() >> 8, slipest_lib_version() & 0xFFu);
+    if (profile_canopen) {
+        slipest_frame_t boot;
+        rc = emu_co_start((uint8_t)node_id, nvm_path != NULL ? &store : NULL, boot_q, boot_f, &boot, 1u);
+        if (rc < 0) {
+            fprintf(stderr, "slipest_emu: CANopen node: %s\n", slipest_status_str(rc));
+            return 2;
+        }
+        queue_frames(&e, &boot, rc); /* the boot-up message */
+    }
+    fprintf(stderr, "slipest_emu: ready link=%s profile=%s model=%s lib=%u.%u\n",
+            e.link == LINK_SLCAN ? "slcan" : "cobs", profile_canopen ? "canopen" : "dbc", model_hex,
+            slipest_lib_version() >> 8, slipest_lib_version() & 0xFFu);
     rc = serve(&e);
-    print_counters(&e);
+    if (profile_canopen) emu_co_print_counters();
+    else print_counters(&e);
     if (slave_keep >= 0) close(slave_keep);
     return rc;
 }

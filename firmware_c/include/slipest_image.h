@@ -33,8 +33,12 @@ extern "C" {
 #define SLIPEST_IMAGE_TRAILER_SIZE 36u
 /** Header flag: the image carries the float32 model after the fixed-point one. */
 #define SLIPEST_IMAGE_FLAG_F32 0x0001u
-/** Largest valid image (with the float32 model), for sizing a receive buffer. */
-#define SLIPEST_IMAGE_MAX_SIZE 3842u
+/** Header flag: an HMAC-SHA256 tag over header and payload follows the trailer. */
+#define SLIPEST_IMAGE_FLAG_HMAC 0x0002u
+/** Bytes of the HMAC-SHA256 tag (present when SLIPEST_IMAGE_FLAG_HMAC is set). */
+#define SLIPEST_IMAGE_HMAC_SIZE 32u
+/** Largest valid image (with the float32 model and an HMAC tag), for sizing a receive buffer. */
+#define SLIPEST_IMAGE_MAX_SIZE 3874u
 
 /** Storage of a fixed-point model read from an image (the model struct points into it). */
 typedef struct {
@@ -62,6 +66,9 @@ typedef struct {
  * @brief Validate a model image and fill model structs from it. Nothing is written to mq / mf
  *        unless every check passed (the storage may be partly written on a failure).
  * @param[in]  img       the image bytes
+ * An image flagged SLIPEST_IMAGE_FLAG_HMAC carries a 32-byte tag after the trailer; this reader
+ * checks its length only. The tag is verified by the model store (slipest_store.h) of a build
+ * provisioned with a key.
  * @param[in]  len       number of bytes in img (the image must be exactly this long)
  * @param[in]  expect32  expected content hash32, or 0 to accept any (the image's own hash is
  *                       always checked against its trailer)
@@ -71,7 +78,7 @@ typedef struct {
  *                       fixed-point-only library)
  * @param[out] fs        storage for the float32 arrays (used when mf is not NULL)
  * @return SLIPEST_OK; SLIPEST_E_NULL; SLIPEST_E_LENGTH (truncated, too long or a size field that
- *         disagrees); SLIPEST_E_FORMAT (magic or flags); SLIPEST_E_VERSION; SLIPEST_E_ARCH;
+ *         disagrees); SLIPEST_E_FORMAT (magic, unknown flags or reserved bytes); SLIPEST_E_VERSION; SLIPEST_E_ARCH;
  *         SLIPEST_E_CRC; SLIPEST_E_HASH; SLIPEST_E_STATE (mf requested but the image has no float
  *         model); or the status of slipest_model_q_check() / slipest_model_f32_check()
  */

@@ -28,7 +28,10 @@ typedef enum {
     SLIPEST_E_STATE = -10,      /**< call not valid in the current state */
     SLIPEST_E_ARCH = -11,       /**< model architecture or layer sizes differ from SN-S */
     SLIPEST_E_VERSION = -12,    /**< unsupported model image format version */
-    SLIPEST_E_HASH = -13        /**< model image hash disagrees with the expected one */
+    SLIPEST_E_HASH = -13,       /**< model image hash disagrees with the expected one */
+    SLIPEST_E_NVM = -14,        /**< a non-volatile memory callback failed */
+    SLIPEST_E_AUTH = -15,       /**< model image HMAC tag missing or wrong (key provisioned) */
+    SLIPEST_E_STALE = -16       /**< model version not newer than the active one (not a rollback) */
 } slipest_status_t;
 
 /**

@@ -3,6 +3,7 @@
  * checked against len before use, and the length fields are compared with the only layout SN-S
  * allows, never used to size a read. */
 #include "slipest_image.h"
+#include "slipest_image_internal.h"
 
 #include <string.h>
 
@@ -13,7 +14,7 @@
     SLIPEST_Q_RSQRT_SEED_N != 24
 #error "slipest_image.c: the image layout is that of SN-S"
 #endif
-#if SLIPEST_IMAGE_HEADER_SIZE + Q_PAYLOAD + F32_PAYLOAD + SLIPEST_IMAGE_TRAILER_SIZE != SLIPEST_IMAGE_MAX_SIZE
+#if SLIPEST_IMAGE_HEADER_SIZE + Q_PAYLOAD + F32_PAYLOAD + SLIPEST_IMAGE_TRAILER_SIZE + SLIPEST_IMAGE_HMAC_SIZE != SLIPEST_IMAGE_MAX_SIZE
 #error "slipest_image.c: SLIPEST_IMAGE_MAX_SIZE disagrees with the layout"
 #endif
 
@@ -33,13 +34,13 @@ static int16_t s16(uint16_t u)
     return (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): v fits int16_t (see above) */
 }
 
-uint32_t slipest_crc32(const uint8_t *data, size_t len)
+uint32_t slipest_crc32_update(uint32_t crc_in, const uint8_t *data, size_t len)
 {
-    uint32_t crc = 0xFFFFFFFFu;
+    uint32_t crc = crc_in;
     size_t i;
     int b;
     if (data == NULL) {
-        return 0u;
+        return crc;
     }
     for (i = 0; i < len; ++i) {
         crc ^= data[i];
@@ -47,7 +48,15 @@ uint32_t slipest_crc32(const uint8_t *data, size_t len)
             crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
         }
     }
-    return crc ^ 0xFFFFFFFFu;
+    return crc;
+}
+
+uint32_t slipest_crc32(const uint8_t *data, size_t len)
+{
+    if (data == NULL) {
+        return 0u;
+    }
+    return slipest_crc32_update(0xFFFFFFFFu, data, len) ^ 0xFFFFFFFFu;
 }
 
 /* Readers of n consecutive little-endian elements at *off (advanced); the caller has checked
@@ -86,31 +95,68 @@ static void get_f32(const uint8_t *img, size_t *off, float *dst, size_t n)
 }
 #endif
 
+slipest_status_t slipest_image_check_header(const uint8_t *img, size_t len, uint16_t *flags, size_t *body)
+{
+    uint32_t payload;
+    uint16_t f;
+    size_t i, tail;
+    if (len < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE) return SLIPEST_E_LENGTH;
+    if (memcmp(img, SLIPEST_IMAGE_MAGIC, 4) != 0) return SLIPEST_E_FORMAT;
+    if (le16(img + 4) != SLIPEST_IMAGE_FORMAT) return SLIPEST_E_VERSION;
+    if (le16(img + 6) != SLIPEST_IMAGE_ARCH_SN_S || le16(img + 8) != SLIPEST_IMAGE_HEADER_SIZE) return SLIPEST_E_ARCH;
+    f = le16(img + 10);
+    if ((f & ~(SLIPEST_IMAGE_FLAG_F32 | SLIPEST_IMAGE_FLAG_HMAC)) != 0u) return SLIPEST_E_FORMAT;
+    for (i = 46u; i < SLIPEST_IMAGE_HEADER_SIZE; ++i) {
+        if (img[i] != 0u) return SLIPEST_E_FORMAT; /* reserved bytes */
+    }
+    /* the payload size must be the one SN-S layout with or without the float model */
+    payload = le32(img + 42);
+    if (payload != Q_PAYLOAD + ((f & SLIPEST_IMAGE_FLAG_F32) ? F32_PAYLOAD : 0u)) return SLIPEST_E_LENGTH;
+    tail = SLIPEST_IMAGE_TRAILER_SIZE;
+    if ((f & SLIPEST_IMAGE_FLAG_HMAC) != 0u) {
+        tail += SLIPEST_IMAGE_HMAC_SIZE;
+    }
+    if (len != SLIPEST_IMAGE_HEADER_SIZE + (size_t)payload + tail) return SLIPEST_E_LENGTH;
+    *flags = f;
+    *body = SLIPEST_IMAGE_HEADER_SIZE + (size_t)payload;
+    return SLIPEST_OK;
+}
+
+void slipest_image_header_scalars(const uint8_t *img, slipest_model_q_t *q)
+{
+    memset(q, 0, sizeof *q);
+    q->n_in = img[12];
+    q->n_hidden = img[13];
+    q->n_out = img[14];
+    q->gelu_n = img[15];
+    q->rsqrt_seed_n = img[16];
+    q->h_bits = img[17];
+    q->e_bits = img[18];
+    q->fz = img[19];
+    q->fg = img[20];
+    q->fy = img[21];
+    q->gelu_step_log2 = img[22];
+    q->eps_e = (int8_t)(img[23] > 127u ? (int)img[23] - 256 : (int)img[23]);
+    q->eps_m = s16(le16(img + 24));
+    q->c30 = s32(le32(img + 26));
+    q->eps_cap = s32(le32(img + 30));
+    q->version = le32(img + 34);
+    q->hash32 = le32(img + 38);
+}
+
 slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t expect32, slipest_model_q_t *mq,
                                     slipest_image_q_storage_t *qs, slipest_model_f32_t *mf,
                                     slipest_image_f32_storage_t *fs)
 {
     slipest_model_q_t q;
     uint16_t flags;
-    uint32_t payload, hash32, trailer_hash32;
-    size_t body, off, i;
+    uint32_t hash32, trailer_hash32;
+    size_t body, off;
     slipest_status_t st;
 
     if (img == NULL || mq == NULL || qs == NULL || (mf != NULL && fs == NULL)) return SLIPEST_E_NULL;
-    if (len < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE) return SLIPEST_E_LENGTH;
-    if (memcmp(img, SLIPEST_IMAGE_MAGIC, 4) != 0) return SLIPEST_E_FORMAT;
-    if (le16(img + 4) != SLIPEST_IMAGE_FORMAT) return SLIPEST_E_VERSION;
-    if (le16(img + 6) != SLIPEST_IMAGE_ARCH_SN_S || le16(img + 8) != SLIPEST_IMAGE_HEADER_SIZE) return SLIPEST_E_ARCH;
-    flags = le16(img + 10);
-    if ((flags & ~SLIPEST_IMAGE_FLAG_F32) != 0u) return SLIPEST_E_FORMAT;
-    for (i = 46u; i < SLIPEST_IMAGE_HEADER_SIZE; ++i) {
-        if (img[i] != 0u) return SLIPEST_E_FORMAT; /* reserved bytes */
-    }
-    /* the payload size must be the one SN-S layout with or without the float model */
-    payload = le32(img + 42);
-    if (payload != Q_PAYLOAD + ((flags & SLIPEST_IMAGE_FLAG_F32) ? F32_PAYLOAD : 0u)) return SLIPEST_E_LENGTH;
-    body = SLIPEST_IMAGE_HEADER_SIZE + (size_t)payload;
-    if (len != body + SLIPEST_IMAGE_TRAILER_SIZE) return SLIPEST_E_LENGTH;
+    st = slipest_image_check_header(img, len, &flags, &body);
+    if (st != SLIPEST_OK) return st;
     if (le32(img + body) != slipest_crc32(img, body)) return SLIPEST_E_CRC;
     hash32 = le32(img + 38);
     trailer_hash32 = ((uint32_t)img[body + 4] << 24) | ((uint32_t)img[body + 5] << 16) |
@@ -127,24 +173,7 @@ slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t exp
     }
 #endif
 
-    memset(&q, 0, sizeof q);
-    q.n_in = img[12];
-    q.n_hidden = img[13];
-    q.n_out = img[14];
-    q.gelu_n = img[15];
-    q.rsqrt_seed_n = img[16];
-    q.h_bits = img[17];
-    q.e_bits = img[18];
-    q.fz = img[19];
-    q.fg = img[20];
-    q.fy = img[21];
-    q.gelu_step_log2 = img[22];
-    q.eps_e = (int8_t)(img[23] > 127u ? (int)img[23] - 256 : (int)img[23]);
-    q.eps_m = s16(le16(img + 24));
-    q.c30 = s32(le32(img + 26));
-    q.eps_cap = s32(le32(img + 30));
-    q.version = le32(img + 34);
-    q.hash32 = hash32;
+    slipest_image_header_scalars(img, &q);
     off = SLIPEST_IMAGE_HEADER_SIZE;
     get_i16(img, &off, qs->w1, SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES);
     get_i32(img, &off, qs->b1, SLIPEST_N_HIDDEN);

@@ -4,30 +4,31 @@
  * preconditions of the overflow proof of slipest_infer_q.c (docs/fixed_point.md), the same ones
  * export/quant.py's check_bounds() enforces at export. */
 #include "slipest_model.h"
+#include "slipest_model_internal.h"
 
 #include <stddef.h>
 
-/* Bound of every partial sum of a row: 2^15 sum_j |w_ij| + |b_i| (a row of int16 weights
- * against inputs of magnitude <= 2^15). Computed in 64 bits: cannot overflow for <= 30 terms. */
-static int64_t row_bound(const int16_t *w, int32_t b, int n)
+/* Sum of |w_j| over a row of n weights (<= 30 * 2^15: no overflow in 64 bits). */
+static int64_t row_abs_sum(const int16_t *w, int n)
 {
     int64_t s = 0;
     int j;
     for (j = 0; j < n; ++j) {
         s += w[j] < 0 ? -(int64_t)w[j] : (int64_t)w[j];
     }
-    return s * 32768 + (b < 0 ? -(int64_t)b : (int64_t)b);
+    return s;
 }
 
-slipest_status_t slipest_model_q_check(const slipest_model_q_t *m)
+int slipest_model_row_ok(int64_t abs_w_sum, int32_t b, int64_t limit)
 {
-    int i;
-    int32_t u_shift, gelu_shift;
+    /* bound of every partial sum of a row: 2^15 sum_j |w_ij| + |b_i| (int16 inputs) */
+    return abs_w_sum * 32768 + (b < 0 ? -(int64_t)b : (int64_t)b) <= limit;
+}
 
-    if (m == NULL || m->w1 == NULL || m->b1 == NULL || m->gamma == NULL || m->beta == NULL || m->w2 == NULL ||
-        m->b2 == NULL || m->gelu == NULL || m->rsqrt_seed == NULL) {
-        return SLIPEST_E_NULL;
-    }
+slipest_status_t slipest_model_q_check_scalars(const slipest_model_q_t *m)
+{
+    int32_t u_shift, gelu_shift;
+    if (m == NULL) return SLIPEST_E_NULL;
     if (m->n_in != SLIPEST_N_FEATURES || m->n_hidden != SLIPEST_N_HIDDEN || m->n_out != SLIPEST_N_CLASSES ||
         m->gelu_n != SLIPEST_Q_GELU_N || m->rsqrt_seed_n != SLIPEST_Q_RSQRT_SEED_N) {
         return SLIPEST_E_ARCH;
@@ -45,21 +46,37 @@ slipest_status_t slipest_model_q_check(const slipest_model_q_t *m)
         m->c30 <= 0 || m->c30 >= (1 << 17)) {
         return SLIPEST_E_RANGE;
     }
+    return SLIPEST_OK;
+}
+
+slipest_status_t slipest_model_q_check(const slipest_model_q_t *m)
+{
+    int i;
+    slipest_status_t st;
+
+    if (m == NULL || m->w1 == NULL || m->b1 == NULL || m->gamma == NULL || m->beta == NULL || m->w2 == NULL ||
+        m->b2 == NULL || m->gelu == NULL || m->rsqrt_seed == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    st = slipest_model_q_check_scalars(m);
+    if (st != SLIPEST_OK) return st;
     for (i = 0; i < SLIPEST_Q_RSQRT_SEED_N; ++i) {
-        if (m->rsqrt_seed[i] > 0x80000000u) { /* Q30 seeds of 1/sqrt(w), w >= 1/4: <= 2^31 */
+        if (m->rsqrt_seed[i] > SLIPEST_Q_RSQRT_SEED_MAX) { /* Q30 seeds of 1/sqrt(w), w >= 1/4: <= 2^31 */
             return SLIPEST_E_RANGE;
         }
     }
     for (i = 0; i < SLIPEST_N_HIDDEN; ++i) {
         /* layer-1 accumulator bound (acc1_bound <= 2^31 - 2^8), int16 LayerNorm bias */
-        if (row_bound(&m->w1[i * SLIPEST_N_FEATURES], m->b1[i], SLIPEST_N_FEATURES) > 2147483392 ||
+        if (!slipest_model_row_ok(row_abs_sum(&m->w1[i * SLIPEST_N_FEATURES], SLIPEST_N_FEATURES), m->b1[i],
+                                  SLIPEST_Q_ACC1_LIMIT) ||
             m->beta[i] < -32768 || m->beta[i] > 32767) {
             return SLIPEST_E_RANGE;
         }
     }
     for (i = 0; i < SLIPEST_N_CLASSES; ++i) {
         /* head accumulator bound (acc2_bound <= INT32_MAX): |g| < 2^15 */
-        if (row_bound(&m->w2[i * SLIPEST_N_HIDDEN], m->b2[i], SLIPEST_N_HIDDEN) > 2147483647) {
+        if (!slipest_model_row_ok(row_abs_sum(&m->w2[i * SLIPEST_N_HIDDEN], SLIPEST_N_HIDDEN), m->b2[i],
+                                  SLIPEST_Q_ACC2_LIMIT)) {
             return SLIPEST_E_RANGE;
         }
     }

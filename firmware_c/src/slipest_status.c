@@ -17,6 +17,9 @@ const char *slipest_status_str(int status)
     case SLIPEST_E_ARCH: return "model architecture mismatch";
     case SLIPEST_E_VERSION: return "unsupported image format version";
     case SLIPEST_E_HASH: return "model hash mismatch";
+    case SLIPEST_E_NVM: return "non-volatile memory error";
+    case SLIPEST_E_AUTH: return "model image authentication failed";
+    case SLIPEST_E_STALE: return "model version not newer than the active one";
     case SLIPEST_OK: return "ok";
     default: return status >= 0 ? "ok" : "unknown error";
     }

@@ -16,6 +16,9 @@ per target for the given bundle, then measures in one run:
   frame that closes a window (extraction + fixed-point inference + output frames). The
   cost image links both serial codecs (SLCAN and COBS); `m4_flash_bytes_can_firmware` is
   the same measure on the CAN-native example firmware of docs/integrating_slipest.md.
+  `m4_*_model_slots` are what A/B model slots on NVM add (docs/model_slots.md): the flash of the
+  store, SHA-256, image-reader and model-check objects linked into the store test image, and the RAM of its
+  `slipest_store_t` (its symbol size in that image); `*_can_node_with_slots` add them to the CAN node.
 
 The reference target's figures keep their `m4_*` keys; every target's figures are under `cpu_targets`.
 Where the guest has no counter QEMU drives (user-mode PowerPC, bare-metal SPARC), the cost image is run
@@ -40,7 +43,7 @@ from typing import Callable
 import numpy as np
 
 from . import targets as target_registry
-from .build import cmake_build, run, run_image
+from .build import cmake_build, run, run_image, run_record
 from ...paths import default_bundle, repo_root
 
 REPO = repo_root()
@@ -245,6 +248,40 @@ def target_figures(t: Target, build_dir: Path) -> dict:
     return row
 
 
+# the CANopen node with two model slots (firmware_c/target/co_node_target.c), by part
+CANOPEN_PARTS = {
+    "canopen": ("slipest_co", "slipest_co_sdo", "slipest_co_od_access", "slipest_co_od"),
+    "store": ("slipest_store", "slipest_sha256", "slipest_image", "slipest_model"),
+}
+CANOPEN_GOALS = {"ram_bytes": 4096, "flash_bytes": 12288}  # issue 20: the whole CANopen node on the M4
+
+
+def canopen_node_figures(build_dir: Path) -> dict:
+    """RAM and flash of the CANopen node with two model slots, as linked and run in its target image
+    (upload by SDO block download, activation, one window): flash = library objects kept in the image
+    (node, CANopen, store, kernel, built-in model); RAM = their static data + the node context + the
+    store (one model in RAM, one sector buffer) + the peak stack of the heaviest call. The NVM area is
+    the integrator's flash and is not counted."""
+    out = run_image(build_dir, "slipest_co_node.elf")
+    if "PASS" not in out:
+        raise OSError(f"{build_dir}/slipest_co_node.elf did not pass:\n{out[-1000:]}")
+    kv = parse_kv(out)
+    lib = _by_source(library_footprint(build_dir / "slipest_co_node.elf.map", "libslipest_q.a"))
+    flash = sum(o["flash"] for o in lib.values())
+    static_ram = sum(o["ram"] for o in lib.values())
+    stack = max(kv["stack_co_window"], kv["stack_co_upload_end"], kv["stack_co_activate"])
+    by_part = {part: sum(lib.get(k, {"flash": 0})["flash"] for k in objs) for part, objs in CANOPEN_PARTS.items()}
+    by_part["estimator, kernel and built-in model"] = flash - sum(by_part.values())
+    return {
+        "flash_bytes": flash,
+        "ram_bytes": static_ram + kv["co_node_bytes"] + kv["store_bytes"] + stack,
+        "flash_bytes_by_part": by_part,
+        "ram_parts": {"static": static_ram, "node_context": kv["co_node_bytes"], "store": kv["store_bytes"],
+                      "peak_stack": stack},
+        "goals": CANOPEN_GOALS,
+    }
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bundle", type=Path, default=DEFAULT_BUNDLE, help="export bundle (default: the example bundle)")
     parser.add_argument("--build-dir", type=Path, default=REPO / "build" / "bench",
@@ -308,6 +345,8 @@ def run(args: argparse.Namespace) -> int:
     lib = library_footprint(m4 / "slipest_bench_target_q.elf.map", "libslipest_q.a")
     # a CAN-attached flight firmware: the integration guide's main loop, no serial codec linked
     can_fw = library_footprint(m4 / "example_minimal_can_loop.elf.map", "libslipest_q.a")
+    slots = model_slots_footprint(m4)
+    co_node = canopen_node_figures(m4)
     steps.close()
     flash = sum(o["flash"] for o in lib.values())
     static_ram = sum(o["ram"] for o in lib.values())
@@ -331,6 +370,11 @@ def run(args: argparse.Namespace) -> int:
         # library + model as linked into docs/integrating_slipest.md's CAN main loop (CAN peripheral, no serial link)
         "m4_flash_bytes_can_firmware": sum(o["flash"] for o in can_fw.values()),
         "m4_flash_bytes_by_object": {k: v["flash"] for k, v in sorted(lib.items())},
+        # A/B model slots on NVM (docs/model_slots.md): store + SHA-256 + image reader, and slipest_store_t
+        "m4_flash_bytes_model_slots": slots["flash"],
+        "m4_ram_bytes_model_slots": slots["ram"],
+        "m4_flash_bytes_can_node_with_slots": sum(o["flash"] for k, o in can_fw.items() if k not in STORE_OBJECTS)
+        + slots["flash"],
         "m4_static_ram_bytes": static_ram,
         "m4_node_context_bytes": cost["node_bytes"],
         "m4_stack_bytes_q": cost["stack_q"],
@@ -339,6 +383,10 @@ def run(args: argparse.Namespace) -> int:
         "m4_instructions_per_sample_node_slcan": round(cost["node_instructions_per_sample"], 1),
         "m4_instructions_per_systick": cost["instructions_per_tick"],
         "m4_label": found[ref].label,
+        # the CANopen node with two model slots (issue 20 goal: <= 4 KB RAM, <= 12 KB flash)
+        "m4_canopen_node_ram_bytes": co_node["ram_bytes"],
+        "m4_canopen_node_flash_bytes": co_node["flash_bytes"],
+        "m4_canopen_node": co_node,
         "cpu_targets": rows,
         "targets": {"m4_instructions_q": 3000, "m4_flash_bytes": 6144, "m4_ram_bytes": 1024, "speedup_vs_onnxruntime": 20},
         "bundle": str(bundle),
@@ -350,9 +398,29 @@ def run(args: argparse.Namespace) -> int:
         for key, value in result.items():
             if not isinstance(value, dict):
                 print(f"{key:42s} {value:.1f}" if isinstance(value, float) else f"{key:42s} {value}")
+        parts = ", ".join(f"{k} {v}" for k, v in co_node["flash_bytes_by_part"].items())
+        print(f"{'m4_canopen_node_flash_by_part':42s} {parts}")
+        print(f"{'m4_canopen_node_ram_parts':42s} " + ", ".join(f"{k} {v}" for k, v in co_node["ram_parts"].items()))
         print()
         print(format_table(rows))
     return 0
+
+
+STORE_OBJECTS = ("slipest_store.c.obj", "slipest_sha256.c.obj", "slipest_image.c.obj", "slipest_model.c.obj")
+
+
+def model_slots_footprint(build_dir: Path) -> dict[str, int]:
+    """Flash of the model-store objects and RAM of the store state, from the store test image
+    (firmware_c/target/store_target.c) of a cross build."""
+    image = Path(build_dir) / "slipest_store_target.elf"
+    objs = library_footprint(Path(f"{image}.map"), "libslipest_q.a")
+    nm = run_record(build_dir)["nm"]
+    out = subprocess.run([nm, "-S", str(image)], capture_output=True, text=True, check=True).stdout
+    m = re.search(r"^[0-9a-f]+ ([0-9a-f]+) [bB] store$", out, flags=re.M)
+    if m is None:
+        raise ValueError(f"{image}: no 'store' symbol (slipest_store_t) in the symbol table")
+    return {"flash": sum(o["flash"] for k, o in objs.items() if k in STORE_OBJECTS), "ram": int(m.group(1), 16),
+            "objects": {k: v["flash"] for k, v in objs.items() if k in STORE_OBJECTS}}
 
 
 def _cell(v) -> str:

@@ -35,6 +35,8 @@ def generate_dbc(out_dir: Path) -> Path:
     run([sys.executable, "-m", "cantools", "generate_c_source", str(DBC), "--database-name", "slipest_dbc",
          "--no-floating-point-numbers", "-o", str(out_dir)], check=True)
     run(["cmake", f"-DGEN={out_dir}", "-P", str(FW / "cmake" / "strip_float_dbc.cmake")], check=True)
+    # the CANopen object dictionary tables (slipest_co_od.h/.c), as CMake generates them beside the codec
+    run([sys.executable, str(REPO / "canopen_od" / "generate.py"), "c", str(out_dir)], check=True)
     return out_dir / "slipest_dbc.c"
 
 

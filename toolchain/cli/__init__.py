@@ -24,6 +24,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "emulate": ("fleetlab.cli.emulate", "run the C estimator in the host emulation loop and compare bit for bit"),
     "stream": ("fleetlab.cli.stream", "stream telemetry or features to the estimator over CAN or serial"),
     "monitor": ("fleetlab.cli.monitor", "watch slip estimates and status frames on a CAN bus"),
+    "upload": ("fleetlab.cli.upload", "send a model image to a running CANopen node (SDO block download) and activate it"),
     "bench": ("fleetlab.cli.bench", "benchmarks: featurisation and simulation, fusion, C inference"),
     "assure": ("fleetlab.cli.assure", "flight-software evidence: MISRA, analysers, stack, coverage, fuzzing report"),
     "demo": ("fleetlab.demo", "the whole pipeline on built-in defaults, ending in a report"),

@@ -34,6 +34,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model-version", type=int, default=1, metavar="N",
                    help="model version written into model.img and the C model structs (monotonically increasing "
                    "per deployment; default 1)")
+    p.add_argument("--hmac-key", type=Path, metavar="FILE",
+                   help="sign model.img with HMAC-SHA256 under the key in FILE (16..64 raw bytes), the key a "
+                   "flight build was provisioned with (cmake -DSLIPEST_HMAC_KEY_FILE=FILE)")
     p.add_argument("--c-name", default="main", metavar="NAME",
                    help="C name of the bundle's models: slipest_NAME_q / slipest_NAME_f32 (default main); give "
                    "two bundles different names to include both in one image")
@@ -87,7 +90,8 @@ def run(args: argparse.Namespace) -> int:
     sources = {"data": [str(d) for d in args.data], "seed": args.seed, "kind": kind}
     b = export_bundle(model, args.out, inputs=inputs, meta=meta, model_path=args.model, data_dirs=args.data,
                       onnx_only=args.onnx_only, vector_sources=sources, c_name=args.c_name,
-                      model_version=args.model_version)
+                      model_version=args.model_version,
+                      hmac_key=args.hmac_key.read_bytes() if args.hmac_key is not None else None)
     print(f"wrote {b.path} ({meta['arch']}, content hash {b.content_hash[:16]}...)")
     for name, entry in b.manifest["files"].items():
         print(f"  {name:24s} {entry['bytes']:>9d} bytes")

@@ -1,0 +1,181 @@
+"""The slipest CANopen node's object dictionary: the ONE source of both the C tables
+(generated at build time into slipest_co_od.c/.h) and the EDS (CiA 306) file.
+
+Pure data and stdlib only: CMake runs `generate.py` with whatever Python it finds.
+
+Each entry: (index, sub, name, data type, access, default, kind, arg, pdo_mappable).
+`kind` names where the C node keeps the value (a handler in slipest_co_od_access.c):
+  const      the default itself (plus the node id when `default` is a "$NODEID+..." string)
+  hb_time    producer heartbeat time 0x1017 (read/write)
+  err_reg    error register 0x1001
+  serial     identity serial number (given to slipest_co_init)
+  pdo        bytes of the last payload of a PDO: arg = (pdo number << 8) | byte offset
+  model      the active model: arg 0 version, 1 hash32, 2 sha256, 3 slot, 4 library version
+  counter    node counter number arg (slipest_co_counter())
+  slot       slot arg >> 4, field arg & 15: 0 state, 1 length, 2 version, 3 hash32
+  store_cnt  store counter number arg (slipest_store_counters_t field order)
+  upload     arg 0 upload state, 1 last store status, 2 bytes received
+  command    write-only command arg: 1 activate, 2 rollback, 3 abort upload
+  domain     the model image (DOMAIN, written into the inactive slot)
+PDO communication and mapping objects (0x1400/0x1600/0x1800/0x1A00) are derived from PDOS.
+"""
+
+from __future__ import annotations
+
+# CiA 301 data type codes
+BOOLEAN, INTEGER8, INTEGER16, INTEGER32 = 0x01, 0x02, 0x03, 0x04
+UNSIGNED8, UNSIGNED16, UNSIGNED32 = 0x05, 0x06, 0x07
+VISIBLE_STRING, OCTET_STRING, DOMAIN = 0x09, 0x0A, 0x0F
+TYPE_BYTES = {BOOLEAN: 1, INTEGER8: 1, INTEGER16: 2, INTEGER32: 4, UNSIGNED8: 1, UNSIGNED16: 2, UNSIGNED32: 4,
+              OCTET_STRING: 32, DOMAIN: 0}
+SIGNED = {INTEGER8, INTEGER16, INTEGER32}
+
+# Identity (0x1018). Not a CiA-assigned vendor ID: an integrator puts their own here.
+VENDOR_ID = 0x00000000
+PRODUCT_CODE = 0x534C5031  # "SLP1"
+REVISION = 0x00010000  # major 1, minor 0 (slipest library 1.0)
+DEVICE_TYPE = 0x00000000  # no CiA device profile
+HEARTBEAT_MS = 1000
+DEVICE_NAME = "slipest"
+
+# Manufacturer objects
+IDX_MODEL_IMAGE = 0x2000
+IDX_ACTIVE_MODEL = 0x2001
+IDX_COMMAND = 0x2002
+IDX_COUNTERS = 0x2003
+IDX_SLOTS = 0x2004
+IDX_STORE_COUNTERS = 0x2005
+IDX_UPLOAD = 0x2006
+
+COUNTERS = ("frames_received", "frames_rejected", "samples_dropped", "windows_flagged", "windows_done",
+            "saturations", "rpdo_received", "sdo_aborts_sent", "sdo_aborts_received", "emcy_sent",
+            "block_sequence_errors", "nmt_commands", "frames_ignored")
+STORE_COUNTERS = ("uploads_started", "uploads_aborted", "images_accepted", "refused_length", "refused_format",
+                  "refused_arch", "refused_crc", "refused_hash", "refused_range", "refused_hmac", "refused_version",
+                  "activations", "rollbacks", "nvm_errors", "boot_fallbacks")
+SLOT_FIELDS = (("state", UNSIGNED8), ("length", UNSIGNED32), ("version", UNSIGNED32), ("hash32", UNSIGNED32))
+
+# PDO-mapped records. Payload layouts equal the DBC frames (dbc/slipest.dbc, little-endian),
+# so the CANopen profile carries the plain profile's bytes: tests/test_canopen_od.py checks it.
+PDO_RECORDS = {
+    0x2100: ("Telemetry wheel", "TELEM_WHEEL",
+             (("sample_counter", UNSIGNED16), ("wheel_speed", INTEGER16), ("motor_current", INTEGER16))),
+    0x2101: ("Telemetry IMU", "TELEM_IMU",
+             (("sample_counter", UNSIGNED16), ("acc_x", INTEGER16), ("acc_y", INTEGER16), ("acc_z", INTEGER16))),
+    0x2102: ("Telemetry attitude", "TELEM_ATTITUDE",
+             (("sample_counter", UNSIGNED16), ("roll", INTEGER16), ("pitch", INTEGER16))),
+    0x2110: ("Slip estimate", "SLIP_ESTIMATE",
+             (("window_counter", UNSIGNED16), ("slip_class", UNSIGNED8), ("slip_class_f32", UNSIGNED8),
+              ("flags", UNSIGNED8), ("n_samples", UNSIGNED8), ("saturations", UNSIGNED16))),
+    0x2111: ("Slip logits 01", "SLIP_LOGITS_01", (("logit_0", INTEGER32), ("logit_1", INTEGER32))),
+    0x2112: ("Slip logit 2", "SLIP_LOGITS_2", (("logit_2", INTEGER32), ("window_counter", UNSIGNED16))),
+    # not a DBC frame: the CANopen status carries the active model's hash32 and version
+    0x2113: ("Model status", None, (("model_hash32", UNSIGNED32), ("model_version", UNSIGNED32))),
+}
+
+# (direction, number 1..4, mapped record). COB-IDs are the predefined connection set of the
+# node id: RPDOn = 0x100 + 0x100 n + id, TPDOn = 0x080 + 0x100 n + id.
+PDOS = (
+    ("rx", 1, 0x2100),
+    ("rx", 2, 0x2101),
+    ("rx", 3, 0x2102),
+    ("tx", 1, 0x2110),
+    ("tx", 2, 0x2111),
+    ("tx", 3, 0x2112),
+    ("tx", 4, 0x2113),
+)
+
+
+def pdo_cob_base(direction: str, number: int) -> int:
+    return (0x100 + 0x100 * number) if direction == "rx" else (0x080 + 0x100 * number)
+
+
+def pdo_slot(direction: str, number: int) -> int:
+    """Index of a PDO's payload buffer in the C node: RPDOs first, then TPDOs."""
+    n_rx = sum(1 for d, _, _ in PDOS if d == "rx")
+    return number - 1 if direction == "rx" else n_rx + number - 1
+
+
+class Entry:
+    __slots__ = ("index", "sub", "name", "dtype", "access", "default", "kind", "arg", "mappable", "parent")
+
+    def __init__(self, index, sub, name, dtype, access, default=0, kind="const", arg=0, mappable=False, parent=None):
+        self.index, self.sub, self.name, self.dtype, self.access = index, sub, name, dtype, access
+        self.default, self.kind, self.arg, self.mappable, self.parent = default, kind, arg, mappable, parent
+
+
+def _record(index, name, subs):
+    """A RECORD: sub 0 (highest sub-index) then the given (name, type, access, default, kind, arg[, mappable])."""
+    out = [Entry(index, 0, "Highest sub-index supported", UNSIGNED8, "const", len(subs), parent=name)]
+    for k, s in enumerate(subs, start=1):
+        out.append(Entry(index, k, *s, parent=name))
+    return out
+
+
+def objects() -> list[Entry]:
+    """Every object of the node, sorted by (index, sub)."""
+    e: list[Entry] = [
+        Entry(0x1000, 0, "Device type", UNSIGNED32, "const", DEVICE_TYPE),
+        Entry(0x1001, 0, "Error register", UNSIGNED8, "ro", 0, "err_reg"),
+        Entry(0x1017, 0, "Producer heartbeat time", UNSIGNED16, "rw", HEARTBEAT_MS, "hb_time"),
+    ]
+    e += _record(0x1018, "Identity object", [
+        ("Vendor-ID", UNSIGNED32, "ro", VENDOR_ID),
+        ("Product code", UNSIGNED32, "ro", PRODUCT_CODE),
+        ("Revision number", UNSIGNED32, "ro", REVISION),
+        ("Serial number", UNSIGNED32, "ro", 0, "serial"),
+    ])
+    e += _record(0x1200, "SDO server parameter", [
+        ("COB-ID client to server", UNSIGNED32, "ro", "$NODEID+0x600"),
+        ("COB-ID server to client", UNSIGNED32, "ro", "$NODEID+0x580"),
+    ])
+    for direction, number, rec in PDOS:
+        base = pdo_cob_base(direction, number)
+        comm = (0x1400 if direction == "rx" else 0x1800) + number - 1
+        mapping = (0x1600 if direction == "rx" else 0x1A00) + number - 1
+        kind = "RPDO" if direction == "rx" else "TPDO"
+        e += _record(comm, f"{kind}{number} communication parameter", [
+            ("COB-ID used by PDO", UNSIGNED32, "ro", f"$NODEID+0x{base:X}"),
+            ("Transmission type", UNSIGNED8, "ro", 0xFF),  # event-driven (manufacturer-specific)
+        ])
+        _, _, fields = PDO_RECORDS[rec]
+        e += _record(mapping, f"{kind}{number} mapping parameter", [
+            (f"Mapped object {k}", UNSIGNED32, "ro", (rec << 16) | (k << 8) | (8 * TYPE_BYTES[t]))
+            for k, (_, t) in enumerate(fields, start=1)
+        ])
+    e.append(Entry(IDX_MODEL_IMAGE, 0, "Model image", DOMAIN, "wo", 0, "domain"))
+    e += _record(IDX_ACTIVE_MODEL, "Active model", [
+        ("version", UNSIGNED32, "ro", 0, "model", 0),
+        ("hash32", UNSIGNED32, "ro", 0, "model", 1),
+        ("sha256", OCTET_STRING, "ro", 0, "model", 2),
+        ("slot", UNSIGNED8, "ro", 0, "model", 3),  # 0xFF: the built-in model
+        ("library version", UNSIGNED16, "ro", 0, "model", 4),
+    ])
+    e += _record(IDX_COMMAND, "Model command", [
+        ("activate", UNSIGNED8, "wo", 0, "command", 1),  # write 1
+        ("rollback", UNSIGNED8, "wo", 0, "command", 2),
+        ("abort upload", UNSIGNED8, "wo", 0, "command", 3),
+    ])
+    e += _record(IDX_COUNTERS, "Node counters",
+                 [(n, UNSIGNED32, "ro", 0, "counter", k) for k, n in enumerate(COUNTERS)])
+    e += _record(IDX_SLOTS, "Model slots",
+                 [(f"slot {s} {f}", t, "ro", 0, "slot", (s << 4) | k) for s in (0, 1)
+                  for k, (f, t) in enumerate(SLOT_FIELDS)])
+    e += _record(IDX_STORE_COUNTERS, "Store counters",
+                 [(n, UNSIGNED32, "ro", 0, "store_cnt", k) for k, n in enumerate(STORE_COUNTERS)])
+    e += _record(IDX_UPLOAD, "Upload status", [
+        ("state", UNSIGNED8, "ro", 0, "upload", 0),
+        ("last store status", INTEGER8, "ro", 0, "upload", 1),
+        ("bytes received", UNSIGNED32, "ro", 0, "upload", 2),
+    ])
+    for rec, (name, _, fields) in PDO_RECORDS.items():
+        direction, number = next((d, n) for d, n, r in PDOS if r == rec)
+        slot = pdo_slot(direction, number)
+        access = "rww" if direction == "rx" else "ro"
+        subs, off = [], 0
+        for fname, t in fields:
+            subs.append((fname, t, access, 0, "pdo", (slot << 8) | off, True))
+            off += TYPE_BYTES[t]
+        e += _record(rec, name, subs)
+    e.sort(key=lambda x: (x.index, x.sub))
+    return e

@@ -1,0 +1,151 @@
+/* libFuzzer: arbitrary operation sequences on the CANopen node (slipest_co.h) with its model store
+ * on a RAM NVM: NMT commands, raw SDO requests, RPDOs of any length, raw frames of any ID, time
+ * steps, block and segmented downloads of the example image with one byte changed, power cycles.
+ * After every operation: at most SLIPEST_CO_MAX_OUT frames of at most 8 bytes, only on the node's
+ * own COB-IDs, and the active model passes slipest_model_q_check() (ASan + UBSan build). */
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "slipest_bundle.h"
+#include "slipest_co.h"
+
+#define SECTOR 64u
+#define ID 5u
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+
+static uint8_t mem[SLIPEST_STORE_NVM_SECTORS(SECTOR) * SECTOR];
+static uint8_t seed_img[SLIPEST_IMAGE_MAX_SIZE];
+static size_t seed_len;
+static slipest_store_t store;
+static slipest_co_t co;
+static uint32_t now;
+
+static slipest_status_t f_read(void *ctx, uint32_t addr, uint8_t *buf, uint32_t len)
+{
+    (void)ctx;
+    if (addr > sizeof mem || len > sizeof mem - addr) __builtin_trap();
+    memcpy(buf, mem + addr, len);
+    return SLIPEST_OK;
+}
+
+static slipest_status_t f_write(void *ctx, uint32_t addr, const uint8_t *buf, uint32_t len)
+{
+    (void)ctx;
+    if (len != SECTOR || addr % SECTOR != 0u || addr + len > sizeof mem) __builtin_trap();
+    memcpy(mem + addr, buf, len);
+    return SLIPEST_OK;
+}
+
+static slipest_status_t f_erase(void *ctx, uint32_t addr)
+{
+    (void)ctx;
+    if (addr % SECTOR != 0u || addr + SECTOR > sizeof mem) __builtin_trap();
+    memset(mem + addr, 0xFF, SECTOR);
+    return SLIPEST_OK;
+}
+
+static void check_out(const slipest_frame_t *out, int n)
+{
+    int i;
+    if (n < 0) return;
+    if (n > (int)SLIPEST_CO_MAX_OUT) __builtin_trap();
+    for (i = 0; i < n; i++) {
+        uint32_t f = out[i].id - ID;
+        if (out[i].dlc > 8u) __builtin_trap();
+        /* EMCY, TPDO1..4, SDO response, heartbeat: the predefined connection set of the node */
+        if (f != 0x080u && f != 0x180u && f != 0x280u && f != 0x380u && f != 0x480u && f != 0x580u && f != 0x700u) {
+            __builtin_trap();
+        }
+    }
+    if (slipest_model_q_check(slipest_node_model_q(slipest_co_estimator(&co))) != SLIPEST_OK) __builtin_trap();
+}
+
+static void frame(uint32_t id, uint8_t dlc, const uint8_t *d)
+{
+    slipest_frame_t in, out[SLIPEST_CO_MAX_OUT];
+    in.id = id;
+    in.dlc = dlc;
+    memset(in.data, 0, sizeof in.data);
+    memcpy(in.data, d, dlc > 8u ? 8u : dlc);
+    check_out(out, slipest_co_handle(&co, &in, now, out, SLIPEST_CO_MAX_OUT));
+}
+
+static void boot(void)
+{
+    slipest_nvm_t nvm = {f_read, f_write, f_erase, SECTOR, SLIPEST_STORE_NVM_SECTORS(SECTOR), NULL};
+    slipest_frame_t out[1];
+    (void)slipest_store_open(&store, &nvm, NULL, 0u);
+    if (slipest_co_init(&co, ID, 1u, &store, slipest_bundle_model_q(), NULL, now, out, 1u) != 1) __builtin_trap();
+}
+
+/* the seed image with byte `at` xor `x`, by block download (block != 0) or segmented download */
+static void download(int block, uint32_t at, uint8_t x)
+{
+    uint8_t img[SLIPEST_IMAGE_MAX_SIZE], d[8];
+    uint32_t off = 0, len = (uint32_t)seed_len;
+    unsigned seq = 0, t = 0;
+    memcpy(img, seed_img, seed_len);
+    if (len > 0u) img[at % len] ^= x;
+    memset(d, 0, 8);
+    d[0] = block ? 0xC6u : 0x21u;
+    d[2] = 0x20u;
+    d[4] = (uint8_t)len;
+    d[5] = (uint8_t)(len >> 8);
+    frame(0x600u + ID, 8u, d);
+    while (off < len) {
+        uint32_t k = len - off < 7u ? len - off : 7u;
+        memset(d, 0, 8);
+        if (block) {
+            seq = seq % SLIPEST_CO_BLKSIZE + 1u;
+            d[0] = (uint8_t)(seq | (off + k >= len ? 0x80u : 0u));
+        } else {
+            d[0] = (uint8_t)((t << 4) | ((7u - k) << 1) | (off + k >= len ? 1u : 0u));
+            t ^= 1u;
+        }
+        memcpy(&d[1], img + off, k);
+        frame(0x600u + ID, 8u, d);
+        off += k;
+    }
+    if (block) {
+        memset(d, 0, 8);
+        d[0] = (uint8_t)(0xC1u | ((7u - (len % 7u == 0u ? 7u : len % 7u)) << 2)); /* CRC left 0: often wrong */
+        frame(0x600u + ID, 8u, d);
+    }
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    size_t i = 0;
+    if (seed_len == 0u) {
+        FILE *fp = fopen(SLIPEST_FUZZ_IMAGE, "rb");
+        if (fp == NULL) __builtin_trap();
+        seed_len = fread(seed_img, 1, sizeof seed_img, fp);
+        fclose(fp);
+    }
+    memset(mem, 0xFF, sizeof mem);
+    now = 0;
+    boot();
+    while (i + 10u <= size) {
+        const uint8_t *p = data + i;
+        i += 10u;
+        switch (p[0] & 7u) {
+        case 0: frame(0u, 2u, (const uint8_t[]){p[1], (p[2] & 1u) ? 0u : (uint8_t)ID}); break;
+        case 1: frame(0x600u + ID, p[1] & 15u, p + 2); break;
+        case 2: frame(0x200u + 0x100u * (p[1] % 3u) + ID, p[9] & 15u, p + 2); break;
+        case 3: {
+            slipest_frame_t out[SLIPEST_CO_MAX_OUT];
+            now += (uint32_t)p[1] * 8u;
+            check_out(out, slipest_co_tick(&co, now, out, SLIPEST_CO_MAX_OUT));
+            break;
+        }
+        case 4: download(1, (uint32_t)p[1] | (uint32_t)p[2] << 8, p[3]); break;
+        case 5: download(0, (uint32_t)p[1] | (uint32_t)p[2] << 8, p[3]); break;
+        case 6: boot(); break;
+        default: frame((((uint32_t)p[1] << 3) | (p[9] & 7u)) & 0x7FFu, (uint8_t)(p[9] >> 4), p + 2); break;
+        }
+    }
+    return 0;
+}

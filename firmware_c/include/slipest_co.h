@@ -1,0 +1,200 @@
+/**
+ * @file slipest_co.h
+ * @brief The CANopen profile of the estimator node (CiA 301 subset, in the spirit of the minimal
+ *        implementation of ECSS-E-ST-50-15C), beside the plain DBC profile of slipest_node.h.
+ *
+ * One CAN frame in, output frames out, like slipest_node_handle(); time comes from the caller
+ * (a millisecond tick), the library reads no clock. The node is:
+ * - an NMT slave (boot-up, pre-operational, operational, stopped; NMT commands on COB-ID 0x000),
+ * - a heartbeat producer (0x1017),
+ * - an SDO server (expedited and segmented upload and download, block download with the CiA 301
+ *   CRC): the model image is the DOMAIN object 0x2000, written into the inactive slot of a
+ *   slipest_store_t and activated by writing 1 to 0x2002 sub 1,
+ * - static PDOs: RPDO1..3 carry the three telemetry frames, TPDO1..3 the estimate, TPDO4 the
+ *   active model's hash32 and version. Their payload bytes are those of the DBC frames, so the
+ *   estimates are those of the plain profile, bit for bit,
+ * - an EMCY producer for faults (refused image, NVM error, RPDO length error).
+ * COB-IDs are the predefined connection set of the node id. The object dictionary (and the EDS)
+ * are generated from canopen_od/objects.py into slipest_co_od.h/.c at build time.
+ * All state lives in slipest_co_t: no globals, no malloc.
+ */
+#ifndef SLIPEST_CO_H
+#define SLIPEST_CO_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "slipest_co_od.h"
+#include "slipest_codec.h"
+#include "slipest_model.h"
+#include "slipest_node.h"
+#include "slipest_status.h"
+#include "slipest_store.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Output frames per call at most: 2 windows x 3 TPDOs, the model status TPDO, an EMCY, and
+ *  one SDO response / heartbeat. */
+#define SLIPEST_CO_MAX_OUT 9u
+/** An SDO transfer with no frame for this long is aborted (0x05040000) by slipest_co_tick(). */
+#define SLIPEST_CO_SDO_TIMEOUT_MS 1000u
+/** Block size the SDO server asks for in a block download (segments per block, 1..127). */
+#define SLIPEST_CO_BLKSIZE 127u
+
+/* NMT states as the heartbeat reports them. */
+#define SLIPEST_CO_NMT_BOOTUP 0x00u /**< boot-up message / initialising */
+#define SLIPEST_CO_NMT_STOPPED 0x04u /**< stopped: NMT only */
+#define SLIPEST_CO_NMT_OPERATIONAL 0x05u /**< operational: PDOs, SDO, EMCY */
+#define SLIPEST_CO_NMT_PRE_OPERATIONAL 0x7Fu /**< pre-operational: SDO and EMCY, no PDO */
+
+/** EMCY error codes (CiA 301) the node sends. */
+#define SLIPEST_CO_EMCY_RESET 0x0000u      /**< error reset: the error register is clear again */
+#define SLIPEST_CO_EMCY_HARDWARE 0x5000u   /**< an NVM callback failed */
+#define SLIPEST_CO_EMCY_DATA_SET 0x6300u   /**< a model image was refused (byte 3: slipest status) */
+#define SLIPEST_CO_EMCY_PDO_LENGTH 0x8210u /**< an RPDO had the wrong length */
+
+/* SDO abort codes (CiA 301) the server sends. */
+#define SLIPEST_CO_ABORT_TOGGLE 0x05030000u /**< toggle bit not alternated */
+#define SLIPEST_CO_ABORT_TIMEOUT 0x05040000u /**< SDO protocol timed out */
+#define SLIPEST_CO_ABORT_COMMAND 0x05040001u /**< command specifier not valid or unknown */
+#define SLIPEST_CO_ABORT_CRC 0x05040004u /**< CRC error (block mode) */
+#define SLIPEST_CO_ABORT_UNSUPPORTED 0x06010000u /**< unsupported access to an object */
+#define SLIPEST_CO_ABORT_WRITE_ONLY 0x06010001u /**< attempt to read a write-only object */
+#define SLIPEST_CO_ABORT_READ_ONLY 0x06010002u /**< attempt to write a read-only object */
+#define SLIPEST_CO_ABORT_NO_OBJECT 0x06020000u /**< object does not exist */
+#define SLIPEST_CO_ABORT_HARDWARE 0x06060000u /**< access failed: hardware (NVM) error */
+#define SLIPEST_CO_ABORT_LENGTH 0x06070010u /**< length of the service parameter does not match */
+#define SLIPEST_CO_ABORT_TOO_HIGH 0x06070012u /**< length too high */
+#define SLIPEST_CO_ABORT_TOO_LOW 0x06070013u /**< length too low */
+#define SLIPEST_CO_ABORT_NO_SUB 0x06090011u /**< sub-index does not exist */
+#define SLIPEST_CO_ABORT_VALUE 0x06090030u /**< invalid value (a command other than 1) */
+#define SLIPEST_CO_ABORT_GENERAL 0x08000000u /**< general error */
+#define SLIPEST_CO_ABORT_STORE 0x08000020u /**< data cannot be stored: the image was refused */
+#define SLIPEST_CO_ABORT_STATE 0x08000022u /**< not in the present device state (no store, nothing to activate) */
+#define SLIPEST_CO_ABORT_NO_DATA 0x08000024u /**< no data available (the built-in model's sha256, no store) */
+
+/** State of the SDO server (one transfer at a time). */
+typedef struct {
+    uint32_t size;    /**< announced bytes of the transfer */
+    uint32_t done;    /**< bytes transferred so far */
+    uint32_t last_ms; /**< tick of the transfer's last frame (timeout) */
+    uint16_t index;   /**< object of the transfer */
+    uint16_t entry;   /**< its OD entry */
+    uint16_t crc;     /**< running CRC of a block download */
+    uint8_t sub;      /**< sub-index of the transfer */
+    uint8_t state;    /**< idle, segmented download/upload, block download (sub-block or end) */
+    uint8_t toggle;   /**< toggle bit expected next (segmented) */
+    uint8_t crc_on;   /**< block download with CRC */
+    uint8_t seq_ok;   /**< last in-order sequence number of the current block */
+    uint8_t seq_bad;  /**< a segment of this block came out of order */
+    uint8_t buf[32];  /**< value being uploaded, or a small value being downloaded */
+} slipest_co_sdo_t;
+
+/** CANopen node context (all state; no globals, no malloc). Treat as opaque. */
+typedef struct {
+    slipest_node_t est;                  /**< the estimator (the plain profile's node) */
+    slipest_store_t *store;              /**< model slots, or NULL (no model upload) */
+    const slipest_model_q_t *builtin_q;  /**< model when no slot holds one */
+    const slipest_model_f32_t *builtin_f; /**< its float model, or NULL */
+    slipest_co_sdo_t sdo;                /**< SDO server */
+    uint32_t serial;                     /**< identity serial number (0x1018 sub 4) */
+    uint32_t hb_last_ms;                 /**< tick of the last heartbeat */
+    uint32_t cnt[SLIPEST_CO_N_COUNTERS]; /**< CANopen counters (the first six mirror est's) */
+    uint16_t hb_ms;                      /**< producer heartbeat time, 0 = off */
+    uint8_t node_id;                     /**< 1..127 */
+    uint8_t nmt;                         /**< SLIPEST_CO_NMT_* */
+    uint8_t err_reg;                     /**< error register 0x1001 */
+    uint8_t from_store;                  /**< the active model is the store's */
+    int8_t last_store_status;            /**< last status of a store call (0x2006 sub 2) */
+    uint8_t pdo[SLIPEST_CO_N_PDO][8];    /**< last payload of each PDO */
+} slipest_co_t;
+
+/**
+ * @brief Start a CANopen node: the estimator runs the store's active model (or the built-in one
+ *        when the store is NULL or holds none); writes the boot-up message and enters
+ *        pre-operational.
+ * @param[out] co        node context
+ * @param[in]  node_id   CANopen node id, 1..127
+ * @param[in]  serial    identity serial number (0x1018 sub 4)
+ * @param[in]  store     an opened model store, or NULL (then 0x2000 refuses downloads)
+ * @param[in]  builtin_q model used while no slot holds one (validated, e.g. slipest_bundle_model_q())
+ * @param[in]  builtin_f its float model, or NULL
+ * @param[in]  now_ms    current tick in milliseconds (any origin, wraps)
+ * @param[out] out       receives the boot-up frame
+ * @param[in]  cap       capacity of out (>= 1)
+ * @return 1 (frames written), SLIPEST_E_NULL, SLIPEST_E_RANGE (node id) or SLIPEST_E_OVERFLOW
+ */
+int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_store_t *store,
+                    const slipest_model_q_t *builtin_q, const slipest_model_f32_t *builtin_f, uint32_t now_ms,
+                    slipest_frame_t *out, size_t cap);
+
+/**
+ * @brief Handle one received CAN frame (NMT, SDO request, RPDO; other COB-IDs are ignored, as on
+ *        a shared bus).
+ * @param[in,out] co      an initialised node
+ * @param[in]     in      the frame
+ * @param[in]     now_ms  current tick (ms)
+ * @param[out]    out     receives up to SLIPEST_CO_MAX_OUT frames
+ * @param[in]     cap     capacity of out (>= SLIPEST_CO_MAX_OUT)
+ * @return frames written to out, or a negative slipest_status_t (SLIPEST_E_NULL, SLIPEST_E_OVERFLOW)
+ */
+int slipest_co_handle(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, slipest_frame_t *out,
+                      size_t cap);
+
+/**
+ * @brief Let time pass: heartbeat when due, SDO transfer timeout. Call at least every few ms.
+ * @param[in,out] co      an initialised node
+ * @param[in]     now_ms  current tick (ms)
+ * @param[out]    out     receives up to 2 frames
+ * @param[in]     cap     capacity of out (>= 2)
+ * @return frames written, or SLIPEST_E_NULL / SLIPEST_E_OVERFLOW
+ */
+int slipest_co_tick(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out, size_t cap);
+
+/**
+ * @brief A node counter (0x2003 sub n+1), by number (SLIPEST_CO_CNT_*).
+ * @param[in] co  an initialised node
+ * @param[in] n   counter number
+ * @return the counter, 0 for an unknown number or a NULL co
+ */
+uint32_t slipest_co_counter(const slipest_co_t *co, unsigned n);
+
+/**
+ * @brief The NMT state.
+ * @param[in] co  an initialised node
+ * @return SLIPEST_CO_NMT_*, or SLIPEST_CO_NMT_BOOTUP when co is NULL
+ */
+uint8_t slipest_co_nmt_state(const slipest_co_t *co);
+
+/**
+ * @brief The estimator inside the node (its counters, its active model).
+ * @param[in] co  an initialised node
+ * @return the estimator node, or NULL when co is NULL
+ */
+const slipest_node_t *slipest_co_estimator(const slipest_co_t *co);
+
+/**
+ * @brief sizeof(slipest_co_t), for ctypes callers.
+ * @return the size in bytes
+ */
+size_t slipest_co_size(void);
+
+/**
+ * @brief sizeof(slipest_store_t), for ctypes callers that allocate the store beside the node.
+ * @return the size in bytes
+ */
+size_t slipest_co_store_size(void);
+
+/**
+ * @brief SLIPEST_CO_MAX_OUT, for ctypes callers that size the output array.
+ * @return frames one call of slipest_co_handle may write at most
+ */
+size_t slipest_co_max_out(void);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* SLIPEST_CO_H */

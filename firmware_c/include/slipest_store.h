@@ -1,0 +1,329 @@
+/**
+ * @file slipest_store.h
+ * @brief A/B model slots on integrator-supplied non-volatile memory: upload, validation,
+ *        power-safe activation, rollback and optional HMAC-SHA256 authentication.
+ *
+ * The store keeps one model in RAM (the active one) and streams everything else through the
+ * NVM read callback, so RAM holds one model, one sector buffer and a few counters; never two
+ * models or a whole image (sizeof(slipest_store_t) is reported in docs/model_slots.md).
+ *
+ * NVM layout (S = nvm->sector_size bytes, k = SLIPEST_STORE_SLOT_SECTORS(S)), byte addresses:
+ *
+ *   sector 0 and 1      commit records, written alternately (the one not holding the newest
+ *                       valid record is erased and rewritten)
+ *   sectors 2 .. 2+k-1  slot 0: a model image (model.img bytes, padded with 0xFF)
+ *   sectors 2+k .. 2+2k-1  slot 1
+ *
+ * A commit record (SLIPEST_STORE_RECORD_SIZE bytes at the start of its sector, little-endian):
+ * magic "SLPR", layout version, sequence number, active and previous slot, per slot the image
+ * length, CRC-32, model version and hash32, then a CRC-32 of all the preceding record bytes.
+ * At boot the valid record with the highest sequence number whose active slot validates wins;
+ * a torn record fails its CRC and the older one is used. A slot is erased only when no record
+ * names it as active, and activation is a single record write, so a power loss at any point of an
+ * upload or an activation leaves the previous model or the new one active, never neither.
+ *
+ * Layout and the integrator's part: docs/model_slots.md.
+ */
+#ifndef SLIPEST_STORE_H
+#define SLIPEST_STORE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "slipest_image.h"
+#include "slipest_model.h"
+#include "slipest_status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Largest NVM sector the store buffers (bytes). An integrator with bigger sectors raises it
+ *  at build time (-DSLIPEST_STORE_SECTOR_MAX=...); it is the store's largest RAM item after
+ *  the model. */
+#ifndef SLIPEST_STORE_SECTOR_MAX
+#define SLIPEST_STORE_SECTOR_MAX 256u
+#endif
+/** Smallest NVM sector the store accepts (a commit record and an image header must fit). */
+#define SLIPEST_STORE_SECTOR_MIN 64u
+/** Bytes of a commit record at the start of a record sector. */
+#define SLIPEST_STORE_RECORD_SIZE 52u
+/** Sectors of one slot for sector size s. */
+#define SLIPEST_STORE_SLOT_SECTORS(s) ((SLIPEST_IMAGE_MAX_SIZE + (s) - 1u) / (s))
+/** Sectors the NVM must have for sector size s: two record sectors and two slots. */
+#define SLIPEST_STORE_NVM_SECTORS(s) (2u + 2u * SLIPEST_STORE_SLOT_SECTORS(s))
+/** Number of model slots. */
+#define SLIPEST_STORE_N_SLOTS 2u
+/** slipest_store_active_slot() when no slot holds an active model. */
+#define SLIPEST_STORE_NO_SLOT (-1)
+
+/**
+ * Integrator-supplied non-volatile memory (flash, MRAM, FRAM...). Addresses are byte offsets from
+ * the start of the area given to the store; the area is n_sectors * sector_size bytes. Every
+ * callback returns SLIPEST_OK or an error (any negative slipest_status_t; the store counts it as
+ * an NVM error and returns SLIPEST_E_NVM).
+ */
+typedef struct {
+    /** Read len bytes at addr into buf (any addr and len inside the area). */
+    slipest_status_t (*read)(void *ctx, uint32_t addr, uint8_t *buf, uint32_t len);
+    /** Program one whole sector: addr is sector-aligned and len == sector_size. The sector was
+     *  erased before. */
+    slipest_status_t (*write)(void *ctx, uint32_t addr, const uint8_t *buf, uint32_t len);
+    /** Erase the sector at the sector-aligned addr (to 0xFF, as NOR flash does; the store
+     *  does not rely on the erased value). */
+    slipest_status_t (*erase)(void *ctx, uint32_t sector_addr);
+    uint32_t sector_size; /**< bytes of a sector, SLIPEST_STORE_SECTOR_MIN..SLIPEST_STORE_SECTOR_MAX */
+    uint32_t n_sectors;   /**< sectors in the area, >= SLIPEST_STORE_NVM_SECTORS(sector_size) */
+    void *ctx;            /**< passed to every callback */
+} slipest_nvm_t;
+
+/** State of one slot. */
+typedef enum {
+    SLIPEST_SLOT_EMPTY = 0,     /**< no image known (erased, never written, or abandoned) */
+    SLIPEST_SLOT_RECEIVING = 1, /**< an upload is being written into it */
+    SLIPEST_SLOT_READY = 2,     /**< holds a fully validated image waiting for activation */
+    SLIPEST_SLOT_ACTIVE = 3,    /**< holds the active model */
+    SLIPEST_SLOT_PREVIOUS = 4,  /**< holds the previously active model (rollback target) */
+    SLIPEST_SLOT_INVALID = 5    /**< its image failed validation */
+} slipest_slot_state_t;
+
+/** What the store knows about one slot (from the commit record or a validation). */
+typedef struct {
+    slipest_slot_state_t state; /**< state of the slot */
+    uint32_t length;            /**< image bytes (0 when unknown) */
+    uint32_t version;           /**< model version of its image (0 when unknown) */
+    uint32_t hash32;            /**< content hash32 of its image (0 when unknown) */
+} slipest_slot_info_t;
+
+/** Store counters. Each refused image is counted under exactly one reason. */
+typedef struct {
+    uint32_t uploads_started;   /**< slipest_store_begin() calls that opened an upload */
+    uint32_t uploads_aborted;   /**< uploads ended by slipest_store_abort() or an NVM error */
+    uint32_t images_accepted;   /**< images that passed slipest_store_finish() */
+    uint32_t refused_length;    /**< refused: a length disagrees (begin, write or finish) */
+    uint32_t refused_format;    /**< refused: magic, flags, reserved bytes or image format version */
+    uint32_t refused_arch;      /**< refused: architecture or layer sizes */
+    uint32_t refused_crc;       /**< refused: CRC-32 */
+    uint32_t refused_hash;      /**< refused: the header's hash32 disagrees with the trailer */
+    uint32_t refused_range;     /**< refused: a shift, scale, bound or non-finite parameter */
+    uint32_t refused_hmac;      /**< refused: key provisioned and the tag is missing or wrong */
+    uint32_t refused_version;   /**< refused: model version not newer than the active one */
+    uint32_t activations;       /**< successful slipest_store_activate() calls */
+    uint32_t rollbacks;         /**< successful slipest_store_rollback() calls */
+    uint32_t nvm_errors;        /**< NVM callbacks that returned an error */
+    uint32_t boot_fallbacks;    /**< boots where the newest record was torn or its slot invalid */
+} slipest_store_counters_t;
+
+/** Upload state of the store. */
+typedef enum {
+    SLIPEST_UPLOAD_IDLE = 0,      /**< no upload open */
+    SLIPEST_UPLOAD_RECEIVING = 1, /**< between begin and finish */
+    SLIPEST_UPLOAD_READY = 2      /**< finish passed; activate (or abort, or begin again) */
+} slipest_upload_state_t;
+
+/** A decoded commit record (internal; in the struct so that all state is caller-allocated). */
+typedef struct {
+    uint32_t seq;                                       /**< sequence number, 0 = no record */
+    int8_t active;                                      /**< active slot or SLIPEST_STORE_NO_SLOT */
+    int8_t prev;                                        /**< previous slot or SLIPEST_STORE_NO_SLOT */
+    uint32_t length[SLIPEST_STORE_N_SLOTS];             /**< image length per slot */
+    uint32_t crc[SLIPEST_STORE_N_SLOTS];                /**< image CRC-32 per slot */
+    uint32_t version[SLIPEST_STORE_N_SLOTS];            /**< model version per slot */
+    uint32_t hash32[SLIPEST_STORE_N_SLOTS];             /**< content hash32 per slot */
+} slipest_store_record_t;
+
+/** All state of a model store (caller-allocated; no globals, no malloc). Treat as opaque. */
+typedef struct {
+    slipest_nvm_t nvm;                    /**< copy of the NVM interface */
+    const uint8_t *key;                   /**< HMAC key, NULL = no authentication */
+    size_t key_len;                       /**< bytes of key */
+    uint32_t slot_sectors;                /**< sectors per slot */
+    slipest_store_record_t rec;           /**< newest valid commit record (seq 0: none) */
+    uint8_t rec_sector;                   /**< record sector holding rec */
+    slipest_slot_state_t slot_state[SLIPEST_STORE_N_SLOTS]; /**< state per slot */
+    slipest_slot_info_t ready;            /**< the validated upload (state READY) */
+    uint32_t ready_crc;                   /**< its image CRC-32 */
+    slipest_upload_state_t upload;        /**< upload state */
+    int8_t upload_slot;                   /**< slot being written, or SLIPEST_STORE_NO_SLOT */
+    uint32_t total_len;                   /**< announced image length of the upload */
+    uint32_t received;                    /**< bytes received so far */
+    uint32_t buf_fill;                    /**< bytes in buf not yet programmed */
+    uint8_t buf[SLIPEST_STORE_SECTOR_MAX]; /**< one sector: write buffer and read-back buffer */
+    uint8_t sha256[32];                   /**< trailer sha256 of the active image */
+    uint8_t have_model;                   /**< mq (and mf) hold the active slot's model */
+    slipest_model_q_t mq;                 /**< active fixed-point model (arrays in qs) */
+    slipest_image_q_storage_t qs;         /**< its arrays */
+#ifndef SLIPEST_Q_ONLY
+    uint8_t have_f32;                     /**< mf holds a float model (the image had one) */
+    slipest_model_f32_t mf;               /**< active float model (arrays in fs) */
+    slipest_image_f32_storage_t fs;       /**< its arrays */
+#endif
+    slipest_store_counters_t c;           /**< counters */
+} slipest_store_t;
+
+/**
+ * @brief Open the store at boot: read both commit records, take the newest valid one whose
+ *        active slot fully validates (CRC, hash, every model check, HMAC when a key is given),
+ *        and load that slot's model into RAM.
+ * @param[out] store    store state to initialise
+ * @param[in]  nvm      NVM interface (copied)
+ * @param[in]  key      HMAC-SHA256 key, or NULL for no authentication (then key_len is ignored);
+ *                      must outlive the store
+ * @param[in]  key_len  bytes of key (at least 1 when key is not NULL; a key longer than 64 bytes is
+ *                      hashed first, as RFC 2104 says; the CMake option takes 16..64 bytes)
+ * @return SLIPEST_OK (a model is active); SLIPEST_E_STATE (no valid model on the NVM: the store
+ *         is usable for an upload and the caller runs its built-in model); SLIPEST_E_NVM (a read
+ *         failed: as E_STATE); SLIPEST_E_NULL; SLIPEST_E_RANGE (sector size, sector count or key
+ *         length out of range: the store is not usable)
+ */
+slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t *nvm, const uint8_t *key,
+                                    size_t key_len);
+
+/**
+ * @brief Start an upload into the inactive slot (the one no record names as active): erase it.
+ *        Estimates keep coming from the active model meanwhile. A READY image not yet activated
+ *        is discarded.
+ * @param[in,out] store      the store
+ * @param[in]     total_len  bytes of the image to come
+ * @param[in]     flags      reserved, must be 0
+ * @return SLIPEST_OK; SLIPEST_E_STATE (an upload is RECEIVING: abort it first); SLIPEST_E_LENGTH
+ *         (total_len outside what a model image can be; counted); SLIPEST_E_RANGE (flags);
+ *         SLIPEST_E_NVM (an erase failed; counted, no upload open); SLIPEST_E_NULL
+ */
+slipest_status_t slipest_store_begin(slipest_store_t *store, uint32_t total_len, uint32_t flags);
+
+/**
+ * @brief Append image bytes. Chunks come in order, of any size; whole sectors are programmed as
+ *        they fill.
+ * @param[in,out] store   the store
+ * @param[in]     offset  image offset of data[0]; must equal the bytes received so far
+ * @param[in]     data    the bytes
+ * @param[in]     len     number of bytes (0 is allowed)
+ * @return SLIPEST_OK; SLIPEST_E_STATE (no upload RECEIVING); SLIPEST_E_ORDER (offset is not the
+ *         next byte: nothing written, the upload stays open for the right chunk); SLIPEST_E_LENGTH
+ *         (beyond total_len: nothing written, upload stays open); SLIPEST_E_NVM (a write failed:
+ *         the upload is aborted and counted); SLIPEST_E_NULL
+ */
+slipest_status_t slipest_store_write(slipest_store_t *store, uint32_t offset, const uint8_t *data, size_t len);
+
+/**
+ * @brief End the upload and fully validate the image as stored on the NVM (read back sector by
+ *        sector): everything slipest_image_read() checks, the HMAC tag when a key is provisioned,
+ *        and a model version newer than the active one. On success the slot is READY.
+ * @param[in,out] store  the store
+ * @return SLIPEST_OK; SLIPEST_E_STATE (no upload RECEIVING); SLIPEST_E_LENGTH (fewer bytes than
+ *         announced, or a length field disagrees); SLIPEST_E_FORMAT; SLIPEST_E_VERSION (image format);
+ *         SLIPEST_E_ARCH; SLIPEST_E_CRC; SLIPEST_E_HASH; SLIPEST_E_RANGE / SLIPEST_E_NONFINITE
+ *         (a model check); SLIPEST_E_AUTH (tag missing or wrong); SLIPEST_E_STALE (model version
+ *         not newer than the active one); SLIPEST_E_NVM. Every refusal is counted under its reason
+ *         and leaves the slot INVALID and the upload closed; the active model is untouched.
+ */
+slipest_status_t slipest_store_finish(slipest_store_t *store);
+
+/**
+ * @brief Make the READY image the active one: one commit record write (power-safe), then the
+ *        model is loaded into RAM in place. Call between two frames of the node (a window
+ *        boundary), then hand slipest_store_model_q() / slipest_store_model_f32() to
+ *        slipest_node_set_model().
+ * @param[in,out] store  the store
+ * @return SLIPEST_OK; SLIPEST_E_STATE (no READY image); SLIPEST_E_NVM (the record write failed:
+ *         the old model stays active and the image stays READY); or, when the slot no longer reads
+ *         back as validated after the commit, that status (SLIPEST_E_NVM, SLIPEST_E_CRC...): the
+ *         store reloads the previous slot into RAM. After any failure, hand
+ *         slipest_store_model_q() to the node again before the next frame; when it is NULL (the
+ *         previous slot could not be reloaded either) the node must go back to its built-in model,
+ *         because the RAM model may be partly overwritten. SLIPEST_E_NULL
+ */
+slipest_status_t slipest_store_activate(slipest_store_t *store);
+
+/**
+ * @brief Re-activate the previous slot's image (one command; no model version check). Refused
+ *        while an upload is RECEIVING (it writes into that very slot).
+ * @param[in,out] store  the store
+ * @return SLIPEST_OK; SLIPEST_E_STATE (no valid previous image, or an upload is open); or as
+ *         slipest_store_finish() when the previous image no longer validates (nothing changed);
+ *         SLIPEST_E_NVM. After a failure, as for slipest_store_activate().
+ */
+slipest_status_t slipest_store_rollback(slipest_store_t *store);
+
+/**
+ * @brief Abandon the open upload (RECEIVING or READY). The slot becomes EMPTY; the active model
+ *        is untouched.
+ * @param[in,out] store  the store
+ * @return SLIPEST_OK; SLIPEST_E_STATE (no upload open); SLIPEST_E_NULL
+ */
+slipest_status_t slipest_store_abort(slipest_store_t *store);
+
+/**
+ * @brief The active fixed-point model (validated), or NULL when no slot holds one.
+ * @param[in] store  the store
+ * @return pointer into the store; same pointer across activations (the content changes)
+ */
+const slipest_model_q_t *slipest_store_model_q(const slipest_store_t *store);
+
+#ifndef SLIPEST_Q_ONLY
+/**
+ * @brief The active float32 model, or NULL when none (no active slot or the image has no float
+ *        part).
+ * @param[in] store  the store
+ * @return pointer into the store
+ */
+const slipest_model_f32_t *slipest_store_model_f32(const slipest_store_t *store);
+#endif
+
+/**
+ * @brief Model version of the active image (0 when none).
+ * @param[in] store  the store
+ * @return the version
+ */
+uint32_t slipest_store_active_version(const slipest_store_t *store);
+
+/**
+ * @brief Content hash32 of the active image (0 when none).
+ * @param[in] store  the store
+ * @return the hash32 (the first 4 bytes of the sha256, big-endian)
+ */
+uint32_t slipest_store_active_hash32(const slipest_store_t *store);
+
+/**
+ * @brief The 32-byte content sha256 of the active image (its trailer), or NULL when none.
+ * @param[in] store  the store
+ * @return pointer to 32 bytes inside the store
+ */
+const uint8_t *slipest_store_active_sha256(const slipest_store_t *store);
+
+/**
+ * @brief Index of the active slot.
+ * @param[in] store  the store
+ * @return 0 or 1, or SLIPEST_STORE_NO_SLOT
+ */
+int slipest_store_active_slot(const slipest_store_t *store);
+
+/**
+ * @brief What the store knows about a slot.
+ * @param[in]  store  the store
+ * @param[in]  slot   0 or 1
+ * @param[out] info   receives the slot's state, length, version and hash32
+ * @return SLIPEST_OK, SLIPEST_E_NULL or SLIPEST_E_RANGE (slot)
+ */
+slipest_status_t slipest_store_slot_info(const slipest_store_t *store, unsigned slot, slipest_slot_info_t *info);
+
+/**
+ * @brief Upload progress.
+ * @param[in] store  the store
+ * @return the upload state (SLIPEST_UPLOAD_IDLE when store is NULL)
+ */
+slipest_upload_state_t slipest_store_upload_state(const slipest_store_t *store);
+
+/**
+ * @brief The store's counters.
+ * @param[in] store  the store
+ * @return pointer into the store, or NULL when store is NULL
+ */
+const slipest_store_counters_t *slipest_store_counters(const slipest_store_t *store);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* SLIPEST_STORE_H */

@@ -1,0 +1,262 @@
+/* CANopen node: NMT slave, heartbeat, EMCY, and the static PDOs that carry the plain profile's
+ * frames (RPDO -> DBC frame -> estimator -> DBC frames -> TPDO). */
+#include <string.h>
+
+#include "slipest_co_internal.h"
+
+#define NMT_START 0x01u
+#define NMT_STOP 0x02u
+#define NMT_PRE_OPERATIONAL 0x80u
+#define NMT_RESET_NODE 0x81u
+#define NMT_RESET_COMMUNICATION 0x82u
+
+size_t slipest_co_size(void) { return sizeof(slipest_co_t); }
+size_t slipest_co_store_size(void) { return sizeof(slipest_store_t); }
+size_t slipest_co_max_out(void) { return (size_t)SLIPEST_CO_MAX_OUT; }
+
+uint8_t slipest_co_nmt_state(const slipest_co_t *co) { return co == NULL ? SLIPEST_CO_NMT_BOOTUP : co->nmt; }
+
+const slipest_node_t *slipest_co_estimator(const slipest_co_t *co) { return co == NULL ? NULL : &co->est; }
+
+uint32_t slipest_co_counter(const slipest_co_t *co, unsigned n)
+{
+    slipest_counters_t c;
+    if (co == NULL || n >= SLIPEST_CO_N_COUNTERS) return 0u;
+    if (n > SLIPEST_CO_CNT_SATURATIONS) return co->cnt[n];
+    (void)slipest_node_counters(&co->est, &c);
+    switch (n) {
+    case SLIPEST_CO_CNT_FRAMES_RECEIVED: return c.frames_received;
+    case SLIPEST_CO_CNT_FRAMES_REJECTED: return c.frames_rejected;
+    case SLIPEST_CO_CNT_SAMPLES_DROPPED: return c.samples_dropped;
+    case SLIPEST_CO_CNT_WINDOWS_FLAGGED: return c.windows_flagged;
+    case SLIPEST_CO_CNT_WINDOWS_DONE: return c.windows_done;
+    default: return c.saturations;
+    }
+}
+
+int slipest_co_emcy(slipest_co_t *co, uint16_t code, uint8_t reg_bits, int status, slipest_frame_t *out)
+{
+    co->err_reg |= reg_bits;
+    if (reg_bits != 0u) {
+        co->err_reg |= SLIPEST_CO_ERR_GENERIC;
+    }
+    if (co->nmt == SLIPEST_CO_NMT_STOPPED) {
+        return 0; /* a stopped node sends no EMCY */
+    }
+    out->id = 0x080u + co->node_id;
+    out->dlc = 8u;
+    (void)memset(out->data, 0, sizeof out->data);
+    slipest_co_put_le(out->data, code, 2u);
+    out->data[2] = co->err_reg;
+    out->data[3] = (uint8_t)(int8_t)status; /* manufacturer field: the slipest status (two's complement) */
+    co->cnt[SLIPEST_CO_CNT_EMCY_SENT]++;
+    return 1;
+}
+
+uint32_t slipest_co_store_failed(slipest_co_t *co, int status, slipest_frame_t *out, int *n)
+{
+    switch (status) {
+    case SLIPEST_E_NVM:
+        *n += slipest_co_emcy(co, SLIPEST_CO_EMCY_HARDWARE, SLIPEST_CO_ERR_GENERIC, status, out);
+        return SLIPEST_CO_ABORT_HARDWARE;
+    case SLIPEST_E_STATE: return SLIPEST_CO_ABORT_STATE;
+    case SLIPEST_E_ORDER:
+    case SLIPEST_E_NULL: return SLIPEST_CO_ABORT_GENERAL;
+    default: break;
+    }
+    /* the image was refused (length, format, version, arch, CRC, hash, range, HMAC, stale) */
+    *n += slipest_co_emcy(co, SLIPEST_CO_EMCY_DATA_SET, SLIPEST_CO_ERR_MANUFACTURER, status, out);
+    return (status == (int)SLIPEST_E_LENGTH) ? SLIPEST_CO_ABORT_LENGTH : SLIPEST_CO_ABORT_STORE;
+}
+
+void slipest_co_use_store_model(slipest_co_t *co)
+{
+    const slipest_model_q_t *mq = slipest_store_model_q(co->store);
+    const slipest_model_f32_t *mf = NULL;
+#ifndef SLIPEST_Q_ONLY
+    mf = slipest_store_model_f32(co->store);
+#endif
+    if (mq != NULL && slipest_node_set_model(&co->est, mq, mf) == SLIPEST_OK) {
+        co->from_store = 1u;
+    }
+}
+
+/* A frame this node does not take (another node's COB-ID, a PDO outside operational, anything
+ * but NMT while stopped): nothing is answered, but it is counted (0x2003 frames_ignored). */
+static int ignored(slipest_co_t *co)
+{
+    co->cnt[SLIPEST_CO_CNT_FRAMES_IGNORED]++;
+    return 0;
+}
+
+static int bootup(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
+{
+    co->hb_ms = (uint16_t)SLIPEST_CO_HEARTBEAT_DEFAULT_MS;
+    co->hb_last_ms = now_ms;
+    co->err_reg &= (uint8_t)~SLIPEST_CO_ERR_COMM;
+    slipest_co_sdo_reset(co);
+    co->nmt = SLIPEST_CO_NMT_PRE_OPERATIONAL; /* boot-up goes straight on to pre-operational */
+    out->id = 0x700u + co->node_id;
+    out->dlc = 1u;
+    (void)memset(out->data, 0, sizeof out->data);
+    out->data[0] = SLIPEST_CO_NMT_BOOTUP;
+    return 1;
+}
+
+/* Reset application: a fresh estimator on the active model, counters cleared. */
+static slipest_status_t reset_application(slipest_co_t *co)
+{
+    const slipest_model_q_t *mq = co->builtin_q;
+    const slipest_model_f32_t *mf = co->builtin_f;
+    co->from_store = 0u;
+    if (co->store != NULL && slipest_store_model_q(co->store) != NULL) {
+        mq = slipest_store_model_q(co->store);
+#ifndef SLIPEST_Q_ONLY
+        mf = slipest_store_model_f32(co->store);
+#else
+        mf = NULL;
+#endif
+        co->from_store = 1u;
+    }
+    (void)memset(co->cnt, 0, sizeof co->cnt);
+    (void)memset(co->pdo, 0, sizeof co->pdo);
+    co->err_reg = 0u;
+    co->last_store_status = 0;
+    return slipest_node_init(&co->est, mq, mf);
+}
+
+int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_store_t *store,
+                    const slipest_model_q_t *builtin_q, const slipest_model_f32_t *builtin_f, uint32_t now_ms,
+                    slipest_frame_t *out, size_t cap)
+{
+    slipest_status_t st;
+    if (co == NULL || out == NULL || builtin_q == NULL) return SLIPEST_E_NULL;
+    if (node_id < 1u || node_id > 127u) return SLIPEST_E_RANGE;
+    if (cap < 1u) return SLIPEST_E_OVERFLOW;
+    (void)memset(co, 0, sizeof *co);
+    co->node_id = node_id;
+    co->serial = serial;
+    co->store = store;
+    co->builtin_q = builtin_q;
+    co->builtin_f = builtin_f;
+    st = reset_application(co);
+    if (st != SLIPEST_OK) return st;
+    return bootup(co, now_ms, out);
+}
+
+static int nmt(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, slipest_frame_t *out)
+{
+    if (in->dlc != 2u || (in->data[1] != 0u && in->data[1] != co->node_id)) {
+        return ignored(co);
+    }
+    co->cnt[SLIPEST_CO_CNT_NMT_COMMANDS]++;
+    switch (in->data[0]) {
+    case NMT_START: co->nmt = SLIPEST_CO_NMT_OPERATIONAL; return 0;
+    case NMT_STOP:
+        slipest_co_sdo_reset(co); /* no SDO while stopped */
+        co->nmt = SLIPEST_CO_NMT_STOPPED;
+        return 0;
+    case NMT_PRE_OPERATIONAL: co->nmt = SLIPEST_CO_NMT_PRE_OPERATIONAL; return 0;
+    case NMT_RESET_NODE: {
+        uint32_t nmt_count = co->cnt[SLIPEST_CO_CNT_NMT_COMMANDS];
+        slipest_co_sdo_reset(co);
+        if (reset_application(co) != SLIPEST_OK) return 0;
+        co->cnt[SLIPEST_CO_CNT_NMT_COMMANDS] = nmt_count;
+        return bootup(co, now_ms, out);
+    }
+    case NMT_RESET_COMMUNICATION: return bootup(co, now_ms, out);
+    default: return ignored(co); /* unknown command (NMT has no answer) */
+    }
+}
+
+/* An estimator output frame as its TPDO; 0 when the frame has no TPDO (STATUS_RX/LOSS: read
+ * them as 0x2003 by SDO). */
+static int to_tpdo(slipest_co_t *co, const slipest_frame_t *f, slipest_frame_t *out)
+{
+    unsigned k;
+    for (k = SLIPEST_CO_N_RPDO; k < SLIPEST_CO_N_PDO; k++) {
+        const slipest_co_pdo_t *p = &slipest_co_pdos[k];
+        if (p->dbc_id != f->id) {
+            continue;
+        }
+        out->id = (uint32_t)p->cob_base + co->node_id;
+        out->dlc = p->dlc;
+        (void)memset(out->data, 0, sizeof out->data);
+        if (p->payload == SLIPEST_CO_PAYLOAD_MODEL_STATUS) {
+            const slipest_model_q_t *m = slipest_node_model_q(&co->est);
+            slipest_co_put_le(&out->data[0], slipest_model_hash32(m), 4u);
+            slipest_co_put_le(&out->data[4], m->version, 4u);
+        } else {
+            (void)memcpy(out->data, f->data, p->dlc); /* the DBC frame's bytes, little-endian already */
+        }
+        (void)memcpy(co->pdo[k], out->data, 8u);
+        return 1;
+    }
+    return 0;
+}
+
+static int rpdo(slipest_co_t *co, unsigned k, const slipest_frame_t *in, slipest_frame_t *out)
+{
+    const slipest_co_pdo_t *p = &slipest_co_pdos[k];
+    slipest_frame_t dbc;
+    slipest_frame_t est_out[SLIPEST_NODE_MAX_OUT];
+    int r, i, n = 0;
+    if (co->nmt != SLIPEST_CO_NMT_OPERATIONAL) {
+        return ignored(co); /* PDOs only when operational */
+    }
+    co->cnt[SLIPEST_CO_CNT_RPDO_RECEIVED]++;
+    if (in->dlc != p->dlc) {
+        (void)slipest_node_link_error(&co->est); /* counted as received and rejected */
+        /* one EMCY per episode: again only after the error register was cleared */
+        if ((co->err_reg & SLIPEST_CO_ERR_COMM) == 0u) {
+            return slipest_co_emcy(co, SLIPEST_CO_EMCY_PDO_LENGTH, SLIPEST_CO_ERR_COMM, SLIPEST_E_LENGTH, out);
+        }
+        return 0;
+    }
+    (void)memcpy(co->pdo[k], in->data, in->dlc);
+    dbc.id = p->dbc_id;
+    dbc.dlc = p->dlc;
+    (void)memcpy(dbc.data, in->data, sizeof dbc.data);
+    r = slipest_node_handle(&co->est, &dbc, est_out, SLIPEST_NODE_MAX_OUT);
+    for (i = 0; i < r; i++) {
+        n += to_tpdo(co, &est_out[i], &out[n]);
+    }
+    return n;
+}
+
+int slipest_co_handle(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, slipest_frame_t *out,
+                      size_t cap)
+{
+    unsigned k;
+    if (co == NULL || in == NULL || out == NULL) return SLIPEST_E_NULL;
+    if (cap < SLIPEST_CO_MAX_OUT) return SLIPEST_E_OVERFLOW;
+    if ((in->id & SLIPEST_FRAME_EXT) != 0u) {
+        return ignored(co); /* CANopen uses 11-bit identifiers */
+    }
+    if (in->id == 0u) return nmt(co, in, now_ms, out);
+    if (co->nmt == SLIPEST_CO_NMT_STOPPED) {
+        return ignored(co); /* stopped: NMT only */
+    }
+    if (in->id == 0x600u + co->node_id) return slipest_co_sdo_request(co, in, now_ms, out);
+    for (k = 0; k < SLIPEST_CO_N_RPDO; k++) {
+        if (in->id == (uint32_t)slipest_co_pdos[k].cob_base + co->node_id) return rpdo(co, k, in, out);
+    }
+    return ignored(co); /* another node's traffic */
+}
+
+int slipest_co_tick(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out, size_t cap)
+{
+    int n = 0;
+    if (co == NULL || out == NULL) return SLIPEST_E_NULL;
+    if (cap < 2u) return SLIPEST_E_OVERFLOW;
+    if (co->hb_ms != 0u && (uint32_t)(now_ms - co->hb_last_ms) >= co->hb_ms) {
+        co->hb_last_ms = now_ms;
+        out[n].id = 0x700u + co->node_id;
+        out[n].dlc = 1u;
+        (void)memset(out[n].data, 0, sizeof out[n].data);
+        out[n].data[0] = co->nmt;
+        n++;
+    }
+    n += slipest_co_sdo_tick(co, now_ms, &out[n]);
+    return n;
+}

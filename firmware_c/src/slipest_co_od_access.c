@@ -1,0 +1,222 @@
+/* CANopen object dictionary access: find an entry in the generated table and read or write
+ * the value it names (the table says where a value lives; this file knows how to get it). */
+#include <string.h>
+
+#include "slipest_co_internal.h"
+
+const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32_t *abort_code, uint16_t *entry)
+{
+    /* binary search over the table sorted by (index, sub): at most log2(N)+1 steps */
+    uint32_t key = ((uint32_t)index << 8) | sub;
+    uint32_t lo = 0u, hi = SLIPEST_CO_OD_N;
+    int index_seen = 0;
+    while (lo < hi) {
+        uint32_t mid = lo + (hi - lo) / 2u;
+        const slipest_co_entry_t *e = &slipest_co_od[mid];
+        uint32_t k = ((uint32_t)e->index << 8) | e->sub;
+        if (e->index == index) {
+            index_seen = 1;
+        }
+        if (k == key) {
+            *entry = (uint16_t)mid; /* < SLIPEST_CO_OD_N */
+            return e;
+        }
+        if (k < key) {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    /* the search may have skipped the index's other sub-indices: look at the neighbours */
+    if (!index_seen) {
+        if ((lo < SLIPEST_CO_OD_N && slipest_co_od[lo].index == index) ||
+            (lo > 0u && slipest_co_od[lo - 1u].index == index)) {
+            index_seen = 1;
+        }
+    }
+    *abort_code = index_seen ? SLIPEST_CO_ABORT_NO_SUB : SLIPEST_CO_ABORT_NO_OBJECT;
+    return NULL;
+}
+
+uint32_t slipest_co_od_size(const slipest_co_entry_t *e)
+{
+    switch (e->dtype) {
+    case 0x01u: /* BOOLEAN */
+    case 0x02u: /* INTEGER8 */
+    case 0x05u: /* UNSIGNED8 */
+        return 1u;
+    case 0x03u: /* INTEGER16 */
+    case 0x06u: /* UNSIGNED16 */
+        return 2u;
+    case 0x04u: /* INTEGER32 */
+    case 0x07u: /* UNSIGNED32 */
+        return 4u;
+    case 0x0Au: /* OCTET_STRING: the 32-byte sha256 */
+        return 32u;
+    default: /* DOMAIN */
+        return 0u;
+    }
+}
+
+static uint32_t store_counter(const slipest_store_counters_t *c, unsigned n)
+{
+    switch (n) {
+    case 0u: return c->uploads_started;
+    case 1u: return c->uploads_aborted;
+    case 2u: return c->images_accepted;
+    case 3u: return c->refused_length;
+    case 4u: return c->refused_format;
+    case 5u: return c->refused_arch;
+    case 6u: return c->refused_crc;
+    case 7u: return c->refused_hash;
+    case 8u: return c->refused_range;
+    case 9u: return c->refused_hmac;
+    case 10u: return c->refused_version;
+    case 11u: return c->activations;
+    case 12u: return c->rollbacks;
+    case 13u: return c->nvm_errors;
+    default: return c->boot_fallbacks;
+    }
+}
+
+static uint32_t read_model(const slipest_co_t *co, unsigned what, uint8_t buf[32], uint32_t *len)
+{
+    const slipest_model_q_t *m = slipest_node_model_q(&co->est);
+    uint32_t v;
+    switch (what) {
+    case 0u: v = m->version; break;
+    case 1u: v = slipest_model_hash32(m); break;
+    case 2u: {
+        /* the built-in model's sha256 is not compiled in: only a slot's image carries it */
+        const uint8_t *h = co->from_store ? slipest_store_active_sha256(co->store) : NULL;
+        if (h == NULL) return SLIPEST_CO_ABORT_NO_DATA;
+        (void)memcpy(buf, h, 32u); /* a byte string: no byte order to apply */
+        *len = 32u;
+        return 0u;
+    }
+    case 3u: {
+        int s = co->from_store ? slipest_store_active_slot(co->store) : SLIPEST_STORE_NO_SLOT;
+        v = (s < 0) ? 0xFFu : (uint32_t)s;
+        break;
+    }
+    default: v = slipest_lib_version(); break;
+    }
+    slipest_co_put_le(buf, v, *len);
+    return 0u;
+}
+
+uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e, uint8_t buf[32], uint32_t *len)
+{
+    uint32_t v = 0u;
+    *len = slipest_co_od_size(e);
+    if ((e->flags & SLIPEST_CO_ACC_R) == 0u) return SLIPEST_CO_ABORT_WRITE_ONLY;
+    switch (e->kind) {
+    case SLIPEST_CO_KIND_CONST:
+        v = e->value + (((e->flags & SLIPEST_CO_PLUS_ID) != 0u) ? co->node_id : 0u);
+        break;
+    case SLIPEST_CO_KIND_HB_TIME: v = co->hb_ms; break;
+    case SLIPEST_CO_KIND_ERR_REG: v = co->err_reg; break;
+    case SLIPEST_CO_KIND_SERIAL: v = co->serial; break;
+    case SLIPEST_CO_KIND_PDO: {
+        unsigned pdo = (unsigned)e->arg >> 8, off = (unsigned)e->arg & 0xFFu;
+        if (pdo >= SLIPEST_CO_N_PDO || off + *len > 8u) return SLIPEST_CO_ABORT_GENERAL;
+        (void)memcpy(buf, &co->pdo[pdo][off], *len); /* already little-endian wire bytes */
+        return 0u;
+    }
+    case SLIPEST_CO_KIND_MODEL: return read_model(co, e->arg, buf, len);
+    case SLIPEST_CO_KIND_COUNTER: v = slipest_co_counter(co, e->arg); break;
+    case SLIPEST_CO_KIND_SLOT: {
+        slipest_slot_info_t info;
+        if (co->store == NULL) return SLIPEST_CO_ABORT_NO_DATA;
+        if (slipest_store_slot_info(co->store, (unsigned)e->arg >> 4, &info) != SLIPEST_OK) {
+            return SLIPEST_CO_ABORT_GENERAL;
+        }
+        switch (e->arg & 0xFu) {
+        case 0u: v = (uint32_t)info.state; break;
+        case 1u: v = info.length; break;
+        case 2u: v = info.version; break;
+        default: v = info.hash32; break;
+        }
+        break;
+    }
+    case SLIPEST_CO_KIND_STORE_CNT:
+        if (co->store == NULL) return SLIPEST_CO_ABORT_NO_DATA;
+        v = store_counter(slipest_store_counters(co->store), e->arg);
+        break;
+    case SLIPEST_CO_KIND_UPLOAD:
+        if (e->arg == 0u) {
+            v = (co->store == NULL) ? 0u : (uint32_t)slipest_store_upload_state(co->store);
+        } else if (e->arg == 1u) {
+            v = (uint32_t)(uint8_t)co->last_store_status; /* two's complement byte */
+        } else {
+            v = co->sdo.done;
+        }
+        break;
+    default: return SLIPEST_CO_ABORT_GENERAL;
+    }
+    slipest_co_put_le(buf, v, *len);
+    return 0u;
+}
+
+/* 0x2002: model commands (value 1 only) */
+static uint32_t command(slipest_co_t *co, unsigned what, uint32_t value, slipest_frame_t *out, int *n)
+{
+    slipest_status_t st;
+    if (value != 1u) return SLIPEST_CO_ABORT_VALUE;
+    if (co->store == NULL) return SLIPEST_CO_ABORT_STATE;
+    if (what == 1u) {
+        st = slipest_store_activate(co->store);
+    } else if (what == 2u) {
+        st = slipest_store_rollback(co->store);
+    } else {
+        st = slipest_store_abort(co->store);
+    }
+    co->last_store_status = (int8_t)st;
+    if (st != SLIPEST_OK) {
+        /* a failed activate or rollback may have reloaded the previous slot (follow the store), or
+         * left no valid model in the store's RAM: then the built-in model serves */
+        if (what != 3u) {
+            if (slipest_store_model_q(co->store) != NULL) {
+                slipest_co_use_store_model(co);
+            } else {
+                (void)slipest_node_set_model(&co->est, co->builtin_q, co->builtin_f);
+                co->from_store = 0u;
+            }
+        }
+        return slipest_co_store_failed(co, st, out, n);
+    }
+    if (what != 3u) {
+        /* between two frames: the next window is the first one of the new model */
+        slipest_co_use_store_model(co);
+        if (co->err_reg != 0u) {
+            co->err_reg = 0u;
+            *n += slipest_co_emcy(co, SLIPEST_CO_EMCY_RESET, 0u, 0, out);
+        }
+    }
+    return 0u;
+}
+
+uint32_t slipest_co_od_write(slipest_co_t *co, const slipest_co_entry_t *e, const uint8_t *data, uint32_t len,
+                             slipest_frame_t *out, int *n)
+{
+    uint32_t size = slipest_co_od_size(e);
+    uint32_t v;
+    if ((e->flags & SLIPEST_CO_ACC_W) == 0u) return SLIPEST_CO_ABORT_READ_ONLY;
+    if (size == 0u || size > 4u) return SLIPEST_CO_ABORT_UNSUPPORTED; /* DOMAIN: via the transfer */
+    if (len > size) return SLIPEST_CO_ABORT_TOO_HIGH;
+    if (len < size) return SLIPEST_CO_ABORT_TOO_LOW;
+    v = slipest_co_get_le(data, len);
+    switch (e->kind) {
+    case SLIPEST_CO_KIND_HB_TIME:
+        co->hb_ms = (uint16_t)v;
+        return 0u;
+    case SLIPEST_CO_KIND_PDO: {
+        unsigned pdo = (unsigned)e->arg >> 8, off = (unsigned)e->arg & 0xFFu;
+        if (pdo >= SLIPEST_CO_N_PDO || off + len > 8u) return SLIPEST_CO_ABORT_GENERAL;
+        (void)memcpy(&co->pdo[pdo][off], data, len); /* wire bytes; processed only as a whole RPDO */
+        return 0u;
+    }
+    case SLIPEST_CO_KIND_COMMAND: return command(co, e->arg, v, out, n);
+    default: return SLIPEST_CO_ABORT_READ_ONLY;
+    }
+}

@@ -1,0 +1,403 @@
+/* CANopen SDO server (CiA 301): expedited and segmented upload and download, block download
+ * with the optional CRC. The model image (DOMAIN 0x2000) streams into the store's inactive slot
+ * as it arrives, so no image-sized buffer exists in RAM. */
+#include <string.h>
+
+#include "slipest_co_internal.h"
+
+/* client command specifiers (byte 0 >> 5) */
+#define CCS_DOWNLOAD_SEGMENT 0u
+#define CCS_DOWNLOAD_INITIATE 1u
+#define CCS_UPLOAD_INITIATE 2u
+#define CCS_UPLOAD_SEGMENT 3u
+#define CCS_ABORT 4u
+#define CCS_BLOCK_DOWNLOAD 6u
+
+/* CRC-16 of CiA 301 block transfers: polynomial 0x1021, initial value 0 (XMODEM), bitwise:
+ * a few bytes of code instead of a 512-byte table */
+static uint16_t crc16_update(uint16_t crc_in, const uint8_t *data, uint32_t len)
+{
+    uint16_t crc = crc_in;
+    uint32_t i;
+    unsigned b;
+    for (i = 0; i < len; i++) {
+        crc ^= (uint16_t)((uint16_t)data[i] << 8);
+        for (b = 0; b < 8u; b++) {
+            crc = ((crc & 0x8000u) != 0u) ? (uint16_t)((uint16_t)(crc << 1) ^ 0x1021u) : (uint16_t)(crc << 1);
+        }
+    }
+    return crc;
+}
+
+static void frame8(slipest_co_t *co, slipest_frame_t *f)
+{
+    f->id = 0x580u + co->node_id;
+    f->dlc = 8u;
+    (void)memset(f->data, 0, sizeof f->data);
+}
+
+static void put_mux(slipest_frame_t *f, uint16_t index, uint8_t sub)
+{
+    slipest_co_put_le(&f->data[1], index, 2u);
+    f->data[3] = sub;
+}
+
+static int is_domain(const slipest_co_t *co)
+{
+    return slipest_co_od[co->sdo.entry].kind == SLIPEST_CO_KIND_DOMAIN;
+}
+
+/* End the transfer in progress; an open model upload is abandoned in the store. */
+static void end_transfer(slipest_co_t *co, int abandon)
+{
+    if (abandon && co->sdo.state != SLIPEST_CO_SDO_IDLE && co->sdo.state != SLIPEST_CO_SDO_UPLOAD && is_domain(co) &&
+        co->store != NULL) {
+        co->last_store_status = (int8_t)slipest_store_abort(co->store);
+    }
+    co->sdo.state = SLIPEST_CO_SDO_IDLE;
+}
+
+static int abort_frame(slipest_co_t *co, uint16_t index, uint8_t sub, uint32_t code, slipest_frame_t *out)
+{
+    end_transfer(co, 1);
+    frame8(co, out);
+    out->data[0] = 0x80u;
+    put_mux(out, index, sub);
+    slipest_co_put_le(&out->data[4], code, 4u);
+    co->cnt[SLIPEST_CO_CNT_SDO_ABORTS_SENT]++;
+    return 1;
+}
+
+void slipest_co_sdo_reset(slipest_co_t *co)
+{
+    end_transfer(co, 1);
+}
+
+/* Open a DOMAIN download of `size` bytes into the store; 0 or an abort code. */
+static uint32_t domain_begin(slipest_co_t *co, uint32_t size, slipest_frame_t *out, int *n)
+{
+    slipest_status_t st;
+    if (co->store == NULL) return SLIPEST_CO_ABORT_STATE;
+    if (size > SLIPEST_IMAGE_MAX_SIZE) return SLIPEST_CO_ABORT_TOO_HIGH;
+    if (size < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE) return SLIPEST_CO_ABORT_TOO_LOW;
+    if (slipest_store_upload_state(co->store) == SLIPEST_UPLOAD_RECEIVING) {
+        (void)slipest_store_abort(co->store); /* a new transfer replaces a stalled one */
+    }
+    st = slipest_store_begin(co->store, size, 0u);
+    co->last_store_status = (int8_t)st;
+    if (st != SLIPEST_OK) return slipest_co_store_failed(co, st, out, n);
+    return 0u;
+}
+
+/* Append bytes of a DOMAIN download; 0 or an abort code. */
+static uint32_t domain_write(slipest_co_t *co, const uint8_t *data, uint32_t len, slipest_frame_t *out, int *n)
+{
+    slipest_status_t st;
+    if (co->sdo.done + len > co->sdo.size) return SLIPEST_CO_ABORT_TOO_HIGH;
+    st = slipest_store_write(co->store, co->sdo.done, data, len);
+    if (st != SLIPEST_OK) {
+        co->last_store_status = (int8_t)st;
+        return slipest_co_store_failed(co, st, out, n);
+    }
+    co->sdo.done += len;
+    return 0u;
+}
+
+/* All bytes of a DOMAIN download are in: validate the image in the slot; 0 or an abort code. */
+static uint32_t domain_finish(slipest_co_t *co, slipest_frame_t *out, int *n)
+{
+    slipest_status_t st;
+    if (co->sdo.done != co->sdo.size) return SLIPEST_CO_ABORT_TOO_LOW;
+    st = slipest_store_finish(co->store);
+    co->last_store_status = (int8_t)st;
+    if (st != SLIPEST_OK) return slipest_co_store_failed(co, st, out, n);
+    return 0u;
+}
+
+static int download_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_t *out)
+{
+    uint16_t index = (uint16_t)slipest_co_get_le(&in->data[1], 2u);
+    uint8_t sub = in->data[3], cmd = in->data[0];
+    uint32_t code = 0u;
+    int n = 1; /* the response first, an EMCY maybe after it */
+    const slipest_co_entry_t *e = slipest_co_od_find(index, sub, &code, &co->sdo.entry);
+    end_transfer(co, 1);
+    if (e == NULL) return abort_frame(co, index, sub, code, out);
+    co->sdo.index = index;
+    co->sdo.sub = sub;
+    if ((e->flags & SLIPEST_CO_ACC_W) == 0u) return abort_frame(co, index, sub, SLIPEST_CO_ABORT_READ_ONLY, out);
+    if ((cmd & 0x02u) != 0u) { /* expedited: 4 - n bytes in the frame */
+        uint32_t len = ((cmd & 0x01u) != 0u) ? 4u - ((uint32_t)(cmd >> 2) & 3u) : 4u;
+        if (e->kind == SLIPEST_CO_KIND_DOMAIN) return abort_frame(co, index, sub, SLIPEST_CO_ABORT_TOO_LOW, out);
+        code = slipest_co_od_write(co, e, &in->data[4], len, &out[1], &n);
+        if (code != 0u) {
+            (void)abort_frame(co, index, sub, code, out);
+            return n;
+        }
+        frame8(co, out);
+        out->data[0] = 0x60u;
+        put_mux(out, index, sub);
+        return n;
+    }
+    /* segmented: the size must be indicated (a DOMAIN needs it to open the slot) */
+    if ((cmd & 0x01u) == 0u) return abort_frame(co, index, sub, SLIPEST_CO_ABORT_LENGTH, out);
+    co->sdo.size = slipest_co_get_le(&in->data[4], 4u);
+    co->sdo.done = 0u;
+    co->sdo.toggle = 0u;
+    if (e->kind == SLIPEST_CO_KIND_DOMAIN) {
+        code = domain_begin(co, co->sdo.size, &out[1], &n);
+    } else if (co->sdo.size > slipest_co_od_size(e)) {
+        code = SLIPEST_CO_ABORT_TOO_HIGH;
+    } else {
+        code = 0u;
+    }
+    if (code != 0u) {
+        (void)abort_frame(co, index, sub, code, out);
+        return n;
+    }
+    co->sdo.state = SLIPEST_CO_SDO_DOWNLOAD;
+    frame8(co, out);
+    out->data[0] = 0x60u;
+    put_mux(out, index, sub);
+    return n;
+}
+
+static int download_segment(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_t *out)
+{
+    uint8_t cmd = in->data[0];
+    uint32_t len = 7u - (((uint32_t)cmd >> 1) & 7u), code;
+    int n = 1;
+    const slipest_co_entry_t *e = &slipest_co_od[co->sdo.entry];
+    if (co->sdo.state != SLIPEST_CO_SDO_DOWNLOAD) {
+        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_COMMAND, out);
+    }
+    if (((cmd >> 4) & 1u) != co->sdo.toggle) {
+        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_TOGGLE, out);
+    }
+    if (e->kind == SLIPEST_CO_KIND_DOMAIN) {
+        code = domain_write(co, &in->data[1], len, &out[1], &n);
+        if (code == 0u && (cmd & 0x01u) != 0u) code = domain_finish(co, &out[1], &n);
+    } else if (co->sdo.done + len > co->sdo.size) {
+        code = SLIPEST_CO_ABORT_TOO_HIGH;
+    } else {
+        (void)memcpy(&co->sdo.buf[co->sdo.done], &in->data[1], len);
+        co->sdo.done += len;
+        code = 0u;
+        if ((cmd & 0x01u) != 0u) {
+            code = (co->sdo.done == co->sdo.size) ? slipest_co_od_write(co, e, co->sdo.buf, co->sdo.done, &out[1], &n)
+                                                 : SLIPEST_CO_ABORT_TOO_LOW;
+        }
+    }
+    if (code != 0u) {
+        (void)abort_frame(co, co->sdo.index, co->sdo.sub, code, out);
+        return n;
+    }
+    frame8(co, out);
+    out->data[0] = (uint8_t)(0x20u | (co->sdo.toggle << 4));
+    co->sdo.toggle ^= 1u;
+    if ((cmd & 0x01u) != 0u) {
+        co->sdo.state = SLIPEST_CO_SDO_IDLE;
+    }
+    return n;
+}
+
+static int upload_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_t *out)
+{
+    uint16_t index = (uint16_t)slipest_co_get_le(&in->data[1], 2u);
+    uint8_t sub = in->data[3];
+    uint32_t code = 0u, len = 0u;
+    const slipest_co_entry_t *e = slipest_co_od_find(index, sub, &code, &co->sdo.entry);
+    end_transfer(co, 1);
+    if (e == NULL) return abort_frame(co, index, sub, code, out);
+    code = slipest_co_od_read(co, e, co->sdo.buf, &len);
+    if (code == 0u && len == 0u) code = SLIPEST_CO_ABORT_WRITE_ONLY; /* the DOMAIN is write-only */
+    if (code != 0u) return abort_frame(co, index, sub, code, out);
+    frame8(co, out);
+    put_mux(out, index, sub);
+    if (len <= 4u) { /* expedited, size indicated */
+        out->data[0] = (uint8_t)(0x43u | ((4u - len) << 2));
+        (void)memcpy(&out->data[4], co->sdo.buf, len);
+        return 1;
+    }
+    out->data[0] = 0x41u; /* segmented, size indicated */
+    slipest_co_put_le(&out->data[4], len, 4u);
+    co->sdo.index = index;
+    co->sdo.sub = sub;
+    co->sdo.size = len;
+    co->sdo.done = 0u;
+    co->sdo.toggle = 0u;
+    co->sdo.state = SLIPEST_CO_SDO_UPLOAD;
+    return 1;
+}
+
+static int upload_segment(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_t *out)
+{
+    uint32_t len;
+    if (co->sdo.state != SLIPEST_CO_SDO_UPLOAD) {
+        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_COMMAND, out);
+    }
+    if (((in->data[0] >> 4) & 1u) != co->sdo.toggle) {
+        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_TOGGLE, out);
+    }
+    len = co->sdo.size - co->sdo.done;
+    if (len > 7u) {
+        len = 7u;
+    }
+    frame8(co, out);
+    (void)memcpy(&out->data[1], &co->sdo.buf[co->sdo.done], len);
+    co->sdo.done += len;
+    out->data[0] = (uint8_t)((co->sdo.toggle << 4) | ((7u - len) << 1));
+    if (co->sdo.done >= co->sdo.size) {
+        out->data[0] |= 0x01u; /* no more segments */
+        co->sdo.state = SLIPEST_CO_SDO_IDLE;
+    }
+    co->sdo.toggle ^= 1u;
+    return 1;
+}
+
+static int block_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_t *out)
+{
+    uint16_t index = (uint16_t)slipest_co_get_le(&in->data[1], 2u);
+    uint8_t sub = in->data[3], cmd = in->data[0];
+    uint32_t code = 0u;
+    int n = 1;
+    const slipest_co_entry_t *e = slipest_co_od_find(index, sub, &code, &co->sdo.entry);
+    end_transfer(co, 1);
+    if (e == NULL) return abort_frame(co, index, sub, code, out);
+    co->sdo.index = index;
+    co->sdo.sub = sub;
+    /* block transfers carry the model image only; small values go expedited */
+    if (e->kind != SLIPEST_CO_KIND_DOMAIN) return abort_frame(co, index, sub, SLIPEST_CO_ABORT_UNSUPPORTED, out);
+    if ((cmd & 0x02u) == 0u) return abort_frame(co, index, sub, SLIPEST_CO_ABORT_LENGTH, out);
+    co->sdo.size = slipest_co_get_le(&in->data[4], 4u);
+    co->sdo.done = 0u;
+    code = domain_begin(co, co->sdo.size, &out[1], &n);
+    if (code != 0u) {
+        (void)abort_frame(co, index, sub, code, out);
+        return n;
+    }
+    co->sdo.crc_on = (uint8_t)((cmd >> 2) & 1u);
+    co->sdo.crc = 0u;
+    co->sdo.seq_ok = 0u;
+    co->sdo.seq_bad = 0u;
+    co->sdo.state = SLIPEST_CO_SDO_BLOCK;
+    frame8(co, out);
+    out->data[0] = 0xA4u; /* block download response, the server checks CRCs */
+    put_mux(out, index, sub);
+    out->data[4] = (uint8_t)SLIPEST_CO_BLKSIZE;
+    return n;
+}
+
+/* A sub-block segment: accepted only with the next sequence number (a lost, duplicated or
+ * reordered segment is not written: the acknowledgement makes the client send it again). */
+static int block_segment(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_t *out)
+{
+    uint8_t seq = (uint8_t)(in->data[0] & 0x7Fu);
+    uint8_t last = ((in->data[0] & 0x80u) != 0u) ? 1u : 0u;
+    int n = 0;
+    if (seq == (uint8_t)(co->sdo.seq_ok + 1u) && co->sdo.seq_bad == 0u) {
+        uint32_t left = co->sdo.size - co->sdo.done;
+        uint32_t len = left < 7u ? left : 7u;
+        uint32_t code;
+        if (last == 0u && left <= 7u) {
+            /* more segments announced than the indicated size holds */
+            return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_TOO_HIGH, out);
+        }
+        code = domain_write(co, &in->data[1], len, &out[1], &n);
+        if (code != 0u) {
+            (void)abort_frame(co, co->sdo.index, co->sdo.sub, code, out);
+            return 1 + n;
+        }
+        co->sdo.crc = crc16_update(co->sdo.crc, &in->data[1], len);
+        co->sdo.seq_ok = seq;
+        if (last != 0u) {
+            co->sdo.state = SLIPEST_CO_SDO_BLOCK_END;
+        }
+    } else {
+        if (co->sdo.seq_bad == 0u) {
+            co->cnt[SLIPEST_CO_CNT_BLOCK_SEQUENCE_ERRORS]++;
+        }
+        co->sdo.seq_bad = 1u;
+    }
+    if (seq != SLIPEST_CO_BLKSIZE && last == 0u) {
+        return 0; /* the block goes on */
+    }
+    /* end of the sub-block (its last number, or the last segment of the transfer, even out of
+     * order): acknowledge the last segment taken in order; the client repeats the rest */
+    frame8(co, out);
+    out->data[0] = 0xA2u;
+    out->data[1] = co->sdo.seq_ok;
+    out->data[2] = (uint8_t)SLIPEST_CO_BLKSIZE;
+    co->sdo.seq_ok = 0u;
+    co->sdo.seq_bad = 0u;
+    return 1;
+}
+
+static int block_end(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_t *out)
+{
+    uint32_t unused = ((uint32_t)in->data[0] >> 2) & 7u;
+    uint32_t code;
+    int n = 1;
+    if ((in->data[0] & 0xE3u) != 0xC1u) {
+        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_COMMAND, out);
+    }
+    /* the last segment held 7 - unused bytes: they must be what the indicated size left */
+    if (co->sdo.done != co->sdo.size || ((co->sdo.size % 7u) != 0u && (7u - unused) != co->sdo.size % 7u) ||
+        ((co->sdo.size % 7u) == 0u && unused != 0u)) {
+        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_LENGTH, out);
+    }
+    if (co->sdo.crc_on != 0u && (uint16_t)slipest_co_get_le(&in->data[1], 2u) != co->sdo.crc) {
+        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_CRC, out);
+    }
+    code = domain_finish(co, &out[1], &n);
+    if (code != 0u) {
+        (void)abort_frame(co, co->sdo.index, co->sdo.sub, code, out);
+        return n;
+    }
+    co->sdo.state = SLIPEST_CO_SDO_IDLE;
+    frame8(co, out);
+    out->data[0] = 0xA1u;
+    return n;
+}
+
+int slipest_co_sdo_request(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, slipest_frame_t *out)
+{
+    unsigned ccs;
+    if (in->dlc != 8u) {
+        /* CiA 301: SDO frames have 8 bytes; anything else is not an SDO (counted, not answered) */
+        co->cnt[SLIPEST_CO_CNT_FRAMES_IGNORED]++;
+        return 0;
+    }
+    co->sdo.last_ms = now_ms;
+    if (co->sdo.state == SLIPEST_CO_SDO_BLOCK) {
+        /* inside a sub-block every frame is a segment, except an abort request */
+        if (in->data[0] != 0x80u) return block_segment(co, in, out);
+    }
+    ccs = (unsigned)in->data[0] >> 5;
+    switch (ccs) {
+    case CCS_DOWNLOAD_INITIATE: return download_initiate(co, in, out);
+    case CCS_DOWNLOAD_SEGMENT: return download_segment(co, in, out);
+    case CCS_UPLOAD_INITIATE: return upload_initiate(co, in, out);
+    case CCS_UPLOAD_SEGMENT: return upload_segment(co, in, out);
+    case CCS_ABORT:
+        co->cnt[SLIPEST_CO_CNT_SDO_ABORTS_RECEIVED]++;
+        end_transfer(co, 1);
+        return 0; /* no answer to an abort */
+    case CCS_BLOCK_DOWNLOAD:
+        if ((in->data[0] & 0x01u) == 0u) return block_initiate(co, in, out);
+        if (co->sdo.state != SLIPEST_CO_SDO_BLOCK_END) {
+            return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_COMMAND, out);
+        }
+        return block_end(co, in, out);
+    default: /* block upload and anything else */
+        return abort_frame(co, (uint16_t)slipest_co_get_le(&in->data[1], 2u), in->data[3], SLIPEST_CO_ABORT_COMMAND,
+                           out);
+    }
+}
+
+int slipest_co_sdo_tick(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
+{
+    if (co->sdo.state == SLIPEST_CO_SDO_IDLE) return 0;
+    if ((uint32_t)(now_ms - co->sdo.last_ms) < SLIPEST_CO_SDO_TIMEOUT_MS) return 0;
+    return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_TIMEOUT, out);
+}

@@ -1,0 +1,26 @@
+/* Parts of the model-image reader shared with the model store's streaming validation
+ * (slipest_store.c), so that both apply the same header rules. Not a public API. */
+#ifndef SLIPEST_IMAGE_INTERNAL_H
+#define SLIPEST_IMAGE_INTERNAL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "slipest_model.h"
+#include "slipest_status.h"
+
+/* Check the SLIPEST_IMAGE_HEADER_SIZE header bytes at img against an image of len bytes: magic,
+ * format version, architecture, flags, reserved bytes, payload size and total length (with the
+ * HMAC tag when flagged). On success *flags gets the header flags and *body the bytes covered by
+ * the CRC (header + payload). Returns as slipest_image_read() for these checks. */
+slipest_status_t slipest_image_check_header(const uint8_t *img, size_t len, uint16_t *flags, size_t *body);
+
+/* Fill the scalar fields of q (sizes, shifts, scales, version, hash32) from a checked header;
+ * the array pointers are left NULL. */
+void slipest_image_header_scalars(const uint8_t *img, slipest_model_q_t *q);
+
+/* CRC-32 register update without the initial and final inversion (slipest_crc32() is
+ * slipest_crc32_update(0xFFFFFFFF, ...) ^ 0xFFFFFFFF), for streaming. */
+uint32_t slipest_crc32_update(uint32_t crc, const uint8_t *data, size_t len);
+
+#endif /* SLIPEST_IMAGE_INTERNAL_H */

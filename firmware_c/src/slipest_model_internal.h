@@ -1,0 +1,23 @@
+/* Pieces of slipest_model_q_check() shared with the model store, which checks an image's
+ * parameters while streaming it from NVM (without the whole model in RAM). Not a public API. */
+#ifndef SLIPEST_MODEL_INTERNAL_H
+#define SLIPEST_MODEL_INTERNAL_H
+
+#include <stdint.h>
+
+#include "slipest_model.h"
+#include "slipest_status.h"
+
+/* Largest layer-1 row bound (acc1_bound <= 2^31 - 2^8) and head row bound (INT32_MAX). */
+#define SLIPEST_Q_ACC1_LIMIT 2147483392
+#define SLIPEST_Q_ACC2_LIMIT 2147483647
+/* Largest Q30 seed of 1/sqrt(w), w >= 1/4. */
+#define SLIPEST_Q_RSQRT_SEED_MAX 0x80000000u
+
+/* The checks of slipest_model_q_check() on the scalar fields only (architecture, shifts, eps). */
+slipest_status_t slipest_model_q_check_scalars(const slipest_model_q_t *m);
+
+/* 1 when a row with sum_j |w_j| = abs_w_sum and bias b keeps its accumulator within limit. */
+int slipest_model_row_ok(int64_t abs_w_sum, int32_t b, int64_t limit);
+
+#endif /* SLIPEST_MODEL_INTERNAL_H */

@@ -1,0 +1,875 @@
+/* A/B model slots on integrator NVM (slipest_store.h; layout and reasoning in docs/model_slots.md).
+ *
+ * RAM holds one model: images are validated by streaming them back from NVM one sector at a
+ * time (CRC-32, HMAC-SHA256 and every model check run incrementally), and a model is decoded into
+ * RAM only when it becomes active. The only NVM write that changes which model is active is one
+ * commit record, written into the record sector that does not hold the newest record, so a torn
+ * write leaves the newest record as it was. */
+#include "slipest_store.h"
+
+#include <string.h>
+
+#include "slipest_image_internal.h"
+#include "slipest_model_internal.h"
+#include "slipest_sha256.h"
+
+#define REC_MAGIC "SLPR"
+#define REC_LAYOUT 1u
+#define REC_BODY (SLIPEST_STORE_RECORD_SIZE - 4u) /* bytes covered by the record CRC */
+#define NO_SLOT ((int8_t)SLIPEST_STORE_NO_SLOT)
+#define N_ROWS (SLIPEST_N_HIDDEN + SLIPEST_N_CLASSES)
+
+#if SLIPEST_STORE_SECTOR_MAX < SLIPEST_STORE_SECTOR_MIN
+#error "slipest_store.c: SLIPEST_STORE_SECTOR_MAX below SLIPEST_STORE_SECTOR_MIN"
+#endif
+
+/* ------------------------------------------------------------------ byte order helpers */
+static uint32_t get_le32(const uint8_t *p)
+{
+    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
+}
+
+static void put_le32(uint8_t *p, uint32_t v)
+{
+    p[0] = (uint8_t)v;
+    p[1] = (uint8_t)(v >> 8);
+    p[2] = (uint8_t)(v >> 16);
+    p[3] = (uint8_t)(v >> 24);
+}
+
+static int32_t to_s32(uint32_t u) { return u > 0x7FFFFFFFu ? -(int32_t)(~u) - 1 : (int32_t)u; }
+
+static int16_t to_s16(uint32_t u)
+{
+    int32_t v = u > 0x7FFFu ? -(int32_t)(uint16_t)~u - 1 : (int32_t)u; /* u < 2^16 here */
+    return (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): v is in int16_t range */
+}
+
+/* ------------------------------------------------------------------ NVM access */
+static uint32_t slot_addr(const slipest_store_t *s, unsigned slot)
+{
+    return (2u + (uint32_t)slot * s->slot_sectors) * s->nvm.sector_size;
+}
+
+static slipest_status_t nvm_read(slipest_store_t *s, uint32_t addr, uint8_t *buf, uint32_t len)
+{
+    if (s->nvm.read(s->nvm.ctx, addr, buf, len) != SLIPEST_OK) {
+        s->c.nvm_errors++;
+        return SLIPEST_E_NVM;
+    }
+    return SLIPEST_OK;
+}
+
+static slipest_status_t nvm_write(slipest_store_t *s, uint32_t addr, const uint8_t *buf)
+{
+    if (s->nvm.write(s->nvm.ctx, addr, buf, s->nvm.sector_size) != SLIPEST_OK) {
+        s->c.nvm_errors++;
+        return SLIPEST_E_NVM;
+    }
+    return SLIPEST_OK;
+}
+
+static slipest_status_t nvm_erase(slipest_store_t *s, uint32_t addr)
+{
+    if (s->nvm.erase(s->nvm.ctx, addr) != SLIPEST_OK) {
+        s->c.nvm_errors++;
+        return SLIPEST_E_NVM;
+    }
+    return SLIPEST_OK;
+}
+
+/* ------------------------------------------------------------------ streaming image walk
+ * The payload is a fixed sequence of little-endian arrays (docs/fixed_point.md "Model image");
+ * each element is checked as it arrives and, when loading, stored. */
+#define K_W1 0u
+#define K_B1 1u
+#define K_GAMMA 2u
+#define K_BETA 3u
+#define K_W2 4u
+#define K_B2 5u
+#define K_GELU 6u
+#define K_RSQRT 7u
+#define K_FEPS 8u /* the float model: ln_eps, then its arrays */
+#define K_FW1 9u
+#define K_FB1 10u
+#define K_FGAMMA 11u
+#define K_FBETA 12u
+#define K_FW2 13u
+#define K_FB2 14u
+#define K_END 15u
+
+typedef struct {
+    slipest_store_t *s;
+    int load;                       /* 1: decode into the store's model storage */
+    uint8_t hdr[SLIPEST_IMAGE_HEADER_SIZE];
+    uint8_t tail[SLIPEST_IMAGE_TRAILER_SIZE + SLIPEST_IMAGE_HMAC_SIZE];
+    uint16_t flags;
+    size_t body;                    /* header + payload bytes */
+    uint32_t crc;                   /* running CRC-32 register over the body */
+    slipest_hmac_sha256_t mac;      /* running HMAC over the body (key provisioned) */
+    uint32_t row_abs[N_ROWS];       /* sum |w| per layer-1 row, then per head row */
+    unsigned seg, idx, nb;          /* element being assembled: segment, index, bytes so far */
+    uint32_t acc;                   /* its little-endian bytes */
+    slipest_status_t deferred;      /* first parameter check that failed (reported after CRC/HMAC) */
+} walk_t;
+
+static uint32_t abs16(int16_t v) { return v < 0 ? (uint32_t)(-(int32_t)v) : (uint32_t)v; }
+
+static int f32_bits_finite(uint32_t b) { return (b & 0x7F800000u) != 0x7F800000u; }
+
+#ifndef SLIPEST_Q_ONLY
+/* where a float element of segment seg goes (ln_eps is handled by the caller) */
+static float *f32_dst(slipest_store_t *s, unsigned seg)
+{
+    switch (seg) {
+    case K_FW1: return s->fs.w1;
+    case K_FB1: return s->fs.b1;
+    case K_FGAMMA: return s->fs.gamma;
+    case K_FBETA: return s->fs.beta;
+    case K_FW2: return s->fs.w2;
+    case K_FB2: /* fall through: the last float array */
+    default: return s->fs.b2;
+    }
+}
+
+static float bits_to_f32(uint32_t bits)
+{
+    float f;
+    memcpy(&f, &bits, sizeof f); /* bit pattern assembled byte-order-independently */
+    return f;
+}
+#endif
+
+/* one complete element: check it and, when loading, store it */
+static void visit(walk_t *w, unsigned seg, unsigned i, uint32_t raw)
+{
+    slipest_store_t *s = w->s;
+    slipest_status_t bad = SLIPEST_OK;
+    switch (seg) {
+    case K_W1: {
+        int16_t v = to_s16(raw);
+        w->row_abs[i / (unsigned)SLIPEST_N_FEATURES] += abs16(v);
+        if (w->load != 0) {
+            s->qs.w1[i] = v;
+        }
+        break;
+    }
+    case K_B1:
+        if (0 == slipest_model_row_ok((int64_t)w->row_abs[i], to_s32(raw), SLIPEST_Q_ACC1_LIMIT)) {
+            bad = SLIPEST_E_RANGE;
+        }
+        if (w->load != 0) {
+            s->qs.b1[i] = to_s32(raw);
+        }
+        break;
+    case K_GAMMA:
+        if (w->load != 0) {
+            s->qs.gamma[i] = to_s16(raw);
+        }
+        break;
+    case K_BETA:
+        if (to_s32(raw) < -32768 || to_s32(raw) > 32767) {
+            bad = SLIPEST_E_RANGE;
+        }
+        if (w->load != 0) {
+            s->qs.beta[i] = to_s32(raw);
+        }
+        break;
+    case K_W2: {
+        int16_t v = to_s16(raw);
+        w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i / (unsigned)SLIPEST_N_HIDDEN] += abs16(v);
+        if (w->load != 0) {
+            s->qs.w2[i] = v;
+        }
+        break;
+    }
+    case K_B2:
+        if (0 == slipest_model_row_ok((int64_t)w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i], to_s32(raw),
+                                      SLIPEST_Q_ACC2_LIMIT)) {
+            bad = SLIPEST_E_RANGE;
+        }
+        if (w->load != 0) {
+            s->qs.b2[i] = to_s32(raw);
+        }
+        break;
+    case K_GELU:
+        if (w->load != 0) {
+            s->qs.gelu[i] = to_s16(raw);
+        }
+        break;
+    case K_RSQRT:
+        if (raw > SLIPEST_Q_RSQRT_SEED_MAX) {
+            bad = SLIPEST_E_RANGE;
+        }
+        if (w->load != 0) {
+            s->qs.rsqrt_seed[i] = raw;
+        }
+        break;
+    default: /* the float model: finite parameters, positive finite LayerNorm eps */
+        if ((f32_bits_finite(raw) == 0) || ((seg == K_FEPS) && ((raw == 0u) || (raw > 0x7F7FFFFFu)))) {
+            bad = SLIPEST_E_NONFINITE;
+        }
+#ifndef SLIPEST_Q_ONLY
+        if (w->load != 0) {
+            if (seg == K_FEPS) {
+                s->mf.ln_eps = bits_to_f32(raw);
+            } else {
+                f32_dst(s, seg)[i] = bits_to_f32(raw);
+            }
+        }
+#endif
+        break;
+    }
+    if (bad != SLIPEST_OK && w->deferred == SLIPEST_OK) {
+        w->deferred = bad;
+    }
+}
+
+/* one payload byte: assemble elements in layout order */
+static void payload_byte(walk_t *w, uint8_t b)
+{
+    static const uint16_t seg_n[K_END] = {SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES, SLIPEST_N_HIDDEN, SLIPEST_N_HIDDEN,
+                                          SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES * SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES,
+                                          SLIPEST_Q_GELU_N, SLIPEST_Q_RSQRT_SEED_N, 1u,
+                                          SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES, SLIPEST_N_HIDDEN, SLIPEST_N_HIDDEN,
+                                          SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES * SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES};
+    static const uint8_t seg_size[K_END] = {2u, 4u, 2u, 4u, 2u, 4u, 2u, 4u, 4u, 4u, 4u, 4u, 4u, 4u, 4u};
+    unsigned last = K_FEPS;
+    if ((w->flags & SLIPEST_IMAGE_FLAG_F32) != 0u) {
+        last = K_END;
+    }
+    if (w->seg >= last) return; /* cannot happen: the payload size was checked against the layout */
+    w->acc |= (uint32_t)b << (8u * w->nb);
+    w->nb += 1u;
+    if (w->nb < seg_size[w->seg]) {
+        return;
+    }
+    visit(w, w->seg, w->idx, w->acc);
+    w->acc = 0u;
+    w->nb = 0u;
+    w->idx += 1u;
+    if (w->idx == seg_n[w->seg]) {
+        w->idx = 0u;
+        w->seg += 1u;
+    }
+}
+
+/* Stream an image of len bytes from slot through every check of slipest_image_read() plus the
+ * HMAC; with load, also decode it into the store's model storage. Returns the first failure in
+ * the order header, CRC, hash, HMAC, parameters. *crc_out gets the image's CRC-32 field. */
+static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t len, int load, uint32_t *crc_out)
+{
+    walk_t w;
+    uint32_t pos = 0u, base = slot_addr(s, slot), S = s->nvm.sector_size, i, n;
+    uint8_t tag[SLIPEST_SHA256_SIZE];
+    slipest_model_q_t q;
+    slipest_status_t st;
+
+    if (len < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE || len > SLIPEST_IMAGE_MAX_SIZE) {
+        return SLIPEST_E_LENGTH;
+    }
+    memset(&w, 0, sizeof w);
+    w.s = s;
+    w.load = load;
+    w.crc = 0xFFFFFFFFu;
+    if (s->key != NULL) {
+        slipest_hmac_sha256_init(&w.mac, s->key, s->key_len);
+    }
+    /* len <= SLIPEST_IMAGE_MAX_SIZE, so at most SLIPEST_STORE_SLOT_SECTORS(S) iterations */
+    while (pos < len) {
+        n = (len - pos < S) ? len - pos : S;
+        st = nvm_read(s, base + pos, s->buf, n);
+        if (st != SLIPEST_OK) {
+            return st;
+        }
+        for (i = 0; i < n; ++i, ++pos) {
+            uint8_t b = s->buf[i];
+            if (pos < SLIPEST_IMAGE_HEADER_SIZE) {
+                w.hdr[pos] = b;
+                if (pos + 1u == SLIPEST_IMAGE_HEADER_SIZE) {
+                    st = slipest_image_check_header(w.hdr, len, &w.flags, &w.body);
+                    if (st != SLIPEST_OK) {
+                        return st;
+                    }
+                }
+            } else if (pos >= w.body) {
+                w.tail[pos - w.body] = b; /* len == body + trailer (+ tag): checked with the header */
+                continue;
+            } else {
+                payload_byte(&w, b);
+            }
+            w.crc = slipest_crc32_update(w.crc, &b, 1u);
+            if (s->key != NULL) {
+                slipest_hmac_sha256_update(&w.mac, &b, 1u);
+            }
+        }
+    }
+    if (get_le32(w.tail) != (w.crc ^ 0xFFFFFFFFu)) {
+        return SLIPEST_E_CRC;
+    }
+    /* the header's hash32 is the first 4 bytes (big-endian) of the trailer's sha256 */
+    if (get_le32(&w.hdr[38]) != (((uint32_t)w.tail[4] << 24) | ((uint32_t)w.tail[5] << 16) |
+                             ((uint32_t)w.tail[6] << 8) | (uint32_t)w.tail[7])) {
+        return SLIPEST_E_HASH;
+    }
+    if (s->key != NULL) {
+        if ((w.flags & SLIPEST_IMAGE_FLAG_HMAC) == 0u) {
+            return SLIPEST_E_AUTH;
+        }
+        slipest_hmac_sha256_final(&w.mac, tag);
+        if (0 == slipest_ct_equal(tag, &w.tail[SLIPEST_IMAGE_TRAILER_SIZE], SLIPEST_SHA256_SIZE)) {
+            return SLIPEST_E_AUTH;
+        }
+    }
+    slipest_image_header_scalars(w.hdr, &q);
+    st = slipest_model_q_check_scalars(&q);
+    if (st != SLIPEST_OK) {
+        return st;
+    }
+    if (w.deferred != SLIPEST_OK) {
+        return w.deferred;
+    }
+    *crc_out = get_le32(w.tail);
+    if (load == 0) {
+        return SLIPEST_OK;
+    }
+
+    /* loaded: point the model at the storage and run the full check once more on RAM */
+    q.w1 = s->qs.w1;
+    q.b1 = s->qs.b1;
+    q.gamma = s->qs.gamma;
+    q.beta = s->qs.beta;
+    q.w2 = s->qs.w2;
+    q.b2 = s->qs.b2;
+    q.gelu = s->qs.gelu;
+    q.rsqrt_seed = s->qs.rsqrt_seed;
+    st = slipest_model_q_check(&q);
+    if (st != SLIPEST_OK) {
+        return st;
+    }
+    s->mq = q;
+    memcpy(s->sha256, w.tail + 4, sizeof s->sha256);
+#ifndef SLIPEST_Q_ONLY
+    s->have_f32 = 0u;
+    if ((w.flags & SLIPEST_IMAGE_FLAG_F32) != 0u) {
+        s->mf.w1 = s->fs.w1;
+        s->mf.b1 = s->fs.b1;
+        s->mf.gamma = s->fs.gamma;
+        s->mf.beta = s->fs.beta;
+        s->mf.w2 = s->fs.w2;
+        s->mf.b2 = s->fs.b2;
+        s->mf.n_in = q.n_in;
+        s->mf.n_hidden = q.n_hidden;
+        s->mf.n_out = q.n_out;
+        s->mf.version = q.version;
+        s->mf.hash32 = q.hash32;
+        st = slipest_model_f32_check(&s->mf);
+        if (st != SLIPEST_OK) {
+            return st;
+        }
+        s->have_f32 = 1u;
+    }
+#endif
+    return SLIPEST_OK;
+}
+
+/* Load slot's image as the active model; on failure no model is active. */
+static slipest_status_t load_slot(slipest_store_t *s, unsigned slot)
+{
+    uint32_t crc = 0u;
+    slipest_status_t st;
+    s->have_model = 0u;
+    st = walk_slot(s, slot, s->rec.length[slot], 1, &crc);
+    if (st == SLIPEST_OK && crc != s->rec.crc[slot]) st = SLIPEST_E_CRC; /* not the image the record names */
+    if (st == SLIPEST_OK) {
+        s->have_model = 1u;
+    }
+    return st;
+}
+
+/* count a refusal under its one reason */
+static void count_refusal(slipest_store_t *s, slipest_status_t st)
+{
+    switch (st) {
+    case SLIPEST_E_LENGTH: s->c.refused_length++; break;
+    case SLIPEST_E_FORMAT: /* fall through: magic, flags, reserved bytes */
+    case SLIPEST_E_VERSION: s->c.refused_format++; break;
+    case SLIPEST_E_ARCH: s->c.refused_arch++; break;
+    case SLIPEST_E_CRC: s->c.refused_crc++; break;
+    case SLIPEST_E_HASH: s->c.refused_hash++; break;
+    case SLIPEST_E_AUTH: s->c.refused_hmac++; break;
+    case SLIPEST_E_STALE: s->c.refused_version++; break;
+    case SLIPEST_E_NVM: break; /* counted in nvm_errors where it happened */
+    default: s->c.refused_range++; break; /* E_RANGE, E_NONFINITE */
+    }
+}
+
+/* ------------------------------------------------------------------ commit records */
+static void record_encode(const slipest_store_record_t *r, uint8_t *p)
+{
+    unsigned k;
+    memcpy(p, REC_MAGIC, 4);
+    p[4] = (uint8_t)REC_LAYOUT;
+    p[5] = 0u;
+    p[6] = 0u;
+    p[7] = 0u;
+    put_le32(&p[8], r->seq);
+    p[12] = r->active == NO_SLOT ? 0xFFu : (uint8_t)r->active;
+    p[13] = r->prev == NO_SLOT ? 0xFFu : (uint8_t)r->prev;
+    p[14] = 0u;
+    p[15] = 0u;
+    for (k = 0; k < SLIPEST_STORE_N_SLOTS; ++k) {
+        put_le32(&p[16u + 16u * k], r->length[k]);
+        put_le32(&p[20u + 16u * k], r->crc[k]);
+        put_le32(&p[24u + 16u * k], r->version[k]);
+        put_le32(&p[28u + 16u * k], r->hash32[k]);
+    }
+    put_le32(&p[REC_BODY], slipest_crc32(p, REC_BODY));
+}
+
+/* 1 and *r filled when p holds a valid record */
+static int record_decode(const uint8_t *p, slipest_store_record_t *r)
+{
+    unsigned k;
+    if (memcmp(p, REC_MAGIC, 4) != 0 || p[4] != REC_LAYOUT || get_le32(&p[REC_BODY]) != slipest_crc32(p, REC_BODY)) {
+        return 0;
+    }
+    if (p[12] >= SLIPEST_STORE_N_SLOTS || (p[13] != 0xFFu && (p[13] >= SLIPEST_STORE_N_SLOTS || p[13] == p[12]))) {
+        return 0;
+    }
+    r->seq = get_le32(&p[8]);
+    r->active = (int8_t)p[12];
+    r->prev = NO_SLOT;
+    if (p[13] != 0xFFu) {
+        r->prev = (int8_t)p[13]; /* checked above: 0 or 1 */
+    }
+    for (k = 0; k < SLIPEST_STORE_N_SLOTS; ++k) {
+        r->length[k] = get_le32(&p[16u + 16u * k]);
+        r->crc[k] = get_le32(&p[20u + 16u * k]);
+        r->version[k] = get_le32(&p[24u + 16u * k]);
+        r->hash32[k] = get_le32(&p[28u + 16u * k]);
+    }
+    return r->seq != 0u;
+}
+
+/* Write r into the record sector not holding the current record: erase, then one program. */
+static slipest_status_t record_commit(slipest_store_t *s, const slipest_store_record_t *r)
+{
+    uint8_t target = s->rec.seq == 0u ? 0u : (uint8_t)(1u - s->rec_sector);
+    uint32_t addr = (uint32_t)target * s->nvm.sector_size;
+    slipest_status_t st;
+    memset(s->buf, 0xFF, s->nvm.sector_size);
+    record_encode(r, s->buf);
+    st = nvm_erase(s, addr);
+    if (st == SLIPEST_OK) {
+        st = nvm_write(s, addr, s->buf);
+    }
+    if (st != SLIPEST_OK) {
+        return st;
+    }
+    s->rec = *r;
+    s->rec_sector = target;
+    return SLIPEST_OK;
+}
+
+/* slot states as the current record and upload imply */
+static void derive_slot_states(slipest_store_t *s)
+{
+    unsigned k;
+    for (k = 0; k < SLIPEST_STORE_N_SLOTS; ++k) {
+        s->slot_state[k] = SLIPEST_SLOT_EMPTY;
+    }
+    if (s->have_model != 0u) {
+        s->slot_state[(unsigned)s->rec.active] = SLIPEST_SLOT_ACTIVE;
+    }
+    if (s->rec.seq != 0u && s->rec.prev != NO_SLOT) {
+        s->slot_state[(unsigned)s->rec.prev] = SLIPEST_SLOT_PREVIOUS;
+    }
+}
+
+/* ------------------------------------------------------------------ public API */
+slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t *nvm, const uint8_t *key,
+                                    size_t key_len)
+{
+    slipest_store_record_t cand[2];
+    int valid[2];
+    unsigned k, order[2];
+    uint8_t raw[SLIPEST_STORE_RECORD_SIZE];
+    slipest_status_t st = SLIPEST_E_STATE;
+
+    if (store == NULL || nvm == NULL || nvm->read == NULL || nvm->write == NULL || nvm->erase == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (nvm->sector_size < SLIPEST_STORE_SECTOR_MIN || nvm->sector_size > SLIPEST_STORE_SECTOR_MAX ||
+        nvm->n_sectors < SLIPEST_STORE_NVM_SECTORS(nvm->sector_size) || (key != NULL && key_len == 0u)) {
+        return SLIPEST_E_RANGE;
+    }
+    memset(store, 0, sizeof *store);
+    store->nvm = *nvm;
+    store->key = key;
+    store->key_len = key != NULL ? key_len : 0u;
+    store->slot_sectors = SLIPEST_STORE_SLOT_SECTORS(nvm->sector_size);
+    store->rec.active = NO_SLOT;
+    store->rec.prev = NO_SLOT;
+    store->upload_slot = NO_SLOT;
+
+    for (k = 0; k < 2u; ++k) {
+        valid[k] = 0;
+        memset(&cand[k], 0, sizeof cand[k]);
+        if (nvm_read(store, k * nvm->sector_size, raw, sizeof raw) == SLIPEST_OK) {
+            valid[k] = record_decode(raw, &cand[k]);
+            if ((valid[k] == 0) && (raw[0] != 0xFFu)) { /* torn or corrupt, not blank */
+                store->c.boot_fallbacks++;
+            }
+        } else {
+            st = SLIPEST_E_NVM;
+        }
+    }
+    /* newest first; a record whose active slot no longer validates gives way to the older one */
+    order[0] = 0u;
+    if ((valid[1] != 0) && ((valid[0] == 0) || (cand[1].seq > cand[0].seq))) {
+        order[0] = 1u;
+    }
+    order[1] = 1u - order[0];
+    for (k = 0; k < 2u; ++k) {
+        unsigned r = order[k];
+        if (valid[r] == 0) {
+            continue;
+        }
+        store->rec = cand[r];
+        store->rec_sector = (uint8_t)r;
+        if (load_slot(store, (unsigned)cand[r].active) == SLIPEST_OK) {
+            st = SLIPEST_OK;
+            break;
+        }
+        store->c.boot_fallbacks++;
+    }
+    if (st != SLIPEST_OK && store->have_model == 0u) {
+        /* no record validates: keep the newest valid one (if any) only to place the next record */
+        if (valid[order[0]] != 0) {
+            store->rec = cand[order[0]];
+            store->rec_sector = (uint8_t)order[0];
+        }
+    }
+    derive_slot_states(store);
+    if (store->have_model == 0u) {
+        unsigned j;
+        for (j = 0; j < SLIPEST_STORE_N_SLOTS; ++j) {
+            store->slot_state[j] = SLIPEST_SLOT_EMPTY;
+        }
+    }
+    return st;
+}
+
+slipest_status_t slipest_store_begin(slipest_store_t *store, uint32_t total_len, uint32_t flags)
+{
+    unsigned slot, k;
+    slipest_status_t st;
+    if (store == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (store->upload == SLIPEST_UPLOAD_RECEIVING) {
+        return SLIPEST_E_STATE;
+    }
+    if (flags != 0u) {
+        return SLIPEST_E_RANGE;
+    }
+    if (total_len < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE || total_len > SLIPEST_IMAGE_MAX_SIZE) {
+        store->c.refused_length++;
+        return SLIPEST_E_LENGTH;
+    }
+    /* the inactive slot: never the one the newest record names active */
+    slot = 0u;
+    if ((store->rec.seq != 0u) && (store->rec.active == 0)) {
+        slot = 1u;
+    }
+    store->upload = SLIPEST_UPLOAD_IDLE;
+    store->upload_slot = (int8_t)slot;
+    store->slot_state[slot] = SLIPEST_SLOT_RECEIVING; /* the rollback target, if it was one, is gone */
+    for (k = 0; k < store->slot_sectors; ++k) {
+        st = nvm_erase(store, slot_addr(store, slot) + k * store->nvm.sector_size);
+        if (st != SLIPEST_OK) {
+            store->slot_state[slot] = SLIPEST_SLOT_EMPTY;
+            store->upload_slot = NO_SLOT;
+            store->c.uploads_aborted++;
+            return st;
+        }
+    }
+    store->total_len = total_len;
+    store->received = 0u;
+    store->buf_fill = 0u;
+    store->upload = SLIPEST_UPLOAD_RECEIVING;
+    store->c.uploads_started++;
+    return SLIPEST_OK;
+}
+
+static void upload_failed(slipest_store_t *s, slipest_slot_state_t state)
+{
+    s->slot_state[(unsigned)s->upload_slot] = state;
+    s->upload = SLIPEST_UPLOAD_IDLE;
+    s->upload_slot = NO_SLOT;
+}
+
+slipest_status_t slipest_store_write(slipest_store_t *store, uint32_t offset, const uint8_t *data, size_t len)
+{
+    size_t i;
+    uint32_t S;
+    slipest_status_t st;
+    if (store == NULL || (data == NULL && len > 0u)) {
+        return SLIPEST_E_NULL;
+    }
+    if (store->upload != SLIPEST_UPLOAD_RECEIVING) {
+        return SLIPEST_E_STATE;
+    }
+    if (offset != store->received) {
+        return SLIPEST_E_ORDER;
+    }
+    if (len > (size_t)(store->total_len - store->received)) {
+        return SLIPEST_E_LENGTH;
+    }
+    S = store->nvm.sector_size;
+    for (i = 0; i < len; ++i) { /* len <= total_len <= SLIPEST_IMAGE_MAX_SIZE */
+        store->buf[store->buf_fill] = data[i];
+        store->buf_fill += 1u;
+        store->received += 1u;
+        if (store->buf_fill == S) {
+            st = nvm_write(store, slot_addr(store, (unsigned)store->upload_slot) + (store->received - S), store->buf);
+            if (st != SLIPEST_OK) {
+                store->c.uploads_aborted++;
+                upload_failed(store, SLIPEST_SLOT_EMPTY);
+                return st;
+            }
+            store->buf_fill = 0u;
+        }
+    }
+    return SLIPEST_OK;
+}
+
+slipest_status_t slipest_store_finish(slipest_store_t *store)
+{
+    uint32_t crc = 0u, S;
+    unsigned slot;
+    slipest_status_t st;
+    if (store == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (store->upload != SLIPEST_UPLOAD_RECEIVING) {
+        return SLIPEST_E_STATE;
+    }
+    slot = (unsigned)store->upload_slot;
+    if (store->received != store->total_len) {
+        store->c.refused_length++;
+        upload_failed(store, SLIPEST_SLOT_INVALID);
+        return SLIPEST_E_LENGTH;
+    }
+    S = store->nvm.sector_size;
+    if (store->buf_fill > 0u) { /* the last, partial sector, padded as erased flash reads */
+        memset(store->buf + store->buf_fill, 0xFF, S - store->buf_fill);
+        st = nvm_write(store, slot_addr(store, slot) + (store->received - store->buf_fill), store->buf);
+        if (st != SLIPEST_OK) {
+            store->c.uploads_aborted++;
+            upload_failed(store, SLIPEST_SLOT_EMPTY);
+            return st;
+        }
+        store->buf_fill = 0u;
+    }
+    st = walk_slot(store, slot, store->total_len, 0, &crc);
+    if (st == SLIPEST_OK) {
+        uint8_t hdr[SLIPEST_IMAGE_HEADER_SIZE];
+        st = nvm_read(store, slot_addr(store, slot), hdr, sizeof hdr);
+        store->ready.version = get_le32(&hdr[34]);
+        store->ready.hash32 = get_le32(&hdr[38]);
+        /* anti-rollback: only a newer model replaces the active one (rollback is its own command) */
+        if (st == SLIPEST_OK && store->have_model != 0u && store->ready.version <= store->mq.version) {
+            st = SLIPEST_E_STALE;
+        }
+    }
+    if (st != SLIPEST_OK) {
+        count_refusal(store, st);
+        upload_failed(store, SLIPEST_SLOT_INVALID);
+        return st;
+    }
+    store->ready.state = SLIPEST_SLOT_READY;
+    store->ready.length = store->total_len;
+    store->ready_crc = crc;
+    store->slot_state[slot] = SLIPEST_SLOT_READY;
+    store->upload = SLIPEST_UPLOAD_READY;
+    store->c.images_accepted++;
+    return SLIPEST_OK;
+}
+
+/* Commit r (which makes slot new_active active) and load that slot into RAM. */
+static slipest_status_t switch_to(slipest_store_t *s, const slipest_store_record_t *r)
+{
+    slipest_status_t st;
+    int8_t old = NO_SLOT;
+    if (s->have_model != 0u) {
+        old = s->rec.active;
+    }
+    st = record_commit(s, r);
+    if (st != SLIPEST_OK) return st; /* the old record stands: nothing changed */
+    st = load_slot(s, (unsigned)r->active);
+    if (st != SLIPEST_OK && old != NO_SLOT && load_slot(s, (unsigned)old) == SLIPEST_OK) {
+        /* committed but unreadable now: serve the previous model (its slot is intact); the
+         * record on NVM decides at the next boot. Only the RAM copy of the record says so. */
+        s->rec.active = old;
+        s->rec.prev = r->active;
+    }
+    derive_slot_states(s);
+    return st;
+}
+
+slipest_status_t slipest_store_activate(slipest_store_t *store)
+{
+    slipest_store_record_t r;
+    unsigned slot;
+    slipest_status_t st;
+    if (store == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (store->upload != SLIPEST_UPLOAD_READY) {
+        return SLIPEST_E_STATE;
+    }
+    slot = (unsigned)store->upload_slot;
+    r = store->rec;
+    r.seq = store->rec.seq + 1u;
+    r.prev = NO_SLOT;
+    if (store->have_model != 0u) {
+        r.prev = store->rec.active;
+    }
+    r.active = (int8_t)slot;
+    r.length[slot] = store->ready.length;
+    r.crc[slot] = store->ready_crc;
+    r.version[slot] = store->ready.version;
+    r.hash32[slot] = store->ready.hash32;
+    if (r.prev == NO_SLOT) {
+        unsigned other = 1u - slot;
+        r.length[other] = 0u;
+        r.crc[other] = 0u;
+        r.version[other] = 0u;
+        r.hash32[other] = 0u;
+    }
+    st = switch_to(store, &r);
+    if (st == SLIPEST_E_NVM && store->rec.seq != r.seq) return st; /* record not written: still READY */
+    store->upload = SLIPEST_UPLOAD_IDLE;
+    store->upload_slot = NO_SLOT;
+    if (st == SLIPEST_OK) {
+        store->c.activations++;
+    }
+    return st;
+}
+
+slipest_status_t slipest_store_rollback(slipest_store_t *store)
+{
+    slipest_store_record_t r;
+    unsigned prev;
+    uint32_t crc = 0u;
+    slipest_status_t st;
+    if (store == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (store->upload != SLIPEST_UPLOAD_IDLE || store->have_model == 0u || store->rec.prev == NO_SLOT) {
+        return SLIPEST_E_STATE;
+    }
+    prev = (unsigned)store->rec.prev;
+    if (store->slot_state[prev] != SLIPEST_SLOT_PREVIOUS) {
+        return SLIPEST_E_STATE;
+    }
+    st = walk_slot(store, prev, store->rec.length[prev], 0, &crc);
+    if (st == SLIPEST_OK && crc != store->rec.crc[prev]) {
+        st = SLIPEST_E_CRC;
+    }
+    if (st != SLIPEST_OK) {
+        if (st != SLIPEST_E_NVM) {
+            store->slot_state[prev] = SLIPEST_SLOT_INVALID;
+        }
+        return st;
+    }
+    r = store->rec;
+    r.seq = store->rec.seq + 1u;
+    r.active = (int8_t)prev;
+    r.prev = store->rec.active;
+    st = switch_to(store, &r);
+    if (st == SLIPEST_OK) {
+        store->c.rollbacks++;
+    }
+    return st;
+}
+
+slipest_status_t slipest_store_abort(slipest_store_t *store)
+{
+    if (store == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (store->upload == SLIPEST_UPLOAD_IDLE) {
+        return SLIPEST_E_STATE;
+    }
+    store->c.uploads_aborted++;
+    upload_failed(store, SLIPEST_SLOT_EMPTY);
+    return SLIPEST_OK;
+}
+
+const slipest_model_q_t *slipest_store_model_q(const slipest_store_t *store)
+{
+    return (store == NULL || store->have_model == 0u) ? NULL : &store->mq;
+}
+
+#ifndef SLIPEST_Q_ONLY
+const slipest_model_f32_t *slipest_store_model_f32(const slipest_store_t *store)
+{
+    return (store == NULL || store->have_model == 0u || store->have_f32 == 0u) ? NULL : &store->mf;
+}
+#endif
+
+uint32_t slipest_store_active_version(const slipest_store_t *store)
+{
+    return (store == NULL || store->have_model == 0u) ? 0u : store->mq.version;
+}
+
+uint32_t slipest_store_active_hash32(const slipest_store_t *store)
+{
+    return (store == NULL || store->have_model == 0u) ? 0u : store->mq.hash32;
+}
+
+const uint8_t *slipest_store_active_sha256(const slipest_store_t *store)
+{
+    return (store == NULL || store->have_model == 0u) ? NULL : store->sha256;
+}
+
+int slipest_store_active_slot(const slipest_store_t *store)
+{
+    return (store == NULL || store->have_model == 0u) ? SLIPEST_STORE_NO_SLOT : (int)store->rec.active;
+}
+
+slipest_status_t slipest_store_slot_info(const slipest_store_t *store, unsigned slot, slipest_slot_info_t *info)
+{
+    if (store == NULL || info == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (slot >= SLIPEST_STORE_N_SLOTS) {
+        return SLIPEST_E_RANGE;
+    }
+    info->state = store->slot_state[slot];
+    if (info->state == SLIPEST_SLOT_READY) {
+        *info = store->ready;
+    } else if (info->state == SLIPEST_SLOT_ACTIVE || info->state == SLIPEST_SLOT_PREVIOUS) {
+        info->length = store->rec.length[slot];
+        info->version = store->rec.version[slot];
+        info->hash32 = store->rec.hash32[slot];
+    } else {
+        info->length = 0u;
+        info->version = 0u;
+        info->hash32 = 0u;
+    }
+    return SLIPEST_OK;
+}
+
+slipest_upload_state_t slipest_store_upload_state(const slipest_store_t *store)
+{
+    return store == NULL ? SLIPEST_UPLOAD_IDLE : store->upload;
+}
+
+const slipest_store_counters_t *slipest_store_counters(const slipest_store_t *store)
+{
+    return store == NULL ? NULL : &store->c;
+}

@@ -1,0 +1,475 @@
+/* C unit tests of the CANopen node (slipest_co.h) with the model store on a RAM NVM: NMT,
+ * heartbeat, every SDO service and its abort codes, block download (CRC, sequence errors,
+ * lengths), activation / rollback / abort commands, PDOs and EMCY. */
+#include <stdio.h>
+#include <string.h>
+
+#include "check.h"
+#include "slipest_bundle.h"
+#include "slipest_co.h"
+#include "slipest_store.h"
+
+#define ID 5u
+#define SECTOR 256u
+
+static uint8_t mem[SLIPEST_STORE_NVM_SECTORS(SECTOR) * SECTOR];
+static int nvm_fail;
+static slipest_store_t store;
+static slipest_co_t co;
+static slipest_frame_t out[SLIPEST_CO_MAX_OUT];
+static int n;
+static uint32_t now;
+static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
+static size_t img_len;
+
+static slipest_status_t m_read(void *c, uint32_t a, uint8_t *b, uint32_t l)
+{
+    (void)c;
+    memcpy(b, &mem[a], l);
+    return SLIPEST_OK;
+}
+static slipest_status_t m_write(void *c, uint32_t a, const uint8_t *b, uint32_t l)
+{
+    (void)c;
+    if (nvm_fail) return SLIPEST_E_NVM;
+    memcpy(&mem[a], b, l);
+    return SLIPEST_OK;
+}
+static slipest_status_t m_erase(void *c, uint32_t a)
+{
+    (void)c;
+    if (nvm_fail) return SLIPEST_E_NVM;
+    memset(&mem[a], 0xFF, SECTOR);
+    return SLIPEST_OK;
+}
+
+static void send(uint32_t id, uint8_t dlc, const uint8_t *d)
+{
+    slipest_frame_t f;
+    f.id = id;
+    f.dlc = dlc;
+    memset(f.data, 0, 8);
+    if (dlc > 0u) memcpy(f.data, d, dlc);
+    n = slipest_co_handle(&co, &f, now, out, SLIPEST_CO_MAX_OUT);
+}
+
+static void sdo8(uint8_t b0, uint16_t index, uint8_t sub, uint32_t v)
+{
+    uint8_t d[8] = {b0, (uint8_t)index, (uint8_t)(index >> 8), sub, (uint8_t)v, (uint8_t)(v >> 8), (uint8_t)(v >> 16),
+                    (uint8_t)(v >> 24)};
+    send(0x600u + ID, 8u, d);
+}
+
+static uint32_t le32(const uint8_t *p) { return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24; }
+
+/* abort code of the last answer, 0 when it was not an abort */
+static uint32_t aborted(void) { return (n >= 1 && out[0].id == 0x580u + ID && out[0].data[0] == 0x80u) ? le32(&out[0].data[4]) : 0u; }
+
+/* expedited read: the value, or the abort code | 0x80000000 marker via *code */
+static uint32_t rd(uint16_t index, uint8_t sub, uint32_t *code)
+{
+    sdo8(0x40u, index, sub, 0u);
+    *code = aborted();
+    return le32(&out[0].data[4]);
+}
+
+static uint32_t wr(uint16_t index, uint8_t sub, uint32_t v, unsigned bytes)
+{
+    sdo8((uint8_t)(0x23u | ((4u - bytes) << 2)), index, sub, v);
+    return aborted();
+}
+
+static uint16_t crc16(uint16_t crc, const uint8_t *d, size_t len)
+{
+    size_t i;
+    int b;
+    for (i = 0; i < len; i++) {
+        crc ^= (uint16_t)(d[i] << 8);
+        for (b = 0; b < 8; b++) crc = (crc & 0x8000u) ? (uint16_t)((crc << 1) ^ 0x1021u) : (uint16_t)(crc << 1);
+    }
+    return crc;
+}
+
+/* block download of data (len bytes, announced size `size`); skip_seq > 0 drops that segment once;
+ * bad_crc corrupts the end CRC. Returns the abort code of the end (0 = accepted). */
+static uint32_t block(const uint8_t *data, size_t len, uint32_t size, unsigned skip_seq, int bad_crc)
+{
+    size_t off = 0;
+    unsigned seq = 0, total = 0;
+    uint16_t crc;
+    int skipped = 0;
+    sdo8(0xC6u, 0x2000u, 0u, size);
+    if (aborted() != 0u) return aborted();
+    CHECK(out[0].data[0] == 0xA4u && out[0].data[4] == SLIPEST_CO_BLKSIZE);
+    while (off < len) {
+        uint8_t d[8] = {0};
+        size_t k = len - off < 7u ? len - off : 7u;
+        seq++;
+        total++;
+        d[0] = (uint8_t)(seq | (off + k >= len ? 0x80u : 0u));
+        memcpy(&d[1], data + off, k);
+        if (skip_seq != 0u && total == skip_seq && !skipped) {
+            skipped = 1; /* lost on the bus */
+        } else {
+            send(0x600u + ID, 8u, d);
+            if (aborted() != 0u) return aborted();
+        }
+        if (seq == SLIPEST_CO_BLKSIZE || off + k >= len) {
+            if (n == 1 && out[0].data[0] == 0xA2u && out[0].data[1] != seq) {
+                /* sequence error: repeat from the segment after the acknowledged one */
+                off -= (size_t)(seq - 1u - out[0].data[1]) * 7u;
+                seq = 0;
+                continue;
+            }
+            CHECK(n == 1 && out[0].data[0] == 0xA2u && out[0].data[1] == seq);
+            seq = 0;
+        } else {
+            CHECK(n == 0);
+        }
+        off += k;
+    }
+    crc = crc16(0u, data, len);
+    {
+        uint8_t d[8] = {0};
+        size_t last = len % 7u == 0u ? 7u : len % 7u;
+        d[0] = (uint8_t)(0xC1u | ((7u - last) << 2));
+        d[1] = (uint8_t)(crc ^ (bad_crc ? 0x5Au : 0u));
+        d[2] = (uint8_t)(crc >> 8);
+        send(0x600u + ID, 8u, d);
+    }
+    if (aborted() != 0u) return aborted();
+    CHECK(out[0].data[0] == 0xA1u);
+    return 0u;
+}
+
+/* segmented download of data into 0x2000; toggle_error flips the toggle of the 3rd segment */
+static uint32_t segmented(const uint8_t *data, size_t len, int toggle_error)
+{
+    size_t off = 0;
+    unsigned t = 0, k = 0;
+    sdo8(0x21u, 0x2000u, 0u, (uint32_t)len);
+    if (aborted() != 0u) return aborted();
+    while (off < len) {
+        uint8_t d[8] = {0};
+        size_t m = len - off < 7u ? len - off : 7u;
+        unsigned tt = (++k == 3u && toggle_error) ? (t ^ 1u) : t;
+        d[0] = (uint8_t)((tt << 4) | ((7u - m) << 1) | (off + m >= len ? 1u : 0u));
+        memcpy(&d[1], data + off, m);
+        send(0x600u + ID, 8u, d);
+        if (aborted() != 0u) return aborted();
+        CHECK(out[0].data[0] == (uint8_t)(0x20u | (t << 4)));
+        t ^= 1u;
+        off += m;
+    }
+    return 0u;
+}
+
+static void put_version(uint8_t *im, uint32_t v)
+{
+    im[34] = (uint8_t)v;
+    im[35] = (uint8_t)(v >> 8);
+    im[36] = (uint8_t)(v >> 16);
+    im[37] = (uint8_t)(v >> 24);
+}
+
+static void fix_crc(uint8_t *im, size_t len)
+{
+    uint32_t c = slipest_crc32(im, len - SLIPEST_IMAGE_TRAILER_SIZE);
+    uint8_t *p = im + len - SLIPEST_IMAGE_TRAILER_SIZE;
+    p[0] = (uint8_t)c;
+    p[1] = (uint8_t)(c >> 8);
+    p[2] = (uint8_t)(c >> 16);
+    p[3] = (uint8_t)(c >> 24);
+}
+
+static int emcy_in_out(uint16_t code)
+{
+    int i;
+    for (i = 0; i < n; i++) {
+        if (out[i].id == 0x080u + ID && (uint16_t)(out[i].data[0] | out[i].data[1] << 8) == code) return 1;
+    }
+    return 0;
+}
+
+int main(void)
+{
+    slipest_nvm_t nvm = {m_read, m_write, m_erase, SECTOR, SLIPEST_STORE_NVM_SECTORS(SECTOR), NULL};
+    uint32_t code, v;
+    uint8_t bad[SLIPEST_IMAGE_MAX_SIZE];
+    FILE *fp = fopen(SLIPEST_TEST_IMAGE, "rb");
+    CHECK(fp != NULL);
+    if (fp == NULL) CHECK_DONE();
+    img_len = fread(img, 1, sizeof img, fp);
+    fclose(fp);
+    put_version(img, 3u); /* newer than the built-in model */
+    fix_crc(img, img_len);
+    memset(mem, 0xFF, sizeof mem);
+    CHECK(slipest_store_open(&store, &nvm, NULL, 0u) == SLIPEST_E_STATE);
+
+    /* init and NMT */
+    CHECK(slipest_co_init(NULL, ID, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 1u) == SLIPEST_E_NULL);
+    CHECK(slipest_co_init(&co, 0u, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 1u) == SLIPEST_E_RANGE);
+    CHECK(slipest_co_init(&co, ID, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 0u) == SLIPEST_E_OVERFLOW);
+    CHECK(slipest_co_init(&co, ID, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 1u) == 1);
+    CHECK(out[0].id == 0x700u + ID && out[0].dlc == 1u && out[0].data[0] == 0u);
+    CHECK(slipest_co_nmt_state(&co) == SLIPEST_CO_NMT_PRE_OPERATIONAL);
+    CHECK(slipest_co_tick(&co, 999u, out, 2u) == 0);
+    CHECK(slipest_co_tick(&co, 1000u, out, 2u) == 1 && out[0].id == 0x700u + ID && out[0].data[0] == 0x7Fu);
+    CHECK(slipest_co_tick(&co, 1000u, out, 1u) == SLIPEST_E_OVERFLOW);
+    send(0u, 2u, (const uint8_t[]){0x01u, 7u}); /* another node's start */
+    CHECK(slipest_co_nmt_state(&co) == SLIPEST_CO_NMT_PRE_OPERATIONAL);
+    send(0u, 2u, (const uint8_t[]){0x01u, 0u}); /* all nodes */
+    CHECK(slipest_co_nmt_state(&co) == SLIPEST_CO_NMT_OPERATIONAL);
+    send(0u, 2u, (const uint8_t[]){0x02u, ID});
+    CHECK(slipest_co_nmt_state(&co) == SLIPEST_CO_NMT_STOPPED);
+    sdo8(0x40u, 0x1000u, 0u, 0u);
+    CHECK(n == 0); /* stopped: no SDO */
+    send(0u, 2u, (const uint8_t[]){0x80u, ID});
+    CHECK(slipest_co_nmt_state(&co) == SLIPEST_CO_NMT_PRE_OPERATIONAL);
+    send(0u, 2u, (const uint8_t[]){0x82u, ID});
+    CHECK(n == 1 && out[0].id == 0x700u + ID && out[0].data[0] == 0u);
+    send(0u, 2u, (const uint8_t[]){0x77u, ID});
+    CHECK(n == 0);
+    CHECK(slipest_co_counter(&co, SLIPEST_CO_CNT_NMT_COMMANDS) == 5u);
+
+    /* expedited reads */
+    CHECK(rd(0x1000u, 0u, &code) == 0u && code == 0u);
+    CHECK(rd(0x1018u, 2u, &code) == SLIPEST_CO_PRODUCT_CODE && code == 0u);
+    CHECK(rd(0x1018u, 4u, &code) == 9u);
+    CHECK(rd(0x1200u, 1u, &code) == 0x600u + ID);
+    CHECK(rd(0x1800u, 1u, &code) == 0x180u + ID);
+    CHECK(rd(0x1A00u, 0u, &code) == 6u);
+    CHECK(rd(0x1017u, 0u, &code) == 1000u);
+    CHECK(rd(0x1001u, 0u, &code) == 0u);
+    CHECK(rd(0x2001u, 1u, &code) == slipest_bundle_model_q()->version);
+    CHECK(rd(0x2001u, 2u, &code) == slipest_model_hash32(slipest_bundle_model_q()));
+    CHECK((rd(0x2001u, 4u, &code) & 0xFFu) == 0xFFu); /* built-in model: no slot */
+    CHECK((rd(0x2001u, 5u, &code) & 0xFFFFu) == slipest_lib_version());
+    (void)rd(0x2001u, 3u, &code);
+    CHECK(code == SLIPEST_CO_ABORT_NO_DATA); /* no sha256 for the built-in model */
+    CHECK((rd(0x2004u, 1u, &code) & 0xFFu) == 0u && code == 0u);
+    CHECK(rd(0x2005u, 1u, &code) == 0u && code == 0u);
+    CHECK((rd(0x2006u, 1u, &code) & 0xFFu) == 0u);
+    (void)rd(0x3000u, 0u, &code);
+    CHECK(code == SLIPEST_CO_ABORT_NO_OBJECT);
+    (void)rd(0x1018u, 7u, &code);
+    CHECK(code == SLIPEST_CO_ABORT_NO_SUB);
+    (void)rd(0x2000u, 0u, &code);
+    CHECK(code == SLIPEST_CO_ABORT_WRITE_ONLY);
+    (void)rd(0x2002u, 1u, &code);
+    CHECK(code == SLIPEST_CO_ABORT_WRITE_ONLY);
+    sdo8(0xA0u, 0x2000u, 0u, 0u); /* block upload: not supported */
+    CHECK(aborted() == SLIPEST_CO_ABORT_COMMAND);
+    sdo8(0x60u, 0x1000u, 0u, 0u); /* upload segment without a transfer */
+    CHECK(aborted() == SLIPEST_CO_ABORT_COMMAND);
+    send(0x600u + ID, 4u, (const uint8_t[]){0x40u, 0u, 0x10u, 0u});
+    CHECK(n == 0); /* not an SDO frame */
+
+    /* writes */
+    CHECK(wr(0x1017u, 0u, 50u, 2u) == 0u && rd(0x1017u, 0u, &code) == 50u);
+    CHECK(wr(0x1017u, 0u, 50u, 4u) == SLIPEST_CO_ABORT_TOO_HIGH);
+    CHECK(wr(0x1017u, 0u, 50u, 1u) == SLIPEST_CO_ABORT_TOO_LOW);
+    CHECK(wr(0x1018u, 1u, 1u, 4u) == SLIPEST_CO_ABORT_READ_ONLY);
+    CHECK(wr(0x2003u, 1u, 1u, 4u) == SLIPEST_CO_ABORT_READ_ONLY);
+    CHECK(wr(0x2100u, 2u, 0x1234u, 2u) == 0u && rd(0x2100u, 2u, &code) == 0x1234u);
+    CHECK(wr(0x2002u, 1u, 2u, 1u) == SLIPEST_CO_ABORT_VALUE);
+    CHECK(wr(0x2002u, 1u, 1u, 1u) == SLIPEST_CO_ABORT_STATE); /* nothing to activate */
+    CHECK(wr(0x2002u, 2u, 1u, 1u) == SLIPEST_CO_ABORT_STATE); /* nothing to roll back to */
+    CHECK(wr(0x2002u, 3u, 1u, 1u) == SLIPEST_CO_ABORT_STATE); /* no upload open */
+    CHECK(wr(0x2000u, 0u, 1u, 4u) == SLIPEST_CO_ABORT_TOO_LOW); /* an image is never expedited */
+    sdo8(0x20u, 0x1017u, 0u, 0u); /* segmented, size not indicated */
+    CHECK(aborted() == SLIPEST_CO_ABORT_LENGTH);
+    sdo8(0x21u, 0x1017u, 0u, 2u); /* segmented download of a small value */
+    CHECK(aborted() == 0u);
+    send(0x600u + ID, 8u, (const uint8_t[]){0x0Bu, 0x64u, 0u, 0u, 0u, 0u, 0u, 0u}); /* 2 bytes, last */
+    CHECK(aborted() == 0u && rd(0x1017u, 0u, &code) == 100u);
+    sdo8(0x21u, 0x1017u, 0u, 9u);
+    CHECK(aborted() == SLIPEST_CO_ABORT_TOO_HIGH);
+    sdo8(0x00u, 0x1017u, 0u, 0u); /* download segment without a transfer */
+    CHECK(aborted() == SLIPEST_CO_ABORT_COMMAND);
+
+    /* model image: sizes, block download with a lost segment (repeated), CRC, activation */
+    CHECK(block(img, img_len, SLIPEST_IMAGE_MAX_SIZE + 1u, 0u, 0) == SLIPEST_CO_ABORT_TOO_HIGH);
+    CHECK(block(img, img_len, 10u, 0u, 0) == SLIPEST_CO_ABORT_TOO_LOW);
+    sdo8(0xC4u, 0x2000u, 0u, 0u); /* size not indicated */
+    CHECK(aborted() == SLIPEST_CO_ABORT_LENGTH);
+    sdo8(0xC6u, 0x1017u, 0u, 2u); /* block download of a small value */
+    CHECK(aborted() == SLIPEST_CO_ABORT_UNSUPPORTED);
+    CHECK(block(img, img_len, (uint32_t)img_len, 0u, 1) == SLIPEST_CO_ABORT_CRC);
+    CHECK(slipest_store_counters(&store)->uploads_aborted == 1u);
+    CHECK(block(img, img_len, (uint32_t)img_len, 40u, 0) == 0u);
+    CHECK(slipest_co_counter(&co, SLIPEST_CO_CNT_BLOCK_SEQUENCE_ERRORS) == 1u);
+    CHECK((rd(0x2006u, 1u, &code) & 0xFFu) == 2u); /* READY */
+    CHECK(rd(0x2006u, 3u, &code) == img_len);
+    CHECK(wr(0x2002u, 1u, 1u, 1u) == 0u);
+    CHECK(rd(0x2001u, 1u, &code) == 3u && (rd(0x2001u, 4u, &code) & 0xFFu) <= 1u);
+    sdo8(0x40u, 0x2001u, 3u, 0u); /* sha256: segmented upload, 32 bytes */
+    CHECK(out[0].data[0] == 0x41u && le32(&out[0].data[4]) == 32u);
+    v = 0;
+    {
+        unsigned t = 0;
+        int last = 0;
+        while (!last && v < 10u) {
+            sdo8((uint8_t)(0x60u | (t << 4)), 0u, 0u, 0u);
+            last = out[0].data[0] & 1u;
+            CHECK(((out[0].data[0] >> 4) & 1u) == t);
+            t ^= 1u;
+            v++;
+        }
+        CHECK(v == 5u && memcmp(&out[0].data[1], slipest_store_active_sha256(&store) + 28, 4) == 0);
+    }
+    sdo8(0x40u, 0x2001u, 3u, 0u);
+    sdo8(0x70u, 0u, 0u, 0u); /* wrong toggle */
+    CHECK(aborted() == SLIPEST_CO_ABORT_TOGGLE);
+
+    /* refusals: stale version (segmented), bad CRC-32 in the image, toggle error, client abort, timeout */
+    CHECK(segmented(img, img_len, 0) == SLIPEST_CO_ABORT_STORE);
+    CHECK(emcy_in_out(SLIPEST_CO_EMCY_DATA_SET) && (rd(0x1001u, 0u, &code) & 0x81u) == 0x81u);
+    CHECK(slipest_store_counters(&store)->refused_version == 1u);
+    memcpy(bad, img, img_len);
+    put_version(bad, 4u);
+    bad[100] ^= 1u; /* after the CRC was computed */
+    CHECK(segmented(bad, img_len, 0) == SLIPEST_CO_ABORT_STORE);
+    CHECK(slipest_store_counters(&store)->refused_crc == 1u);
+    fix_crc(bad, img_len);
+    CHECK(segmented(bad, img_len, 1) == SLIPEST_CO_ABORT_TOGGLE);
+    sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
+    sdo8(0x80u, 0x2000u, 0u, 0x08000000u); /* the client aborts */
+    CHECK(n == 0 && slipest_co_counter(&co, SLIPEST_CO_CNT_SDO_ABORTS_RECEIVED) == 1u);
+    now = 5000u;
+    sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
+    CHECK(slipest_co_tick(&co, now + SLIPEST_CO_SDO_TIMEOUT_MS, out, 2u) >= 1);
+    CHECK(out[0].data[0] == 0x80u || out[1].data[0] == 0x80u);
+    /* NVM failure while opening an upload */
+    nvm_fail = 1;
+    CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == SLIPEST_CO_ABORT_HARDWARE);
+    CHECK(emcy_in_out(SLIPEST_CO_EMCY_HARDWARE));
+    nvm_fail = 0;
+    /* a good version 4: block download, activate (error register cleared, EMCY reset), rollback, abort */
+    CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == 0u);
+    CHECK(wr(0x2002u, 1u, 1u, 1u) == 0u && emcy_in_out(SLIPEST_CO_EMCY_RESET));
+    CHECK(rd(0x1001u, 0u, &code) == 0u && rd(0x2001u, 1u, &code) == 4u);
+    CHECK(wr(0x2002u, 2u, 1u, 1u) == 0u && rd(0x2001u, 1u, &code) == 3u);
+    CHECK(block(img, img_len, (uint32_t)img_len, 0u, 0) == SLIPEST_CO_ABORT_STORE); /* 3 is active: stale */
+    put_version(bad, 5u);
+    fix_crc(bad, img_len);
+    CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == 0u);
+    CHECK(wr(0x2002u, 3u, 1u, 1u) == 0u); /* abandon the validated upload */
+    CHECK((rd(0x2006u, 1u, &code) & 0xFFu) == 0u && wr(0x2002u, 1u, 1u, 1u) == SLIPEST_CO_ABORT_STATE);
+
+    /* protocol errors */
+    sdo8(0xC1u, 0u, 0u, 0u); /* end of a block download that never started */
+    CHECK(aborted() == SLIPEST_CO_ABORT_COMMAND);
+    sdo8(0x21u, 0x1017u, 0u, 2u);
+    send(0x600u + ID, 8u, (const uint8_t[]){0x01u, 1, 2, 3, 4, 5, 6, 7}); /* 7 bytes for a 2-byte value */
+    CHECK(aborted() == SLIPEST_CO_ABORT_TOO_HIGH);
+    sdo8(0xC6u, 0x2000u, 0u, 100u);
+    {
+        unsigned k;
+        uint8_t d[8] = {0};
+        for (k = 1; k <= 15u && aborted() == 0u; k++) {
+            d[0] = (uint8_t)k; /* never flagged last: more than 100 bytes */
+            send(0x600u + ID, 8u, d);
+        }
+        CHECK(aborted() == SLIPEST_CO_ABORT_TOO_HIGH && k == 16u);
+    }
+    put_version(bad, 6u);
+    fix_crc(bad, img_len);
+    {
+        /* a whole image, then an end request with the wrong count of unused bytes, then a bad command */
+        size_t off = 0;
+        unsigned seq = 0;
+        sdo8(0xC6u, 0x2000u, 0u, (uint32_t)img_len);
+        while (off < img_len) {
+            uint8_t d[8] = {0};
+            size_t k = img_len - off < 7u ? img_len - off : 7u;
+            seq = seq % SLIPEST_CO_BLKSIZE + 1u;
+            d[0] = (uint8_t)(seq | (off + k >= img_len ? 0x80u : 0u));
+            memcpy(&d[1], bad + off, k);
+            send(0x600u + ID, 8u, d);
+            off += k;
+        }
+        sdo8(0xC3u, 0u, 0u, 0u);
+        CHECK(aborted() == SLIPEST_CO_ABORT_COMMAND);
+        CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == 0u && wr(0x2002u, 3u, 1u, 1u) == 0u);
+    }
+    {
+        /* the NVM fails in the middle of an upload */
+        size_t off = 0;
+        unsigned t = 0;
+        sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
+        nvm_fail = 1;
+        while (off < img_len && aborted() == 0u) {
+            uint8_t d[8] = {0};
+            d[0] = (uint8_t)(t << 4);
+            memcpy(&d[1], bad + off, 7);
+            send(0x600u + ID, 8u, d);
+            t ^= 1u;
+            off += 7u;
+        }
+        nvm_fail = 0;
+        CHECK(aborted() == SLIPEST_CO_ABORT_HARDWARE && off <= 2u * SECTOR);
+    }
+
+    /* PDOs: pre-operational ignores them; operational: a wrong length gives one EMCY; one window */
+    send(0x200u + ID, 6u, (const uint8_t[]){0, 0, 1, 0, 2, 0});
+    CHECK(n == 0 && slipest_co_counter(&co, SLIPEST_CO_CNT_RPDO_RECEIVED) == 0u);
+    send(0u, 2u, (const uint8_t[]){0x01u, ID});
+    send(0x200u + ID, 5u, (const uint8_t[]){0, 0, 1, 0, 2});
+    CHECK(n == 1 && emcy_in_out(SLIPEST_CO_EMCY_PDO_LENGTH));
+    send(0x200u + ID, 5u, (const uint8_t[]){0, 0, 1, 0, 2});
+    CHECK(n == 0); /* once per episode */
+    {
+        unsigned k;
+        int windows = 0, status = 0;
+        for (k = 0; k < 1000u; k++) {
+            uint8_t d[8] = {(uint8_t)k, (uint8_t)(k >> 8), (uint8_t)(k % 7u), 0, 3, 0, 0, 0};
+            int i;
+            send(0x200u + ID, 6u, d);
+            send(0x300u + ID, 8u, d);
+            send(0x400u + ID, 6u, d);
+            for (i = 0; i < n; i++) {
+                windows += out[i].id == 0x180u + ID;
+                if (out[i].id == 0x480u + ID) {
+                    status++;
+                    CHECK(le32(&out[i].data[0]) == slipest_store_active_hash32(&store) && le32(&out[i].data[4]) == 3u);
+                }
+                CHECK(out[i].id != 0x301u && out[i].id != 0x302u); /* no DBC status frame on a CANopen bus */
+            }
+        }
+        CHECK(windows == 10 && status == 1);
+        CHECK(slipest_co_counter(&co, SLIPEST_CO_CNT_WINDOWS_DONE) == 10u);
+        CHECK(rd(0x2110u, 1u, &code) == 9u); /* last TPDO1 payload: window counter 9 */
+    }
+    {
+        /* every counter, slot field, store counter and upload field reads back (values checked above) */
+        static const struct {
+            uint16_t index;
+            uint8_t subs;
+        } recs[] = {{0x2003u, 13u}, {0x2004u, 8u}, {0x2005u, 15u}, {0x2006u, 3u}, {0x2110u, 6u}, {0x2111u, 2u},
+                    {0x2112u, 2u}, {0x2113u, 2u}, {0x2101u, 4u}, {0x2001u, 2u}};
+        unsigned r, k;
+        for (r = 0; r < sizeof recs / sizeof recs[0]; r++) {
+            for (k = 1; k <= recs[r].subs; k++) {
+                (void)rd(recs[r].index, (uint8_t)k, &code);
+                CHECK(code == 0u);
+            }
+        }
+        CHECK(rd(0x2003u, 5u, &code) == 10u && rd(0x2003u, 7u, &code) >= 3000u);
+        CHECK(rd(0x2005u, 12u, &code) == 2u && rd(0x2005u, 13u, &code) == 1u); /* activations, rollbacks */
+    }
+    v = slipest_co_counter(&co, SLIPEST_CO_CNT_FRAMES_IGNORED);
+    send(0x181u, 8u, (const uint8_t[8]){0}); /* another node's TPDO: not answered, counted */
+    CHECK(n == 0 && slipest_co_counter(&co, SLIPEST_CO_CNT_FRAMES_IGNORED) == v + 1u);
+    {
+        slipest_frame_t f = {(0x200u + ID) | SLIPEST_FRAME_EXT, 0u, {0}};
+        CHECK(slipest_co_handle(&co, &f, now, out, SLIPEST_CO_MAX_OUT) == 0);
+        CHECK(slipest_co_handle(&co, &f, now, out, 1u) == SLIPEST_E_OVERFLOW);
+        CHECK(slipest_co_handle(NULL, &f, now, out, SLIPEST_CO_MAX_OUT) == SLIPEST_E_NULL);
+    }
+    send(0u, 2u, (const uint8_t[]){0x81u, ID}); /* reset node: counters cleared, slot model kept */
+    CHECK(n == 1 && slipest_co_counter(&co, SLIPEST_CO_CNT_WINDOWS_DONE) == 0u && rd(0x2001u, 1u, &code) == 3u);
+    CHECK(slipest_co_counter(NULL, 0u) == 0u && slipest_co_estimator(&co) != NULL && slipest_co_size() > 0u);
+    CHECK(slipest_co_store_size() == sizeof(slipest_store_t) && slipest_co_max_out() == SLIPEST_CO_MAX_OUT);
+    CHECK_DONE();
+}

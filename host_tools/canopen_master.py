@@ -1,0 +1,209 @@
+"""The master side of the slipest CANopen node, on the python `canopen` library.
+
+`SlipestMaster` is a `canopen.Network` with the node added from its EDS: NMT, heartbeat, SDO
+reads of identity and model, the model upload (SDO block download of the DOMAIN 0x2000),
+activation and rollback, and the estimates decoded from the TPDOs by canopen's own PDO maps.
+`telemetry_rpdos` turns telemetry samples into the RPDO frames the node takes.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import can
+import canopen
+import numpy as np
+
+from ..canopen_od import objects as od
+from .wire.dbc import Frame, telemetry_frames, codec
+
+ACTIVE_MODEL, COMMAND, COUNTERS, SLOTS, STORE_COUNTERS, UPLOAD = (
+    od.IDX_ACTIVE_MODEL, od.IDX_COMMAND, od.IDX_COUNTERS, od.IDX_SLOTS, od.IDX_STORE_COUNTERS, od.IDX_UPLOAD)
+
+# SDO abort codes (CiA 301) by meaning, as the node sends them
+ABORT_NAMES = {
+    0x05030000: "toggle bit not alternated",
+    0x05040000: "SDO protocol timed out",
+    0x05040001: "command specifier not valid",
+    0x05040003: "invalid sequence number",
+    0x05040004: "CRC error (block mode)",
+    0x06010000: "unsupported access",
+    0x06010001: "attempt to read a write-only object",
+    0x06010002: "attempt to write a read-only object",
+    0x06020000: "object does not exist",
+    0x06060000: "hardware error (NVM)",
+    0x06070010: "length does not match",
+    0x06070012: "length too high",
+    0x06070013: "length too low",
+    0x06090011: "sub-index does not exist",
+    0x06090030: "invalid value",
+    0x08000000: "general error",
+    0x08000020: "data cannot be stored (image refused)",
+    0x08000022: "not in the present device state",
+    0x08000024: "no data available",
+}
+
+
+def rpdo_cob_ids(node_id: int) -> dict[str, int]:
+    """DBC telemetry frame name -> RPDO COB-ID of the node (from the object dictionary source)."""
+    out = {}
+    for direction, number, rec in od.PDOS:
+        frame = od.PDO_RECORDS[rec][1]
+        if direction == "rx" and frame is not None:
+            out[frame] = od.pdo_cob_base(direction, number) + node_id
+    return out
+
+
+def telemetry_rpdos(samples_q: np.ndarray, node_id: int, first_counter: int = 0) -> list[Frame]:
+    """RPDO1..3 frames of consecutive int16 samples (n,7): the DBC telemetry bytes on the
+    node's RPDO COB-IDs."""
+    ids = rpdo_cob_ids(node_id)
+    by_dbc_id = {codec(name).frame_id: cob for name, cob in ids.items()}
+    out: list[Frame] = []
+    for k, raw in enumerate(np.asarray(samples_q)):
+        for f in telemetry_frames(first_counter + k, raw):
+            out.append(Frame(by_dbc_id[f.can_id], f.data))
+    return out
+
+
+@dataclass
+class Estimate:
+    window_counter: int
+    slip_class: int
+    slip_class_f32: int
+    flags: int
+    n_samples: int
+    saturations: int
+    logits: tuple[int, int, int]
+
+
+class EstimateCollector:
+    """Windows from TPDO1..3 through canopen's PDO maps (TPDO1 estimate, TPDO2 logits 0/1,
+    TPDO3 logit 2 + window counter), and the model status from TPDO4."""
+
+    def __init__(self, node: canopen.RemoteNode) -> None:
+        self.estimates: list[Estimate] = []
+        self.arrival: list[float] = []  # time.monotonic() of each estimate's last frame
+        self.model_status: list[tuple[int, int]] = []
+        self._head: dict | None = None
+        self._l01: tuple[int, int] | None = None
+        self._lock = threading.Lock()
+        tp = node.tpdo
+        tp[1].add_callback(self._est)
+        tp[2].add_callback(self._logits01)
+        tp[3].add_callback(self._logit2)
+        tp[4].add_callback(self._status)
+
+    @staticmethod
+    def _values(m) -> dict[str, int]:
+        return {v.name.split(".", 1)[1]: v.raw for v in m.map}
+
+    def _est(self, m) -> None:
+        self._head = self._values(m)
+
+    def _logits01(self, m) -> None:
+        v = self._values(m)
+        self._l01 = (v["logit_0"], v["logit_1"])
+
+    def _logit2(self, m) -> None:
+        v = self._values(m)
+        h, l01 = self._head, self._l01
+        self._head = self._l01 = None
+        if h is None or l01 is None or h["window_counter"] != v["window_counter"]:
+            return  # an incomplete window cannot be matched: the comparison will count it missing
+        with self._lock:
+            self.estimates.append(Estimate(h["window_counter"], h["slip_class"], h["slip_class_f32"], h["flags"],
+                                           h["n_samples"], h["saturations"], (l01[0], l01[1], v["logit_2"])))
+            self.arrival.append(time.monotonic())
+
+    def _status(self, m) -> None:
+        v = self._values(m)
+        self.model_status.append((v["model_hash32"], v["model_version"]))
+
+    def count(self) -> int:
+        with self._lock:
+            return len(self.estimates)
+
+    def wait_for(self, n: int, timeout: float = 10.0) -> bool:
+        deadline = time.monotonic() + timeout
+        while self.count() < n and time.monotonic() < deadline:
+            time.sleep(0.01)
+        return self.count() >= n
+
+
+class SlipestMaster:
+    """python `canopen` as the master of one slipest node on a python-can bus."""
+
+    def __init__(self, bus: can.BusABC, eds: Path | str, node_id: int = 5) -> None:
+        self.network = canopen.Network(bus)
+        self.network.connect()
+        self.node = canopen.RemoteNode(node_id, str(eds))
+        self.network.add_node(self.node)
+        # telemetry shares the bus with the SDO transfer: answers may queue behind RPDOs
+        self.node.sdo.RESPONSE_TIMEOUT = 1.0
+        self.node_id = node_id
+
+    # -- NMT / identity / model -------------------------------------------------------------
+    def identity(self) -> dict[str, int]:
+        rec = self.node.sdo[0x1018]
+        return {"vendor_id": rec[1].raw, "product_code": rec[2].raw, "revision": rec[3].raw, "serial": rec[4].raw}
+
+    def active_model(self) -> dict:
+        rec = self.node.sdo[ACTIVE_MODEL]
+        try:
+            sha = bytes(rec[3].raw).hex()
+        except canopen.SdoAbortedError as e:
+            if e.code != 0x08000024:
+                raise
+            sha = None  # the built-in model: its sha256 is not compiled into the node
+        slot = rec[4].raw
+        return {"version": rec[1].raw, "hash32": rec[2].raw, "sha256": sha, "slot": None if slot == 0xFF else slot}
+
+    def counters(self) -> dict[str, int]:
+        rec = self.node.sdo[COUNTERS]
+        return {name: rec[k].raw for k, name in enumerate(od.COUNTERS, start=1)}
+
+    def store_counters(self) -> dict[str, int]:
+        rec = self.node.sdo[STORE_COUNTERS]
+        return {name: rec[k].raw for k, name in enumerate(od.STORE_COUNTERS, start=1)}
+
+    def slots(self) -> list[dict[str, int]]:
+        rec = self.node.sdo[SLOTS]
+        return [{f: rec[(s * len(od.SLOT_FIELDS)) + k].raw for k, (f, _) in enumerate(od.SLOT_FIELDS, start=1)}
+                for s in (0, 1)]
+
+    def upload_status(self) -> dict[str, int]:
+        rec = self.node.sdo[UPLOAD]
+        return {"state": rec[1].raw, "last_store_status": rec[2].raw, "bytes_received": rec[3].raw}
+
+    # -- model update ---------------------------------------------------------------------
+    def upload(self, image: bytes, block: bool = True, progress: Callable[[int], None] | None = None,
+               chunk: int = 7 * 127) -> None:
+        """Write `image` into the DOMAIN 0x2000 (the inactive slot): SDO block download with CRC
+        (or segmented). Raises canopen.SdoAbortedError with the node's abort code on a refusal."""
+        with self.node.sdo[od.IDX_MODEL_IMAGE].open("wb", size=len(image), block_transfer=block,
+                                                    request_crc_support=True, buffering=0) as f:
+            for i in range(0, len(image), chunk):
+                part = image[i:i + chunk]
+                view = memoryview(part)
+                while len(view):
+                    n = f.write(view)  # raw stream: may take fewer bytes than given
+                    view = view[n:] if n else view
+                if progress is not None:
+                    progress(len(part))
+
+    def activate(self) -> None:
+        self.node.sdo[COMMAND][1].raw = 1
+
+    def rollback(self) -> None:
+        self.node.sdo[COMMAND][2].raw = 1
+
+    def abort_upload(self) -> None:
+        self.node.sdo[COMMAND][3].raw = 1
+
+    def close(self) -> None:
+        self.network.disconnect()

@@ -1,0 +1,186 @@
+"""`fleetlab upload`: send a bundle's model image to a running slipest CANopen node, activate it
+when asked, and read back the active model's version and hash.
+
+The transfer is an SDO block download (CRC-checked) of the DOMAIN object 0x2000 by python
+`canopen`; the same CAN frames go over a CAN bus (any python-can interface: slcan adapter,
+socketcan, ...) or over the serial link's COBS packets. Every frame of the transfer is counted
+and its bits on a CAN bus are computed (stuff bits exactly), so the report states the bus time
+at a given bit rate.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+import can
+import canopen
+
+from .canopen_master import ABORT_NAMES
+from .canopen_session import CanopenSession
+from .wire.can_bits import frame_bits
+
+
+class SdoTap(can.BusABC):
+    """Counts the SDO frames of one node (both directions) and their CAN bits on the way through."""
+
+    def __init__(self, inner: can.BusABC, node_id: int) -> None:
+        self.inner = inner
+        self.ids = (0x600 + node_id, 0x580 + node_id)
+        self.frames = self.bits = 0
+        self._lock = threading.Lock()
+        self.channel_info = getattr(inner, "channel_info", "tap")
+        super().__init__(channel=None)
+
+    def _count(self, msg: can.Message | None) -> None:
+        if msg is not None and msg.arbitration_id in self.ids and not msg.is_extended_id:
+            with self._lock:
+                self.frames += 1
+                self.bits += frame_bits(msg.arbitration_id, bytes(msg.data))
+
+    def _recv_internal(self, timeout):
+        msg = self.inner.recv(timeout)
+        self._count(msg)
+        return msg, False
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self.inner.send(msg, timeout)
+        self._count(msg)
+
+    def reset(self) -> None:
+        with self._lock:
+            self.frames = self.bits = 0
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self.inner.shutdown()
+
+
+@dataclass
+class UploadReport:
+    image_bytes: int
+    sdo_frames: int
+    bus_bits: int
+    bus_time_s_at_500k: float
+    wall_time_s: float
+    activated: bool
+    active_version: int
+    active_hash32: str
+    active_sha256: str | None
+    windows_during_upload: int | None = None
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def explain(e: Exception) -> str:
+    """One line for an SDO failure: the abort code and its meaning."""
+    if isinstance(e, canopen.SdoAbortedError):
+        return f"the node refused: SDO abort 0x{e.code:08X} ({ABORT_NAMES.get(e.code, 'see CiA 301')})"
+    return f"no answer from the node: {e}"
+
+
+def upload_image(session: CanopenSession, tap: SdoTap, image: bytes, activate: bool, block: bool = True,
+                 progress: Callable[[int], None] | None = None) -> UploadReport:
+    """Upload (and activate) on an open session whose master bus is `tap`."""
+    m = session.master
+    tap.reset()
+    t0 = time.perf_counter()
+    try:
+        m.upload(image, block=block, progress=progress)
+        if activate:
+            m.activate()
+    except (canopen.SdoAbortedError, canopen.SdoCommunicationError) as e:
+        raise OSError(explain(e)) from None
+    wall = time.perf_counter() - t0
+    frames, bits = tap.frames, tap.bits
+    model = m.active_model()
+    return UploadReport(len(image), frames, bits, bits / 500_000, wall, activate, model["version"],
+                        f"{model['hash32']:08x}", model["sha256"])
+
+
+def open_tapped(link: str, eds: Path, node_id: int, **kwargs) -> tuple[CanopenSession, SdoTap]:
+    taps: list[SdoTap] = []
+
+    def wrap(bus: can.BusABC) -> can.BusABC:
+        taps.append(SdoTap(bus, node_id))
+        return taps[0]
+
+    session = CanopenSession(link, eds, node_id, wrap_bus=wrap, **kwargs)
+    return session, taps[0]
+
+
+def read_image(bundle: Path) -> bytes:
+    img = Path(bundle) / "model.img"
+    if not img.is_file():
+        raise OSError(f"{bundle}: no model.img (export the bundle with `fleetlab export` first)")
+    return img.read_bytes()
+
+
+def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Path, boot_bundle: Path,
+             windows: int, seed: int = 1, scale: float = 0.3, block: bool = True,
+             progress: Callable[[int], None] | None = None) -> dict:
+    """The after-landing update on a running node, checked: telemetry windows stream while the image
+    is uploaded (every window must be answered, by the boot model, bit-exact), the image is activated
+    between two windows, then the next windows must equal the new model's torch integer reference."""
+    import numpy as np
+
+    from fleetlab.data import features_int as fi
+
+    from .canopen_master import EstimateCollector
+    from .canopen_session import stream_telemetry
+    from .sources import sim_source
+    from .verify.reference import Reference
+
+    samples = sim_source(seed, scale).samples_q
+    if len(samples) < 2 * windows * fi.SAMPLES_PER_WINDOW:
+        raise ValueError(f"the simulator gave {len(samples) // fi.SAMPLES_PER_WINDOW} windows at scale {scale}; "
+                         f"{2 * windows} needed")
+    first = samples[: windows * fi.SAMPLES_PER_WINDOW]
+    second = samples[windows * fi.SAMPLES_PER_WINDOW: 2 * windows * fi.SAMPLES_PER_WINDOW]
+    m = session.master
+    m.node.tpdo.read()
+    col = EstimateCollector(m.node)
+    m.node.nmt.state = "OPERATIONAL"
+    time.sleep(0.05)
+    before = m.active_model()
+    sent: list[int] = []
+    streamer = threading.Thread(target=lambda: sent.append(stream_telemetry(session, first, col)), daemon=True)
+    streamer.start()
+    if not col.wait_for(2, 20):
+        raise OSError("the node sends no estimates (is it operational?)")
+    t0 = time.monotonic()
+    report = upload_image(session, tap, image, activate=False, block=block, progress=progress)
+    t1 = time.monotonic()
+    streamer.join(60)
+    if not sent or not col.wait_for(sent[0], 20):
+        raise OSError(f"windows lost during the upload: {col.count()} estimates for {sent[0] if sent else '?'} windows")
+    during = sum(1 for t in col.arrival if t0 <= t <= t1)
+    phase1 = np.array([e.logits for e in col.estimates])
+    exact1 = phase1.shape == (windows, 3) and bool(np.array_equal(
+        phase1, Reference.load(boot_bundle).q_logits(fi.featurise_int(first).features)[0]))
+    try:
+        m.activate()  # between two frames: the next window is the new model's
+    except canopen.SdoAbortedError as e:
+        raise OSError(explain(e)) from None
+    after = m.active_model()
+    n1 = col.count()
+    n = stream_telemetry(session, second, col, first_counter=len(first))
+    if not col.wait_for(n1 + n, 20):
+        raise OSError(f"windows lost after activation: {col.count() - n1} of {n}")
+    phase2 = np.array([e.logits for e in col.estimates[n1:]])
+    ref2 = Reference.load(new_bundle).q_logits(fi.featurise_int(second).features)[0]
+    return {
+        "upload": report.as_dict() | {"windows_during_upload": during},
+        "before": {"version": before["version"], "hash32": f"{before['hash32']:08x}"},
+        "after": {"version": after["version"], "hash32": f"{after['hash32']:08x}", "sha256": after["sha256"]},
+        "windows_streamed_during_upload_phase": windows,
+        "windows_answered_during_upload_phase": n1,
+        "boot_model_bit_exact": exact1,
+        "windows_after_activation": int(len(phase2)),
+        "new_model_bit_exact": bool(np.array_equal(phase2, ref2)),
+        "store_counters": m.store_counters(),
+    }

@@ -1,0 +1,218 @@
+"""A/B model slots in the real emulator process (slipest_emu --nvm FILE): power loss at every NVM write and
+erase of an upload, an activation and a rollback, done by SIGKILL from inside the NVM callback: before the
+write, after half a sector (a torn write) or right after it. After each death the emulator is restarted on
+the same file; it must serve the old model or the new one, never neither, with every vector of the model it
+serves bit-exact.
+
+CI runs every write/erase of an upload + activation with 256-byte sectors in the three modes (>= 50 cut
+points), a second-generation upload that overwrites the rollback target, and a rollback. FLEETLAB_LONG=1
+adds 64- and 128-byte sectors (about 4x the cut points).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from fleetlab.export import model_image
+from fleetlab.export.bundle import export_bundle, load_bundle
+from fleetlab.export.vectors import draw_inputs
+from fleetlab.host_tools.emulator import EMULATOR_TARGET, build, find_artifact
+from fleetlab.host_tools.firmware.build import cmake_build
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLE = REPO / "firmware_c" / "bundles" / "example"
+LONG = os.environ.get("FLEETLAB_LONG") == "1"
+HASH_RE = re.compile(r"model_hash=([0-9a-f]{8}) (PASS|FAIL)")
+
+
+@pytest.fixture(scope="module")
+def emu() -> Path:
+    return find_artifact(build(None, targets=(EMULATOR_TARGET,)), EMULATOR_TARGET)
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory) -> dict:
+    """old: the example bundle (version 1, the emulator's built-in model); new: another trained SN-S
+    exported as version 2, with its own vectors."""
+    from test_export_bundle import small_model
+
+    out = tmp_path_factory.mktemp("slots") / "new"
+    export_bundle(small_model(seed=9), out, inputs=draw_inputs(1000, None, seed=3), model_version=2)
+    old, new = load_bundle(EXAMPLE), load_bundle(out)
+    assert old.content_hash[:8] != new.content_hash[:8]
+    return {"old": (EXAMPLE / "model.img", EXAMPLE / "vectors.bin", old.content_hash[:8]),
+            "new": (out / "model.img", out / "vectors.bin", new.content_hash[:8]), "dir": out}
+
+
+def run(emu: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([str(emu), *args], capture_output=True, text=True, timeout=60)
+
+
+def nvm_ops(res: subprocess.CompletedProcess) -> int:
+    m = re.search(r"nvm ops=(\d+)", res.stderr)
+    assert m, res.stderr
+    return int(m.group(1))
+
+
+def served(emu: Path, nvm: Path, sector: int, models: dict) -> str:
+    """Boot the emulator on nvm, find which model it serves and check that model's vectors bit-exact."""
+    res = run(emu, "--nvm", str(nvm), "--nvm-sector", str(sector), "--vectors", str(models["old"][1]))
+    m = HASH_RE.search(res.stdout)
+    assert m, res.stdout + res.stderr
+    if m.group(1) == models["old"][2]:
+        assert m.group(2) == "PASS" and res.returncode == 0, res.stdout + res.stderr
+        return "old"
+    assert m.group(1) == models["new"][2], f"served model {m.group(1)} is neither the old nor the new one"
+    res = run(emu, "--nvm", str(nvm), "--nvm-sector", str(sector), "--vectors", str(models["new"][1]))
+    assert res.returncode == 0 and "q_exact=1000 f32_within_1e-5=1000" in res.stdout and "PASS" in res.stdout, \
+        res.stdout + res.stderr
+    return "new"
+
+
+def cut_sweep(emu: Path, base: Path, work: Path, sector: int, models: dict, op_args: list[str]) -> list[str]:
+    """For every NVM write/erase K of `op_args` on a copy of base, in every cut mode: die at K, reboot,
+    check. Returns the model served after each cut, in order (K ascending, modes before, torn, after)."""
+    shutil.copyfile(base, work)
+    full = run(emu, "--nvm", str(work), "--nvm-sector", str(sector), *op_args)
+    assert full.returncode == 0, full.stderr
+    n_ops = nvm_ops(full)
+    outcomes = []
+    for k in range(1, n_ops + 1):
+        for mode in ("before", "torn", "after"):
+            shutil.copyfile(base, work)
+            res = run(emu, "--nvm", str(work), "--nvm-sector", str(sector), *op_args, "--nvm-cut-after", str(k),
+                      "--nvm-cut-mode", mode)
+            assert res.returncode == -signal.SIGKILL, f"cut {k} {mode}: not killed ({res.returncode})"
+            outcomes.append(served(emu, work, sector, models))
+    return outcomes
+
+
+def make_base(emu: Path, path: Path, sector: int, models: dict) -> None:
+    """An NVM file whose active slot holds the old model (uploaded and activated, no cut)."""
+    path.unlink(missing_ok=True)
+    res = run(emu, "--nvm", str(path), "--nvm-sector", str(sector), "--upload", str(models["old"][0]), "--activate")
+    assert res.returncode == 0 and "activated: slot 0" in res.stderr, res.stderr
+
+
+def check_switch(outcomes: list[str], first: str, then: str, what: str) -> None:
+    """`first` for every cut before the last op (the program of the commit record), then `then` from some
+    mode of that last op on: before it, old; after it, new; torn, whichever the half sector holds (a
+    record cut short fails its CRC; one wholly in the first half is complete)."""
+    j = outcomes.index(then) if then in outcomes else len(outcomes)
+    assert outcomes == [first] * j + [then] * (len(outcomes) - j), f"{what}: {outcomes}"
+    assert len(outcomes) - 3 < j < len(outcomes), f"{what}: switched at cut {j} of {len(outcomes)}"
+
+
+@pytest.mark.parametrize("sector", [256] + ([64, 128] if LONG else []))
+def test_power_loss_during_upload_and_activation(emu, models, tmp_path, sector) -> None:
+    base, work = tmp_path / "base.nvm", tmp_path / "work.nvm"
+    make_base(emu, base, sector, models)
+    t0 = time.monotonic()
+    outcomes = cut_sweep(emu, base, work, sector, models, ["--upload", str(models["new"][0]), "--activate"])
+    elapsed = time.monotonic() - t0
+    print(f"sector {sector}: {len(outcomes)} cut points in {elapsed:.1f} s: "
+          f"{outcomes.count('old')} old, {outcomes.count('new')} new")
+    assert len(outcomes) >= 50
+    check_switch(outcomes, "old", "new", f"upload+activate, sector {sector}")
+
+
+def test_power_loss_during_rollback(emu, models, tmp_path) -> None:
+    sector = 256
+    base, work = tmp_path / "base.nvm", tmp_path / "work.nvm"
+    make_base(emu, base, sector, models)
+    res = run(emu, "--nvm", str(base), "--upload", str(models["new"][0]), "--activate")
+    assert res.returncode == 0 and "activated: slot 1" in res.stderr, res.stderr
+    # the base now serves "new" with "old" as the rollback target: a cut rollback serves one of the two
+    outcomes = cut_sweep(emu, base, work, sector, models, ["--rollback"])
+    assert len(outcomes) == 6  # erase and program of one record sector, three modes each
+    check_switch(outcomes, "new", "old", "rollback")
+
+
+@pytest.mark.parametrize("sector", [256] + ([64] if LONG else []))
+def test_power_loss_when_the_upload_overwrites_the_rollback_target(emu, models, tmp_path, sector) -> None:
+    """Old (v1) in slot 0, new (v2) active in slot 1; the old model again as version 3 goes into slot 0,
+    erasing the rollback target. Every cut leaves v2 or v3 active, never neither."""
+    base, work = tmp_path / "base.nvm", tmp_path / "work.nvm"
+    make_base(emu, base, sector, models)
+    assert run(emu, "--nvm", str(base), "--nvm-sector", str(sector), "--upload", str(models["new"][0]),
+               "--activate").returncode == 0
+    b = load_bundle(EXAMPLE)
+    v3 = tmp_path / "v3.img"
+    v3.write_bytes(model_image.image_bytes(b.qparams, b.fparams, b.content_hash, model_version=3))
+    outcomes = cut_sweep(emu, base, work, sector, models, ["--upload", str(v3), "--activate"])
+    assert len(outcomes) >= 50
+    # v3 has the old model's parameters (and hash): "old" here means v3 is served
+    check_switch(outcomes, "new", "old", "second-generation upload")
+
+
+def test_refused_uploads_keep_the_old_model(emu, models, tmp_path) -> None:
+    """Corrupt, truncated, older and wrong-architecture images are refused by the emulator's store with
+    their reason; the active model and its vectors are unchanged."""
+    nvm = tmp_path / "n.nvm"
+    make_base(emu, nvm, 256, models)
+    good = models["new"][0].read_bytes()
+    cases = {
+        "flip": (good[:300] + bytes([good[300] ^ 1]) + good[301:], "CRC mismatch"),
+        "truncated": (good[:-5], "wrong length"),
+        "arch": (_recrc(good[:6] + b"\x02" + good[7:]), "model architecture mismatch"),
+        "older": ((EXAMPLE / "model.img").read_bytes(), "model version not newer than the active one"),
+    }
+    for name, (data, why) in cases.items():
+        img = tmp_path / f"{name}.img"
+        img.write_bytes(data)
+        res = run(emu, "--nvm", str(nvm), "--upload", str(img), "--activate")
+        assert res.returncode == 3 and f"upload refused: {why}" in res.stderr, (name, res.stderr)
+        assert served(emu, nvm, 256, models) == "old"
+
+
+def _recrc(img: bytes) -> bytes:
+    import zlib
+
+    body = img[:-36]
+    return body + zlib.crc32(body).to_bytes(4, "little") + img[-32:]
+
+
+@pytest.fixture(scope="module")
+def keyed_emu(tmp_path_factory) -> tuple[Path, bytes]:
+    """An emulator built with -DSLIPEST_HMAC_KEY_FILE (the key provisioned at build time)."""
+    root = tmp_path_factory.mktemp("keyed")
+    key = bytes(range(100, 132))
+    (root / "key.bin").write_bytes(key)
+    bdir = cmake_build(root / "build", EXAMPLE, options={"SLIPEST_HMAC_KEY_FILE": str(root / "key.bin")},
+                       jobs=2, targets=(EMULATOR_TARGET,))
+    return find_artifact(bdir, EMULATOR_TARGET), key
+
+
+def test_hmac_provisioned_build_refuses_unsigned_and_wrongly_signed_images(keyed_emu, models, tmp_path) -> None:
+    emu_k, key = keyed_emu
+    nvm = tmp_path / "k.nvm"
+    new = models["new"][0].read_bytes()
+    for name, data in {"unsigned": new, "wrong key": model_image.sign_image(new, bytes(32))}.items():
+        img = tmp_path / "x.img"
+        img.write_bytes(data)
+        res = run(emu_k, "--nvm", str(nvm), "--upload", str(img), "--activate")
+        assert res.returncode == 3 and "upload refused: model image authentication failed" in res.stderr, \
+            (name, res.stderr)
+        assert "store boot: built-in model" in res.stderr  # still the built-in (old) model
+    # the image `fleetlab export --hmac-key` writes (export_bundle(hmac_key=...)) is accepted
+    from test_export_bundle import small_model
+
+    from fleetlab.export.bundle import check_bundle
+
+    signed = tmp_path / "signed_bundle"
+    export_bundle(small_model(seed=9), signed, inputs=draw_inputs(1000, None, seed=3), model_version=2, hmac_key=key)
+    check_bundle(signed)
+    img = signed / "model.img"
+    assert model_image.read_image(img.read_bytes(), hmac_key=key).content_hash[:8] == models["new"][2]
+    res = run(emu_k, "--nvm", str(nvm), "--upload", str(img), "--activate")
+    assert res.returncode == 0 and "activated: slot 0" in res.stderr, res.stderr
+    res = run(emu_k, "--nvm", str(nvm), "--vectors", str(models["new"][1]))
+    assert res.returncode == 0 and f"model_hash={models['new'][2]} PASS" in res.stdout, res.stdout + res.stderr

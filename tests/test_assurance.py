@@ -167,3 +167,27 @@ def test_bundle_files_are_keyed_alike_wherever_the_bundle_lives(tmp_path):
         (d / "slipest_model_q.h").write_text("")
         assert rel(d / "slipest_model_q.h") == "bundle/slipest_model_q.h"
     assert rel(REPO / "firmware_c" / "src" / "slipest_node.c") == "firmware_c/src/slipest_node.c"
+
+
+# --------------------------------------------------------------------------- 3 worst-case instruction counts
+def test_worst_case_instruction_counts_on_the_reference_target():
+    """The QEMU worst-case image runs every case and the maxima are consistent with the call structure:
+    the node's worst frame closes a window (features + inference + frames), so it costs more than one
+    inference, and one push costs far less than an inference."""
+    from fleetlab.assurance import wcet
+
+    desc, rows = wcet.measure(REPO / "build" / "test-wcet")
+    by = {(r.function, r.cases.split(":")[0]): r for r in rows}
+    assert all(r.n_cases > 0 and r.instructions > 0 for r in rows), wcet.table(rows)
+    infer_vec = by[("slipest_infer_q", "bundle vectors")]
+    assert infer_vec.n_cases >= 100  # every bundle vector, not a sample of them
+    worst = wcet.per_function(rows)
+    assert worst["slipest_node_handle"] > worst["slipest_infer_q"] > 4 * worst["slipest_extractor_push"] > 0, \
+        wcet.table(rows)
+
+
+def test_worst_case_parser_rejects_incomplete_output():
+    from fleetlab.assurance import wcet
+
+    with pytest.raises(ValueError, match="calib_ticks"):
+        wcet.parse("calib_instructions=2000000\nreps=16\n")

@@ -17,7 +17,7 @@ from pathlib import Path
 from ..host_tools.firmware import targets as target_registry
 from ..host_tools.firmware.bench import target_costs
 from ..host_tools.firmware.build import cmake_build
-from . import analysers, coverage, misra, stack
+from . import analysers, coverage, misra, stack, wcet
 from .sources import EXAMPLE_BUNDLE, REPO, run, tool_version
 
 DEFAULT_FUZZ_STATS = [REPO / "build" / "fuzz-long" / "fuzz-stats.json", REPO / "build" / "fuzz" / "fuzz-stats.json"]
@@ -164,12 +164,18 @@ def assure(args: argparse.Namespace) -> int:
     body += "\n\n### Full library (with the float path)\n\n" + stack.table(rows_full[:6])
     sections.append(_section("Worst-case stack", body))
     if measured:
-        sections.append(_section("Execution cost (Cortex-M4, QEMU icount)",
-                                 f"Measured, averaged over the bench loop of the vectors (not a bound): "
-                                 f"slipest_infer_q {measured['q']:.0f} instructions per inference; "
-                                 f"SLCAN parsing + slipest_node_handle {measured['node_instructions_per_sample']:.0f} instructions "
-                                 f"per telemetry sample (3 frames). "
-                                 "A worst-case path analysis is not part of this report yet."))
+        desc, wc = wcet.measure(REPO / "build" / "assure" / target_registry.reference().name, bundle)
+        worst_fn = wcet.per_function(wc)
+        summary_row(f"Worst-case instructions ({desc}, measured maximum)",
+                    ", ".join(f"{fn} {n:.0f}" for fn, n in worst_fn.items()), None)
+        sections.append(_section(f"Execution cost ({desc}, QEMU icount)",
+                                 "Worst case: the maximum MEASURED over the bundle vectors and over inputs built to "
+                                 "reach the long paths (cases in `firmware_c/target/wcet_target.c`), each case timed "
+                                 "over repeated identical calls; a measured maximum, not a static bound. Command: "
+                                 "`python -m fleetlab.assurance.wcet`.\n\n" + wcet.table(wc) +
+                                 f"\n\nAverage over the bench loop of the vectors (fleetlab bench c): slipest_infer_q "
+                                 f"{measured['q']:.0f} instructions per inference; SLCAN parsing + slipest_node_handle "
+                                 f"{measured['node_instructions_per_sample']:.0f} instructions per telemetry sample (3 frames)."))
 
     # coverage
     cov = coverage.measure(REPO / "build" / "assure" / "coverage", bundle)

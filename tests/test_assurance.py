@@ -122,6 +122,14 @@ def test_static_analyser_is_clean(tool):
     assert res.clean, f"{res.name}:\n" + "\n".join(res.findings)
 
 
+def test_eva_alarm_reasons_do_not_explain_everything():
+    from fleetlab.assurance import analysers
+
+    assert analysers.explain_alarm("eva_infer_q", "slipest_infer_q.c:229: signed overflow. assert e * e ≤ 2147483647;")
+    assert analysers.explain_alarm("eva_infer_q", "slipest_infer_q.c:40: division by zero. assert n ≢ 0;") is None
+    assert analysers.explain_alarm("eva_features", "slipest_features.c:59: signed overflow. assert e * e ≤ 1;") is None
+
+
 def test_static_analyser_can_fail(tmp_path, monkeypatch):
     """The warning check sees a defect: a file with a sign conversion among the sources fails it."""
     from fleetlab.assurance import analysers

@@ -37,13 +37,19 @@ void eva_features(void)
     uint16_t counter = 0;
     int k, c, n, step;
     slipest_extractor_init(&ex);
-    /* a little over two windows: the second closes by a sample after a gap */
+    /* a little over two windows: the second closes by a sample after a gap. Unrolled: each step
+     * is analysed in its own state, so the sums' ranges grow by one int16 per step (no widening) */
+    /*@ loop unroll 2 * SLIPEST_SAMPLES_PER_WINDOW + 2; */
     for (step = 0; step < 2 * SLIPEST_SAMPLES_PER_WINDOW + 2; step++) {
         for (c = 0; c < SLIPEST_N_CHANNELS; c++) sample[c] = any_int16();
         counter = (uint16_t)(counter + (uint16_t)Frama_C_interval(0, 65535));
         n = slipest_extractor_push(&ex, counter, sample, out);
+        /* one state per number of windows closed (push's return states are split on it), so that
+         * each window read is one push wrote */
+        /*@ split n; */
         for (k = 0; k < n && k < SLIPEST_MAX_CLOSED; k++) {
             (void)slipest_window_features_q(&out[k], feat);
         }
+        /*@ merge n; */
     }
 }

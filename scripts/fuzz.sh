@@ -6,6 +6,7 @@
 #   scripts/fuzz.sh --long [EXECS] [BUILD_DIR] long mode: every target until EXECS executions
 #                                             (default $FUZZ_EXECS or 10000000), one after the
 #                                             other on one core; writes BUILD_DIR/fuzz-stats.json
+#   FUZZ_TARGETS="fuzz_push fuzz_cobs" scripts/fuzz.sh ...   only these targets (default: all)
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 MODE=short
@@ -18,6 +19,9 @@ else
 fi
 BUILD="${2:-$ROOT/build/fuzz}"
 TARGETS=(fuzz_payload fuzz_node_frames fuzz_image fuzz_cobs fuzz_slcan fuzz_push fuzz_store fuzz_co_frames)
+if [[ -n "${FUZZ_TARGETS:-}" ]]; then
+  read -r -a TARGETS <<<"$FUZZ_TARGETS"
+fi
 PY="${PYTHON:-$(command -v python3 || command -v python)}"
 
 command -v clang >/dev/null || { echo "fuzz.sh: clang not found (scripts/setup.sh installs it)" >&2; exit 2; }

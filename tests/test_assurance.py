@@ -104,10 +104,10 @@ def test_c_tests_cover_the_library():
     names = {f.name for f in res.files}
     assert {"firmware_c/src/slipest_node.c", "firmware_c/src/slipest_infer_q.c", "generated/slipest_dbc.c"} <= names
     hw = res.handwritten()
-    # floors = what the C tests reach after the model-as-data API landed (its image reader and model checks
-    # are driven mostly from pytest through ctypes, which gcov of ctest does not see); goal: 95 % / 90 %
-    assert hw.line_pct >= 96.5, coverage.table(res)
-    assert hw.branch_pct >= 72.0, coverage.table(res)
+    # floors = what the C tests reach (99.8 % / 97.6 % with test_rejects.c and test_model_paths.c), minus a
+    # small margin; the issue's goal is 95 % / 90 %. What stays uncovered and why: docs/assurance.md
+    assert hw.line_pct >= 99.0, coverage.table(res)
+    assert hw.branch_pct >= 96.5, coverage.table(res)
     # every file the tests reach is listed with real counts (a broken gcov run gives zeros)
     assert all(f.lines > 0 and f.lines_hit > 0 for f in res.files), coverage.table(res)
 
@@ -120,6 +120,29 @@ def test_static_analyser_is_clean(tool):
     res = getattr(analysers, tool)(BUNDLE)
     assert res.version, f"{tool}: no version string, tool did not run"
     assert res.clean, f"{res.name}:\n" + "\n".join(res.findings)
+
+
+def test_frama_c_eva_over_all_int16_inputs():
+    """EVA, a sound value analysis: no alarm on the feature extraction; on the kernel, every alarm is one
+    whose reason to be false is recorded (a relation EVA's interval domains cannot hold), no other."""
+    from fleetlab.assurance import analysers
+
+    res = {e.entry: e for e in analysers.frama_c_eva(BUNDLE)}
+    assert set(res) == {"eva_infer_q", "eva_features"}
+    assert res["eva_features"].alarms == [], "\n".join(res["eva_features"].alarms)
+    infer = res["eva_infer_q"]
+    assert "Frama_C_show_each_class: {0; 1; 2}" in infer.log  # the analysis ran through the whole kernel
+    unexplained = [a for a in infer.alarms if analysers.explain_alarm("eva_infer_q", a) is None]
+    assert unexplained == [], "\n".join(unexplained)
+    assert len(infer.alarms) <= 20, "\n".join(infer.alarms)  # the count this change reached
+
+
+def test_eva_alarm_reasons_do_not_explain_everything():
+    from fleetlab.assurance import analysers
+
+    assert analysers.explain_alarm("eva_infer_q", "slipest_infer_q.c:229: signed overflow. assert e * e ≤ 2147483647;")
+    assert analysers.explain_alarm("eva_infer_q", "slipest_infer_q.c:40: division by zero. assert n ≢ 0;") is None
+    assert analysers.explain_alarm("eva_features", "slipest_features.c:59: signed overflow. assert e * e ≤ 1;") is None
 
 
 def test_static_analyser_can_fail(tmp_path, monkeypatch):
@@ -167,3 +190,27 @@ def test_bundle_files_are_keyed_alike_wherever_the_bundle_lives(tmp_path):
         (d / "slipest_model_q.h").write_text("")
         assert rel(d / "slipest_model_q.h") == "bundle/slipest_model_q.h"
     assert rel(REPO / "firmware_c" / "src" / "slipest_node.c") == "firmware_c/src/slipest_node.c"
+
+
+# --------------------------------------------------------------------------- 3 worst-case instruction counts
+def test_worst_case_instruction_counts_on_the_reference_target():
+    """The QEMU worst-case image runs every case and the maxima are consistent with the call structure:
+    the node's worst frame closes a window (features + inference + frames), so it costs more than one
+    inference, and one push costs far less than an inference."""
+    from fleetlab.assurance import wcet
+
+    desc, rows = wcet.measure(REPO / "build" / "test-wcet")
+    by = {(r.function, r.cases.split(":")[0]): r for r in rows}
+    assert all(r.n_cases > 0 and r.instructions > 0 for r in rows), wcet.table(rows)
+    infer_vec = by[("slipest_infer_q", "bundle vectors")]
+    assert infer_vec.n_cases >= 100  # every bundle vector, not a sample of them
+    worst = wcet.per_function(rows)
+    assert worst["slipest_node_handle"] > worst["slipest_infer_q"] > 4 * worst["slipest_extractor_push"] > 0, \
+        wcet.table(rows)
+
+
+def test_worst_case_parser_rejects_incomplete_output():
+    from fleetlab.assurance import wcet
+
+    with pytest.raises(ValueError, match="calib_ticks"):
+        wcet.parse("calib_instructions=2000000\nreps=16\n")

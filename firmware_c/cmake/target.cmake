@@ -191,6 +191,12 @@ if(NOT SLIPEST_TARGET_COUNTER STREQUAL "none")
   set_source_files_properties(${TGT}/bench_target.c PROPERTIES COMPILE_OPTIONS -fno-shrink-wrap)
 endif()
 
+# --- worst-case instruction counts (fleetlab.assurance.wcet): SysTick targets ---
+if(SLIPEST_TARGET_COUNTER STREQUAL "systick")
+  slipest_image(slipest_wcet_target_q slipest_q ${TGT}/wcet_target.c)
+  slipest_qemu_test(wcet_image_q_${SLIPEST_CPU} slipest_wcet_target_q ${SLIPEST_RUN_ICOUNT})
+endif()
+
 # the example main loops of docs/integrating_slipest.md (ARM semihosting boards with room for them)
 if(SLIPEST_TARGET_REPORT STREQUAL "semihosting" AND SLIPEST_TARGET_LINKER_SCRIPT STREQUAL "mps2.ld")
   set(QEMU_ARGS ${SLIPEST_RUN})

@@ -3,6 +3,7 @@
  * Only this file knows the library's signatures: when an API changes (e.g. the model passed as
  * a struct), adapt the call in the matching eva_* function. */
 #include <stdint.h>
+#include <string.h>
 
 #include "__fc_builtin.h"
 #include "slipest_features.h"
@@ -37,7 +38,14 @@ void eva_features(void)
     uint16_t counter = 0;
     int k, c, n, step;
     slipest_extractor_init(&ex);
-    /* a little over two windows: the second closes by a sample after a gap */
+    /* the caller's buffer starts zeroed (a window push did not write would be the empty window, which
+     * the check rejects): EVA does not relate push's return value to the entries it wrote, so
+     * without this every read of out[] is an "uninitialised" alarm. That push writes out[k] for each
+     * k below its result is the plain out[closed++] in slipest_extractor_push. */
+    memset(out, 0, sizeof out);
+    /* a little over two windows: the second closes by a sample after a gap. Unrolled: each step
+     * is analysed in its own state, so the sums' ranges grow by one int16 per step (no widening) */
+    /*@ loop unroll 2 * SLIPEST_SAMPLES_PER_WINDOW + 2; */
     for (step = 0; step < 2 * SLIPEST_SAMPLES_PER_WINDOW + 2; step++) {
         for (c = 0; c < SLIPEST_N_CHANNELS; c++) sample[c] = any_int16();
         counter = (uint16_t)(counter + (uint16_t)Frama_C_interval(0, 65535));

@@ -142,27 +142,36 @@ slipest_status_t slipest_window_check(const slipest_window_t *w)
     return SLIPEST_OK;
 }
 
+/* Each channel's sums are checked (the conditions of slipest_window_check) on the very values the
+ * feature is computed from, read once, so that a static analysis (Frama-C EVA) sees the checked ranges
+ * (it does not carry a check made in another function, on another copy, back to the window). The
+ * features go to a local array first: on a rejected window nothing is written. */
 int slipest_window_features_q(const slipest_window_t *w, int16_t feat[SLIPEST_N_FEATURES])
 {
+    int16_t out[SLIPEST_N_FEATURES];
     int f, saturated = 0;
     uint32_t n;
-    int ok = slipest_window_check(w);
-    if (ok < 0) return ok;
-    if (feat == NULL) return SLIPEST_E_NULL;
+    int64_t nn;
+    if (w == NULL) return SLIPEST_E_NULL;
     n = w->n;
+    if (n == 0u || n > SLIPEST_SAMPLES_PER_WINDOW) return SLIPEST_E_RANGE;
+    nn = (int64_t)n;
     for (f = 0; f < SLIPEST_N_FEATURES; f++) {
         int c = feat_channel[f];
+        int32_t s = w->sum[c];
+        int64_t q = w->sumsq[c];
         int32_t value;
+        if (s < -32768 * nn || s > 32768 * nn || q < 0 || q > nn * 32768 * 32768 || nn * q - (int64_t)s * s < 0) {
+            return SLIPEST_E_RANGE;
+        }
         if (feat_is_mean[f]) {
             /* round half away from zero of S / n */
-            int32_t s = w->sum[c];
             uint32_t mag = (uint32_t)(s < 0 ? -s : s);
-            uint32_t q = (2u * mag + n) / (2u * n);
-            value = s < 0 ? -(int32_t)q : (int32_t)q;
+            uint32_t qm = (2u * mag + n) / (2u * n);
+            value = s < 0 ? -(int32_t)qm : (int32_t)qm;
         } else {
             /* std = floor((floor(isqrt(4D) / n) + 1) / 2), D = n Q - S^2 >= 0 */
-            int64_t s = w->sum[c];
-            uint64_t d = (uint64_t)((int64_t)n * w->sumsq[c] - s * s);
+            uint64_t d = (uint64_t)(nn * q - (int64_t)s * s);
             uint32_t r = slipest_isqrt_u64(4u * d);
             value = (int32_t)((r / n + 1u) / 2u);
         }
@@ -175,7 +184,9 @@ int slipest_window_features_q(const slipest_window_t *w, int16_t feat[SLIPEST_N_
         } else {
             /* in range: kept as is */
         }
-        feat[f] = (int16_t)value;
+        out[f] = (int16_t)value;
     }
+    if (feat == NULL) return SLIPEST_E_NULL;
+    memcpy(feat, out, sizeof out);
     return saturated;
 }

@@ -64,10 +64,11 @@ HOT int32_t rsr32(int32_t x, unsigned k)
     return k == 0u ? x : asr32(x + (int32_t)(1u << (k - 1u)), k);
 }
 
-/* Number of significant bits of m (0 for 0). */
+/* Number of significant bits of m (0 for 0). Frama-C EVA analyses the portable loop (same result):
+ * it has no model of __builtin_clz, and the loop gives it the range [1, 32] for m != 0. */
 static unsigned bitlen32(uint32_t m)
 {
-#if defined(__GNUC__)
+#if defined(__GNUC__) && !defined(__FRAMAC__)
     return m == 0u ? 0u : 32u - (unsigned)__builtin_clz(m);
 #else
     unsigned n = 0u;
@@ -236,8 +237,9 @@ int slipest_infer_q(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_F
     k1 = bitlen32(mx) > m->h_bits ? bitlen32(mx) - m->h_bits : 0u;
     if (k1 == 0u) {
         /* h' = h and |sum| <= 30 2^24: the wrapped unsigned sum is the exact sum, and 0u - usum
-         * is then < 2^31 when usum encodes a negative value */
-        sum = usum <= (uint32_t)INT32_MAX ? (int32_t)usum : -(int32_t)(0u - usum);
+         * is then <= 2^31 when usum encodes a negative value; negated minus one first, so that
+         * no value of usum overflows */
+        sum = usum <= (uint32_t)INT32_MAX ? (int32_t)usum : -(int32_t)(0u - usum - 1u) - 1;
     } else {
         sum = 0;
         for (i = 0; i < NH; ++i) {

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 from ...paths import repo_root
@@ -45,13 +46,30 @@ def ctest_command(build_dir: Path, regex: str | None = None) -> list[str]:
     return ["ctest", "--test-dir", str(build_dir), "--output-on-failure", "-V", *(["-R", regex] if regex else [])]
 
 
+@dataclass
+class Result:
+    """A finished command: its argv (as strings), exit code and output."""
+    cmd: list[str]
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def execute(cmd: list, *, timeout: float, cwd: Path | None = None) -> Result:
+    """The one place a tool is run: output captured as text, never raises on a non-zero exit."""
+    argv = [str(c) for c in cmd]
+    proc = subprocess.run(argv, capture_output=True, text=True, cwd=cwd, timeout=timeout)
+    return Result(argv, proc.returncode, proc.stdout, proc.stderr)
+
+
 def run(cmd: list[str], *, timeout: float = 600, merge_stderr: bool = False, check: bool = True,
         what: str = "command") -> str:
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
-    if check and proc.returncode != 0:
-        raise OSError(f"{what} failed ({proc.returncode}): {' '.join(map(str, cmd))}\n"
-                      f"{proc.stdout[-2000:]}{proc.stderr[-2000:]}")
-    return proc.stdout + proc.stderr if merge_stderr else proc.stdout
+    """Output of a build step (stdout, or stdout + stderr); OSError naming `what` if it fails."""
+    res = execute(cmd, timeout=timeout)
+    if check and res.returncode != 0:
+        raise OSError(f"{what} failed ({res.returncode}): {' '.join(res.cmd)}\n"
+                      f"{res.stdout[-2000:]}{res.stderr[-2000:]}")
+    return res.stdout + res.stderr if merge_stderr else res.stdout
 
 
 def cmake_build(build_dir: Path, bundle: Path | None = None, *, target: Target | str | None = None,

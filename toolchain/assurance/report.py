@@ -17,7 +17,7 @@ from pathlib import Path
 from ..host_tools.firmware import targets as target_registry
 from ..host_tools.firmware.bench import target_costs
 from ..host_tools.firmware.build import cmake_build
-from . import analysers, coverage, misra, stack
+from . import analysers, coverage, misra, stack, wcet
 from .sources import EXAMPLE_BUNDLE, REPO, run, tool_version
 
 DEFAULT_FUZZ_STATS = [REPO / "build" / "fuzz-long" / "fuzz-stats.json", REPO / "build" / "fuzz" / "fuzz-stats.json"]
@@ -128,15 +128,22 @@ def assure(args: argparse.Namespace) -> int:
     eva_text = "Frama-C EVA skipped (--no-eva)."
     if not args.no_eva:
         eva = analysers.frama_c_eva(bundle)
-        eva_rows = ["| EVA entry (all int16 inputs) | Alarms | Seconds |", "|---|---:|---:|"]
+        eva_rows = ["| EVA entry (all int16 inputs) | Alarms | Unexplained | Seconds |", "|---|---:|---:|---:|"]
+        alarm_rows = ["| Entry | Alarm | Why it is false |", "|---|---|---|"]
         for e in eva:
-            eva_rows.append(f"| {e.entry} | {len(e.alarms)} | {e.seconds:.1f} |")
-            summary_row(f"Frama-C EVA {e.entry}", f"{len(e.alarms)} alarms (goal 0)", not e.alarms)
-        alarm_list = "\n".join(f"- {e.entry}: {a}" for e in eva for a in e.alarms)
-        eva_text = (f"{tool_version(['frama-c', '-version'])}, options `{' '.join(analysers.EVA_OPTIONS)}`, "
-                    f"driver `firmware_c/eva/eva_driver.c`.\n\n" + "\n".join(eva_rows) +
-                    "\n\nAlarms (not yet shown false; each is a place where EVA could not bound a value):\n\n"
-                    + (alarm_list or "none"))
+            unexplained = [a for a in e.alarms if analysers.explain_alarm(e.entry, a) is None]
+            eva_rows.append(f"| {e.entry} | {len(e.alarms)} | {len(unexplained)} | {e.seconds:.1f} |")
+            summary_row(f"Frama-C EVA {e.entry}", f"{len(e.alarms)} alarms (goal 0), {len(unexplained)} not shown "
+                        "false", not e.alarms)
+            alarm_rows += [f"| {e.entry} | `{a}` | {analysers.explain_alarm(e.entry, a) or '**not shown false**'} |"
+                           for a in e.alarms]
+        options = "; ".join(f"{entry}: `{' '.join(analysers.EVA_OPTIONS + opts)}`"
+                            for entry, (_, opts) in analysers.EVA_TARGETS.items())
+        eva_text = (f"{tool_version(['frama-c', '-version'])}, driver `firmware_c/eva/eva_driver.c`, options: "
+                    f"{options}.\n\n" + "\n".join(eva_rows) + "\n\nAlarms and the reason each is false (a "
+                    "relation between variables that EVA's interval domains cannot hold; reasons recorded in "
+                    "`fleetlab.assurance.analysers.EVA_FALSE_ALARMS`):\n\n"
+                    + ("\n".join(alarm_rows) if len(alarm_rows) > 2 else "none"))
     sections.append(_section("Static analysis", "\n".join(rows) + "\n\n" + ("\n".join(details) or "No findings.")
                              + "\n\n### Frama-C EVA\n\n" + eva_text))
 
@@ -164,12 +171,18 @@ def assure(args: argparse.Namespace) -> int:
     body += "\n\n### Full library (with the float path)\n\n" + stack.table(rows_full[:6])
     sections.append(_section("Worst-case stack", body))
     if measured:
-        sections.append(_section("Execution cost (Cortex-M4, QEMU icount)",
-                                 f"Measured, averaged over the bench loop of the vectors (not a bound): "
-                                 f"slipest_infer_q {measured['q']:.0f} instructions per inference; "
-                                 f"SLCAN parsing + slipest_node_handle {measured['node_instructions_per_sample']:.0f} instructions "
-                                 f"per telemetry sample (3 frames). "
-                                 "A worst-case path analysis is not part of this report yet."))
+        desc, wc = wcet.measure(REPO / "build" / "assure" / target_registry.reference().name, bundle)
+        worst_fn = wcet.per_function(wc)
+        summary_row(f"Worst-case instructions ({desc}, measured maximum)",
+                    ", ".join(f"{fn} {n:.0f}" for fn, n in worst_fn.items()), None)
+        sections.append(_section(f"Execution cost ({desc}, QEMU icount)",
+                                 "Worst case: the maximum MEASURED over the bundle vectors and over inputs built to "
+                                 "reach the long paths (cases in `firmware_c/target/wcet_target.c`), each case timed "
+                                 "over repeated identical calls; a measured maximum, not a static bound. Command: "
+                                 "`python -m fleetlab.assurance.wcet`.\n\n" + wcet.table(wc) +
+                                 f"\n\nAverage over the bench loop of the vectors (fleetlab bench c): slipest_infer_q "
+                                 f"{measured['q']:.0f} instructions per inference; SLCAN parsing + slipest_node_handle "
+                                 f"{measured['node_instructions_per_sample']:.0f} instructions per telemetry sample (3 frames)."))
 
     # coverage
     cov = coverage.measure(REPO / "build" / "assure" / "coverage", bundle)

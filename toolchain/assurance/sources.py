@@ -5,9 +5,9 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
-from dataclasses import dataclass
 from pathlib import Path
 
+from ..host_tools.firmware.build import Result, execute
 from ..paths import default_bundle, repo_root
 
 REPO = repo_root()
@@ -30,26 +30,16 @@ def public_headers() -> list[Path]:
 
 
 def generate_dbc(out_dir: Path) -> Path:
-    """cantools C codec from the repo DBC, integer-only, exactly as the CMake build makes it."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    run([sys.executable, "-m", "cantools", "generate_c_source", str(DBC), "--database-name", "slipest_dbc",
-         "--no-floating-point-numbers", "-o", str(out_dir)], check=True)
-    run(["cmake", f"-DGEN={out_dir}", "-P", str(FW / "cmake" / "strip_float_dbc.cmake")], check=True)
-    # the CANopen object dictionary tables (slipest_co_od.h/.c), as CMake generates them beside the codec
+    """cantools C codec from the repo DBC, integer-only: the CMake build's own generation script; beside it
+    the CANopen object dictionary tables (slipest_co_od.h/.c), as CMake generates them."""
+    run(["cmake", f"-DPYTHON={sys.executable}", f"-DDBC={DBC}", f"-DGEN={out_dir}", "-P",
+         FW / "cmake" / "generate_dbc.cmake"], check=True)
     run([sys.executable, str(REPO / "canopen_od" / "generate.py"), "c", str(out_dir)], check=True)
     return out_dir / "slipest_dbc.c"
 
 
 def include_dirs(bundle: Path, gen_dir: Path) -> list[Path]:
     return [FW / "include", Path(bundle), gen_dir]
-
-
-@dataclass
-class Result:
-    cmd: list[str]
-    returncode: int
-    stdout: str
-    stderr: str
 
 
 def need(tool: str) -> str:
@@ -61,10 +51,11 @@ def need(tool: str) -> str:
 
 
 def run(cmd: list[str], *, check: bool = False, cwd: Path | None = None, timeout: float = 1800) -> Result:
-    proc = subprocess.run([str(c) for c in cmd], capture_output=True, text=True, cwd=cwd, timeout=timeout)
-    res = Result([str(c) for c in cmd], proc.returncode, proc.stdout, proc.stderr)
-    if check and proc.returncode != 0:
-        raise RuntimeError(f"{Path(cmd[0]).name} exited {proc.returncode}:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    """A tool's full result (the analysers read exit codes and both streams); with check, RuntimeError
+    on a non-zero exit. Runs through the firmware driver's `execute`, like every build step."""
+    res = execute(cmd, timeout=timeout, cwd=cwd)
+    if check and res.returncode != 0:
+        raise RuntimeError(f"{Path(cmd[0]).name} exited {res.returncode}:\n{res.stdout[-3000:]}\n{res.stderr[-3000:]}")
     return res
 
 

@@ -203,7 +203,8 @@ static void image_rejects(void)
     FRESH(); img[4] = 2; CHECK(read_img(len0, 0, 0) == SLIPEST_E_VERSION);
     FRESH(); img[6] = 2; CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH);
     FRESH(); img[8] = 65; CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH);
-    FRESH(); img[10] |= 0x02u; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT);
+    FRESH(); img[10] |= 0x04u; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT); /* undefined flag */
+    FRESH(); img[10] |= 0x02u; CHECK(read_img(len0, 0, 0) == SLIPEST_E_LENGTH); /* HMAC flag, no tag */
     FRESH(); img[50] = 1; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT);
     FRESH(); put_le32(img + 42, le32(img0 + 42) + 2u); CHECK(read_img(len0, 0, 0) == SLIPEST_E_LENGTH);
     FRESH(); CHECK(read_img(len0 - 1u, 0, 0) == SLIPEST_E_LENGTH);

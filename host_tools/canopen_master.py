@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -19,7 +18,7 @@ import canopen
 import numpy as np
 
 from ..canopen_od import objects as od
-from .wire.dbc import Frame, telemetry_frames, codec
+from .wire.dbc import Frame, WindowEstimate, codec, telemetry_frames
 
 ACTIVE_MODEL, COMMAND, COUNTERS, SLOTS, STORE_COUNTERS, UPLOAD = (
     od.IDX_ACTIVE_MODEL, od.IDX_COMMAND, od.IDX_COUNTERS, od.IDX_SLOTS, od.IDX_STORE_COUNTERS, od.IDX_UPLOAD)
@@ -70,23 +69,12 @@ def telemetry_rpdos(samples_q: np.ndarray, node_id: int, first_counter: int = 0)
     return out
 
 
-@dataclass
-class Estimate:
-    window_counter: int
-    slip_class: int
-    slip_class_f32: int
-    flags: int
-    n_samples: int
-    saturations: int
-    logits: tuple[int, int, int]
-
-
 class EstimateCollector:
     """Windows from TPDO1..3 through canopen's PDO maps (TPDO1 estimate, TPDO2 logits 0/1,
     TPDO3 logit 2 + window counter), and the model status from TPDO4."""
 
     def __init__(self, node: canopen.RemoteNode) -> None:
-        self.estimates: list[Estimate] = []
+        self.estimates: list[WindowEstimate] = []
         self.arrival: list[float] = []  # time.monotonic() of each estimate's last frame
         self.model_status: list[tuple[int, int]] = []
         self._head: dict | None = None
@@ -116,9 +104,10 @@ class EstimateCollector:
         if h is None or l01 is None or h["window_counter"] != v["window_counter"]:
             return  # an incomplete window cannot be matched: the comparison will count it missing
         with self._lock:
-            self.estimates.append(Estimate(h["window_counter"], h["slip_class"], h["slip_class_f32"], h["flags"],
-                                           h["n_samples"], h["saturations"], (l01[0], l01[1], v["logit_2"])))
-            self.arrival.append(time.monotonic())
+            now = time.monotonic()
+            self.estimates.append(WindowEstimate(h["window_counter"], h["slip_class"], h["slip_class_f32"], h["flags"],
+                                                 h["n_samples"], h["saturations"], (l01[0], l01[1], v["logit_2"]), now))
+            self.arrival.append(now)
 
     def _status(self, m) -> None:
         v = self._values(m)

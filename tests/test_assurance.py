@@ -104,10 +104,11 @@ def test_c_tests_cover_the_library():
     names = {f.name for f in res.files}
     assert {"firmware_c/src/slipest_node.c", "firmware_c/src/slipest_infer_q.c", "generated/slipest_dbc.c"} <= names
     hw = res.handwritten()
-    # floors = what the C tests reach (99.8 % / 97.6 % with test_rejects.c and test_model_paths.c), minus a
-    # small margin; the goal is 95 % / 90 %. What stays uncovered and why: docs/assurance.md
-    assert hw.line_pct >= 99.0, coverage.table(res)
-    assert hw.branch_pct >= 96.5, coverage.table(res)
+    # floors = what the C tests reach (99.0 % / 92.0 % with the model store and the CANopen node in the
+    # library), minus a small margin; the goal is 95 % / 90 %. What stays uncovered and why:
+    # docs/assurance.md
+    assert hw.line_pct >= 98.5, coverage.table(res)
+    assert hw.branch_pct >= 91.0, coverage.table(res)
     # every file the tests reach is listed with real counts (a broken gcov run gives zeros)
     assert all(f.lines > 0 and f.lines_hit > 0 for f in res.files), coverage.table(res)
 

@@ -70,6 +70,20 @@ static const slipest_model_q_t *model_q;
 static const slipest_model_f32_t *model_f32;
 static char model_hex[9]; /* the model's hash32 as text */
 
+/* Read a whole image file into buf (cap bytes: one more than the largest image, so that a longer
+ * file reaches the reader and is refused there). Returns 0, or 2 with a message. */
+static int read_image_file(const char *path, uint8_t *buf, size_t cap, size_t *n)
+{
+    FILE *fp = fopen(path, "rb");
+    if (fp == NULL) {
+        fprintf(stderr, "slipest_emu: cannot open %s: %s\n", path, strerror(errno));
+        return 2;
+    }
+    *n = fread(buf, 1, cap, fp);
+    fclose(fp);
+    return 0;
+}
+
 /* Read a model image file through the validating C reader into static storage (as a flight
  * node would read a received image from its buffer). Returns 0, or 2 with a message. */
 static int load_model_image(const char *path)
@@ -79,15 +93,11 @@ static int load_model_image(const char *path)
     static slipest_image_f32_storage_t fs;
     static slipest_model_q_t mq;
     static slipest_model_f32_t mf;
-    size_t n;
+    size_t n = 0;
     int st;
-    FILE *fp = fopen(path, "rb");
-    if (fp == NULL) {
-        fprintf(stderr, "slipest_emu: cannot open %s: %s\n", path, strerror(errno));
+    if (read_image_file(path, buf, sizeof buf, &n) != 0) {
         return 2;
     }
-    n = fread(buf, 1, sizeof buf, fp);
-    fclose(fp);
     st = slipest_image_read(buf, n, 0u, &mq, &qs, &mf, &fs);
     if (st != SLIPEST_OK) {
         fprintf(stderr, "slipest_emu: %s: model image rejected: %s (%d)\n", path, slipest_status_str(st), st);
@@ -142,15 +152,11 @@ static int open_store(const char *path, uint32_t sector)
 static int upload_image(const char *path, int activate)
 {
     static uint8_t buf[SLIPEST_IMAGE_MAX_SIZE + 1u];
-    size_t n, off;
+    size_t n = 0, off;
     int st;
-    FILE *fp = fopen(path, "rb");
-    if (fp == NULL) {
-        fprintf(stderr, "slipest_emu: cannot open %s: %s\n", path, strerror(errno));
+    if (read_image_file(path, buf, sizeof buf, &n) != 0) {
         return 2;
     }
-    n = fread(buf, 1, sizeof buf, fp);
-    fclose(fp);
     st = slipest_store_begin(&store, (uint32_t)n, 0u);
     for (off = 0; st == SLIPEST_OK && off < n; off += 7u) {
         st = slipest_store_write(&store, (uint32_t)off, buf + off, n - off < 7u ? n - off : 7u);

@@ -25,6 +25,18 @@ int slipest_model_row_ok(int64_t abs_w_sum, int32_t b, int64_t limit)
     return abs_w_sum * 32768 + (b < 0 ? -(int64_t)b : (int64_t)b) <= limit;
 }
 
+int slipest_model_seed_ok(uint32_t seed, int i)
+{
+    /* Q30 seeds of 1/sqrt(w), w >= 1/4, are <= 2^31. Newton's step computes 3 2^30 - w y^2 in unsigned
+     * arithmetic: for every w of the seed's bucket (w < (i + 9) / 32) w y^2 must stay <= 3, else the
+     * difference wraps and the multiplier explodes (an image that passed every other check, found by
+     * fuzz_image, overflowed e M in the kernel) */
+    if (seed > SLIPEST_Q_RSQRT_SEED_MAX || i < 0 || i >= SLIPEST_Q_RSQRT_SEED_N) {
+        return 0;
+    }
+    return ((uint64_t)(uint32_t)(i + 9) * (((uint64_t)seed * seed) >> 30)) <= (UINT64_C(96) << 30) ? 1 : 0;
+}
+
 slipest_status_t slipest_model_q_check_scalars(const slipest_model_q_t *m)
 {
     int32_t u_shift, gelu_shift;
@@ -33,17 +45,19 @@ slipest_status_t slipest_model_q_check_scalars(const slipest_model_q_t *m)
         m->gelu_n != SLIPEST_Q_GELU_N || m->rsqrt_seed_n != SLIPEST_Q_RSQRT_SEED_N) {
         return SLIPEST_E_ARCH;
     }
-    /* shifts of the scheme: h' and e keep <= 24 / 13 bits (their products stay in int32), the
+    /* shifts of the scheme: h' and e keep <= 24 / 13 bits (their products stay in int32); h' keeps >= 23
+     * bits, so the block shift k1 <= 31 - 23 and rounding |acc1| + 2^(k1 - 1) stays within acc1's 2^8
+     * margin below 2^31 (a smaller h_bits overflowed that rounding: found by fuzz_image); the
      * GELU interpolation (T1 - T0) f stays below 2^31, rsr(gamma z, U_SHIFT) is a real shift */
     gelu_shift = (int32_t)m->fy - (int32_t)m->gelu_step_log2;
     u_shift = (int32_t)m->fz + (int32_t)m->fg - (int32_t)m->fy;
-    if (m->h_bits < 1u || m->h_bits > 24u || m->e_bits < 1u || m->e_bits > 13u || m->fz != 12u ||
+    if (m->h_bits < 23u || m->h_bits > 24u || m->e_bits < 1u || m->e_bits > 13u || m->fz != 12u ||
         gelu_shift < 0 || gelu_shift > 12 || u_shift < 1 || u_shift > 30 || m->fy > 14u) {
         return SLIPEST_E_RANGE;
     }
     /* eps: eps_m << t for t < 16 must stay below 2^31; the cap is the scheme's 2^30 */
     if (m->eps_m < 0 || m->eps_e < -64 || m->eps_e > 64 || m->eps_cap != 1073741824 ||
-        m->c30 <= 0 || m->c30 >= (1 << 17)) {
+        m->c30 <= 0 || m->c30 > SLIPEST_Q_C30_MAX) {
         return SLIPEST_E_RANGE;
     }
     return SLIPEST_OK;
@@ -61,7 +75,7 @@ slipest_status_t slipest_model_q_check(const slipest_model_q_t *m)
     st = slipest_model_q_check_scalars(m);
     if (st != SLIPEST_OK) return st;
     for (i = 0; i < SLIPEST_Q_RSQRT_SEED_N; ++i) {
-        if (m->rsqrt_seed[i] > SLIPEST_Q_RSQRT_SEED_MAX) { /* Q30 seeds of 1/sqrt(w), w >= 1/4: <= 2^31 */
+        if (slipest_model_seed_ok(m->rsqrt_seed[i], i) == 0) {
             return SLIPEST_E_RANGE;
         }
     }

@@ -13,6 +13,12 @@
 #define SLIPEST_Q_ACC2_LIMIT 2147483647
 /* Largest Q30 seed of 1/sqrt(w), w >= 1/4. */
 #define SLIPEST_Q_RSQRT_SEED_MAX 0x80000000u
+/* round(sqrt(30) 2^14): the normalisation multiplier's scale. The kernel's bounds (M < 2^31, |z| < 22500)
+ * hold for this value and any smaller one, not for a larger one. */
+#define SLIPEST_Q_C30_MAX 89739
+
+/* 1 when seed (entry i of the 1/sqrt seed table) keeps the kernel's Newton step from wrapping. */
+int slipest_model_seed_ok(uint32_t seed, int i);
 
 /* The checks of slipest_model_q_check() on the scalar fields only (architecture, shifts, eps). */
 slipest_status_t slipest_model_q_check_scalars(const slipest_model_q_t *m);

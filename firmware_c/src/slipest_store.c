@@ -198,7 +198,7 @@ static void visit(walk_t *w, unsigned seg, unsigned i, uint32_t raw)
         }
         break;
     case K_RSQRT:
-        if (raw > SLIPEST_Q_RSQRT_SEED_MAX) {
+        if (slipest_model_seed_ok(raw, (int)i) == 0) {
             bad = SLIPEST_E_RANGE;
         }
         if (w->load != 0) {

@@ -78,6 +78,7 @@ static void model_q_checks(void)
     b = m; b.rsqrt_seed_n = 10; CHECK(slipest_model_q_check(&b) == SLIPEST_E_ARCH);
     /* shifts */
     b = m; b.h_bits = 0; CHECK(slipest_model_q_check(&b) == SLIPEST_E_RANGE);
+    b = m; b.h_bits = 22; CHECK(slipest_model_q_check(&b) == SLIPEST_E_RANGE); /* k1 rounding overflows */
     b = m; b.h_bits = 25; CHECK(slipest_model_q_check(&b) == SLIPEST_E_RANGE);
     b = m; b.e_bits = 0; CHECK(slipest_model_q_check(&b) == SLIPEST_E_RANGE);
     b = m; b.e_bits = 14; CHECK(slipest_model_q_check(&b) == SLIPEST_E_RANGE);
@@ -95,9 +96,18 @@ static void model_q_checks(void)
     b = m; b.eps_cap = 1 << 29; CHECK(slipest_model_q_check(&b) == SLIPEST_E_RANGE);
     b = m; b.c30 = 0; CHECK(slipest_model_q_check(&b) == SLIPEST_E_RANGE);
     b = m; b.c30 = 1 << 17; CHECK(slipest_model_q_check(&b) == SLIPEST_E_RANGE);
+    b = m; b.c30 = 89740; CHECK(slipest_model_q_check(&b) == SLIPEST_E_RANGE); /* > round(sqrt(30) 2^14) */
+    b = m; b.c30 = 89739; CHECK(slipest_model_q_check(&b) == SLIPEST_OK);
     /* seeds, accumulator bounds, beta */
     seed[5] = 0x80000001u;
     CHECK(slipest_model_q_check(&m) == SLIPEST_E_RANGE);
+    m = copy_model();
+    /* below 2^31 but w y^2 > 3 for the top of bucket 23 (w < 1): Newton's step would wrap */
+    seed[23] = 0x7FFFFFFFu;
+    CHECK(slipest_model_q_check(&m) == SLIPEST_E_RANGE);
+    m = copy_model();
+    seed[0] = 0x80000000u; /* y = 2 for w < 9/32: w y^2 < 9/8, allowed */
+    CHECK(slipest_model_q_check(&m) == SLIPEST_OK);
     m = copy_model();
     w1[3 * NI + 1] = 32767; w1[3 * NI + 2] = 32767; w1[3 * NI + 3] = 32767; /* row 3: 2^15 sum|w| > 2^31 */
     CHECK(slipest_model_q_check(&m) == SLIPEST_E_RANGE);

@@ -31,10 +31,15 @@ int slipest_model_seed_ok(uint32_t seed, int i)
      * arithmetic: for every w of the seed's bucket (w < (i + 9) / 32) w y^2 must stay <= 3, else the
      * difference wraps and the multiplier explodes (an image that passed every other check, found by
      * fuzz_image, overflowed e M in the kernel) */
-    if (seed > SLIPEST_Q_RSQRT_SEED_MAX || i < 0 || i >= SLIPEST_Q_RSQRT_SEED_N) {
-        return 0;
+    int ok = 0;
+    if ((seed <= SLIPEST_Q_RSQRT_SEED_MAX) && (i >= 0) && (i < SLIPEST_Q_RSQRT_SEED_N)) {
+        uint64_t y2 = ((uint64_t)seed * (uint64_t)seed) >> 30; /* Q30 of y^2 */
+        uint64_t top = (uint64_t)(uint32_t)i + 9u;             /* the bucket is w < top / 32 */
+        if ((top * y2) <= (UINT64_C(96) << 30)) {
+            ok = 1;
+        }
     }
-    return ((uint64_t)(uint32_t)(i + 9) * (((uint64_t)seed * seed) >> 30)) <= (UINT64_C(96) << 30) ? 1 : 0;
+    return ok;
 }
 
 slipest_status_t slipest_model_q_check_scalars(const slipest_model_q_t *m)
@@ -51,13 +56,13 @@ slipest_status_t slipest_model_q_check_scalars(const slipest_model_q_t *m)
      * GELU interpolation (T1 - T0) f stays below 2^31, rsr(gamma z, U_SHIFT) is a real shift */
     gelu_shift = (int32_t)m->fy - (int32_t)m->gelu_step_log2;
     u_shift = (int32_t)m->fz + (int32_t)m->fg - (int32_t)m->fy;
-    if (m->h_bits < 23u || m->h_bits > 24u || m->e_bits < 1u || m->e_bits > 13u || m->fz != 12u ||
-        gelu_shift < 0 || gelu_shift > 12 || u_shift < 1 || u_shift > 30 || m->fy > 14u) {
+    if ((m->h_bits < 23u) || (m->h_bits > 24u) || (m->e_bits < 1u) || (m->e_bits > 13u) || (m->fz != 12u) ||
+        (gelu_shift < 0) || (gelu_shift > 12) || (u_shift < 1) || (u_shift > 30) || (m->fy > 14u)) {
         return SLIPEST_E_RANGE;
     }
     /* eps: eps_m << t for t < 16 must stay below 2^31; the cap is the scheme's 2^30 */
-    if (m->eps_m < 0 || m->eps_e < -64 || m->eps_e > 64 || m->eps_cap != 1073741824 ||
-        m->c30 <= 0 || m->c30 > SLIPEST_Q_C30_MAX) {
+    if ((m->eps_m < 0) || (m->eps_e < -64) || (m->eps_e > 64) || (m->eps_cap != 1073741824) ||
+        (m->c30 <= 0) || (m->c30 > SLIPEST_Q_C30_MAX)) {
         return SLIPEST_E_RANGE;
     }
     return SLIPEST_OK;

@@ -20,9 +20,16 @@
 
 static uint16_t le16(const uint8_t *p) { return (uint16_t)((unsigned)p[0] | ((unsigned)p[1] << 8)); }
 
-static uint32_t le32(const uint8_t *p)
+uint32_t slipest_image_le32(const uint8_t *p)
 {
     return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
+}
+
+slipest_status_t slipest_image_check_hash32(const uint8_t *hdr, const uint8_t *trailer)
+{
+    uint32_t sha_head = ((uint32_t)trailer[4] << 24) | ((uint32_t)trailer[5] << 16) |
+                        ((uint32_t)trailer[6] << 8) | (uint32_t)trailer[7]; /* sha256 bytes, big-endian */
+    return (slipest_image_le32(&hdr[38]) == sha_head) ? SLIPEST_OK : SLIPEST_E_HASH;
 }
 
 /* two's complement from the unsigned bit pattern without implementation-defined conversions */
@@ -70,13 +77,13 @@ static void get_i16(const uint8_t *img, size_t *off, int16_t *dst, size_t n)
 static void get_i32(const uint8_t *img, size_t *off, int32_t *dst, size_t n)
 {
     size_t i;
-    for (i = 0; i < n; ++i, *off += 4u) dst[i] = s32(le32(img + *off));
+    for (i = 0; i < n; ++i, *off += 4u) dst[i] = s32(slipest_image_le32(img + *off));
 }
 
 static void get_u32(const uint8_t *img, size_t *off, uint32_t *dst, size_t n)
 {
     size_t i;
-    for (i = 0; i < n; ++i, *off += 4u) dst[i] = le32(img + *off);
+    for (i = 0; i < n; ++i, *off += 4u) dst[i] = slipest_image_le32(img + *off);
 }
 
 #ifndef SLIPEST_Q_ONLY
@@ -91,7 +98,7 @@ static float f32_of(uint32_t bits)
 static void get_f32(const uint8_t *img, size_t *off, float *dst, size_t n)
 {
     size_t i;
-    for (i = 0; i < n; ++i, *off += 4u) dst[i] = f32_of(le32(img + *off));
+    for (i = 0; i < n; ++i, *off += 4u) dst[i] = f32_of(slipest_image_le32(img + *off));
 }
 #endif
 
@@ -110,7 +117,7 @@ slipest_status_t slipest_image_check_header(const uint8_t *img, size_t len, uint
         if (img[i] != 0u) return SLIPEST_E_FORMAT; /* reserved bytes */
     }
     /* the payload size must be the one SN-S layout with or without the float model */
-    payload = le32(img + 42);
+    payload = slipest_image_le32(img + 42);
     if (payload != Q_PAYLOAD + ((f & SLIPEST_IMAGE_FLAG_F32) ? F32_PAYLOAD : 0u)) return SLIPEST_E_LENGTH;
     tail = SLIPEST_IMAGE_TRAILER_SIZE;
     if ((f & SLIPEST_IMAGE_FLAG_HMAC) != 0u) {
@@ -138,10 +145,10 @@ void slipest_image_header_scalars(const uint8_t *img, slipest_model_q_t *q)
     q->gelu_step_log2 = img[22];
     q->eps_e = (int8_t)(img[23] > 127u ? (int)img[23] - 256 : (int)img[23]);
     q->eps_m = s16(le16(img + 24));
-    q->c30 = s32(le32(img + 26));
-    q->eps_cap = s32(le32(img + 30));
-    q->version = le32(img + 34);
-    q->hash32 = le32(img + 38);
+    q->c30 = s32(slipest_image_le32(img + 26));
+    q->eps_cap = s32(slipest_image_le32(img + 30));
+    q->version = slipest_image_le32(img + 34);
+    q->hash32 = slipest_image_le32(img + 38);
 }
 
 slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t expect32, slipest_model_q_t *mq,
@@ -150,18 +157,16 @@ slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t exp
 {
     slipest_model_q_t q;
     uint16_t flags;
-    uint32_t hash32, trailer_hash32;
+    uint32_t hash32;
     size_t body, off;
     slipest_status_t st;
 
     if (img == NULL || mq == NULL || qs == NULL || (mf != NULL && fs == NULL)) return SLIPEST_E_NULL;
     st = slipest_image_check_header(img, len, &flags, &body);
     if (st != SLIPEST_OK) return st;
-    if (le32(img + body) != slipest_crc32(img, body)) return SLIPEST_E_CRC;
-    hash32 = le32(img + 38);
-    trailer_hash32 = ((uint32_t)img[body + 4] << 24) | ((uint32_t)img[body + 5] << 16) |
-                     ((uint32_t)img[body + 6] << 8) | (uint32_t)img[body + 7]; /* sha256 bytes, big-endian */
-    if (hash32 != trailer_hash32 || (expect32 != 0u && hash32 != expect32)) {
+    if (slipest_image_le32(img + body) != slipest_crc32(img, body)) return SLIPEST_E_CRC;
+    hash32 = slipest_image_le32(&img[38]);
+    if (slipest_image_check_hash32(img, &img[body]) != SLIPEST_OK || (expect32 != 0u && hash32 != expect32)) {
         return SLIPEST_E_HASH;
     }
     if (mf != NULL && !(flags & SLIPEST_IMAGE_FLAG_F32)) {
@@ -198,7 +203,7 @@ slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t exp
     if (mf != NULL) {
         slipest_model_f32_t f;
         memset(&f, 0, sizeof f);
-        f.ln_eps = f32_of(le32(img + off));
+        f.ln_eps = f32_of(slipest_image_le32(img + off));
         off += 4u;
         get_f32(img, &off, fs->w1, SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES);
         get_f32(img, &off, fs->b1, SLIPEST_N_HIDDEN);

@@ -19,6 +19,13 @@ slipest_status_t slipest_image_check_header(const uint8_t *img, size_t len, uint
  * the array pointers are left NULL. */
 void slipest_image_header_scalars(const uint8_t *img, slipest_model_q_t *q);
 
+/* A uint32 from its 4 little-endian bytes at p, on a core of either byte order. */
+uint32_t slipest_image_le32(const uint8_t *p);
+
+/* SLIPEST_OK when the header's hash32 (header byte 38, little-endian) equals the first 4 bytes
+ * (big-endian) of the sha256 in the trailer at trailer + 4, else SLIPEST_E_HASH. */
+slipest_status_t slipest_image_check_hash32(const uint8_t *hdr, const uint8_t *trailer);
+
 /* CRC-32 register update without the initial and final inversion (slipest_crc32() is
  * slipest_crc32_update(0xFFFFFFFF, ...) ^ 0xFFFFFFFF), for streaming. */
 uint32_t slipest_crc32_update(uint32_t crc, const uint8_t *data, size_t len);

@@ -24,11 +24,6 @@
 #endif
 
 /* ------------------------------------------------------------------ byte order helpers */
-static uint32_t get_le32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
-}
-
 static void put_le32(uint8_t *p, uint32_t v)
 {
     p[0] = (uint8_t)v;
@@ -304,12 +299,10 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
             }
         }
     }
-    if (get_le32(w.tail) != (w.crc ^ 0xFFFFFFFFu)) {
+    if (slipest_image_le32(w.tail) != (w.crc ^ 0xFFFFFFFFu)) {
         return SLIPEST_E_CRC;
     }
-    /* the header's hash32 is the first 4 bytes (big-endian) of the trailer's sha256 */
-    if (get_le32(&w.hdr[38]) != (((uint32_t)w.tail[4] << 24) | ((uint32_t)w.tail[5] << 16) |
-                             ((uint32_t)w.tail[6] << 8) | (uint32_t)w.tail[7])) {
+    if (slipest_image_check_hash32(w.hdr, w.tail) != SLIPEST_OK) {
         return SLIPEST_E_HASH;
     }
     if (s->key != NULL) {
@@ -329,7 +322,7 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
     if (w.deferred != SLIPEST_OK) {
         return w.deferred;
     }
-    *crc_out = get_le32(w.tail);
+    *crc_out = slipest_image_le32(w.tail);
     if (load == 0) {
         return SLIPEST_OK;
     }
@@ -431,23 +424,23 @@ static void record_encode(const slipest_store_record_t *r, uint8_t *p)
 static int record_decode(const uint8_t *p, slipest_store_record_t *r)
 {
     unsigned k;
-    if (memcmp(p, REC_MAGIC, 4) != 0 || p[4] != REC_LAYOUT || get_le32(&p[REC_BODY]) != slipest_crc32(p, REC_BODY)) {
+    if (memcmp(p, REC_MAGIC, 4) != 0 || p[4] != REC_LAYOUT || slipest_image_le32(&p[REC_BODY]) != slipest_crc32(p, REC_BODY)) {
         return 0;
     }
     if (p[12] >= SLIPEST_STORE_N_SLOTS || (p[13] != 0xFFu && (p[13] >= SLIPEST_STORE_N_SLOTS || p[13] == p[12]))) {
         return 0;
     }
-    r->seq = get_le32(&p[8]);
+    r->seq = slipest_image_le32(&p[8]);
     r->active = (int8_t)p[12];
     r->prev = NO_SLOT;
     if (p[13] != 0xFFu) {
         r->prev = (int8_t)p[13]; /* checked above: 0 or 1 */
     }
     for (k = 0; k < SLIPEST_STORE_N_SLOTS; ++k) {
-        r->length[k] = get_le32(&p[16u + 16u * k]);
-        r->crc[k] = get_le32(&p[20u + 16u * k]);
-        r->version[k] = get_le32(&p[24u + 16u * k]);
-        r->hash32[k] = get_le32(&p[28u + 16u * k]);
+        r->length[k] = slipest_image_le32(&p[16u + 16u * k]);
+        r->crc[k] = slipest_image_le32(&p[20u + 16u * k]);
+        r->version[k] = slipest_image_le32(&p[24u + 16u * k]);
+        r->hash32[k] = slipest_image_le32(&p[28u + 16u * k]);
     }
     return r->seq != 0u;
 }
@@ -677,8 +670,8 @@ slipest_status_t slipest_store_finish(slipest_store_t *store)
     if (st == SLIPEST_OK) {
         uint8_t hdr[SLIPEST_IMAGE_HEADER_SIZE];
         st = nvm_read(store, slot_addr(store, slot), hdr, sizeof hdr);
-        store->ready.version = get_le32(&hdr[34]);
-        store->ready.hash32 = get_le32(&hdr[38]);
+        store->ready.version = slipest_image_le32(&hdr[34]);
+        store->ready.hash32 = slipest_image_le32(&hdr[38]);
         /* anti-rollback: only a newer model replaces the active one (rollback is its own command) */
         if (st == SLIPEST_OK && store->have_model != 0u && store->ready.version <= store->mq.version) {
             st = SLIPEST_E_STALE;

@@ -19,10 +19,24 @@
 /* Cores with the DSP extension (Cortex-M4/M7/M33) do two 16x16 multiply-accumulates per
  * instruction (SMLAD). Integer arithmetic is exact, so both paths give the same bits. */
 #if defined(__ARM_FEATURE_SIMD32) && defined(__ARMEL__) && !defined(SLIPEST_NO_DUAL_MAC)
-#include <arm_acle.h>
 #define SLIPEST_DUAL_MAC 1
 #else
 #define SLIPEST_DUAL_MAC 0
+#endif
+/* Cores with SSAT (ARMv6 and later, not ARMv6-M) saturate in one instruction (SAT below). */
+#if defined(__ARM_FEATURE_SAT) && !defined(__FRAMAC__)
+#define SLIPEST_HAS_SSAT 1
+#else
+#define SLIPEST_HAS_SSAT 0
+#endif
+/* Cores with the DSP extension have SMMULR, (a b + 2^31) >> 32 in one instruction (norm_z below). */
+#if defined(__ARM_FEATURE_DSP) && !defined(__FRAMAC__)
+#define SLIPEST_HAS_SMMULR 1
+#else
+#define SLIPEST_HAS_SMMULR 0
+#endif
+#if SLIPEST_DUAL_MAC || SLIPEST_HAS_SSAT
+#include <arm_acle.h>
 #endif
 
 /* The architecture is fixed (slipest_model.h), so the loops keep constant bounds; every scale
@@ -63,6 +77,23 @@ HOT int32_t rsr32(int32_t x, unsigned k)
 {
     return k == 0u ? x : asr32(x + (int32_t)(1u << (k - 1u)), k);
 }
+
+/* SAT(x, b): x saturated to [-2^b, 2^b - 1]. Placed only where a hand proof (docs/fixed_point.md)
+ * already bounds x strictly inside that range, so it never changes a value: it is there so that a sound
+ * analyser (Frama-C EVA) sees the bound locally. Without it the bound rests on relations between variables
+ * (h'_i and max|h|, e_i and max|d|, e_i and the multiplier computed from all of them) that an interval
+ * analysis cannot hold. One SSAT instruction where the core has it (ACLE __ssat; the same result), a
+ * compare pair elsewhere. */
+#if SLIPEST_HAS_SSAT
+#define SAT(x, b) __ssat((x), (b) + 1)
+#else
+HOT int32_t sat_sym(int32_t x, int32_t hi)
+{
+    const int32_t lo = -hi - 1;
+    return (x > hi) ? hi : ((x < lo) ? lo : x);
+}
+#define SAT(x, b) sat_sym((x), (int32_t)((UINT32_C(1) << (b)) - 1u))
+#endif
 
 /* Number of significant bits of m (0 for 0). Frama-C EVA analyses the portable loop (same result):
  * it has no model of __builtin_clz, and the loop gives it the range [1, 32] for m != 0. */
@@ -116,15 +147,18 @@ static int32_t rsqrt_mult(const slipest_model_q_t *m, uint32_t v)
 {
     unsigned a;
     uint32_t w;
+    uint32_t idx;
     uint64_t y, w30;
     int it;
 
     if (v == 0u) {
         return 0;
     }
-    a = (32u - bitlen32(v)) / 2u;
+    a = (32u - bitlen32(v)) / 2u;                       /* v > 0: bitlen in [1, 32] */
     w = v << (2u * a);                                  /* w in [2^30, 2^32) */
-    y = m->rsqrt_seed[(w >> 27) - 8u];                  /* Q30 of 1/sqrt(w / 2^32), <= 2^31 */
+    idx = (w >> 27) - 8u;                               /* in [0, 23] since w >= 2^30; the min only states it */
+    idx = (idx < ((uint32_t)SLIPEST_Q_RSQRT_SEED_N - 1u)) ? idx : ((uint32_t)SLIPEST_Q_RSQRT_SEED_N - 1u);
+    y = m->rsqrt_seed[idx];                             /* Q30 of 1/sqrt(w / 2^32), <= 2^31 */
     w30 = (uint64_t)(w >> 2);                           /* < 2^30 */
     for (it = 0; it < 2; ++it) {
         uint64_t y2 = mul64(y, y) >> 30;                /* y^2 <= 2^62 */
@@ -182,13 +216,33 @@ HOT int32_t layer1_row(const int16_t *w, int32_t b, const int16_t *x)
 }
 #endif
 
+/* z = rsr(e M, 16) for |e| <= 2^13 (saturated at 2^14) and 0 <= M < 2^31; |z| < 22500 (|e| <= sqrt(v)).
+ * With SMMULR: rsr(e M, 16) = floor((e 2^16 M + 2^31) / 2^32), e 2^16 fits as |e| < 2^14; ACLE has no
+ * intrinsic for it. Elsewhere from the halves M = m_hi 2^16 + m_lo (0 <= m_lo < 2^16): rsr(e M, 16) =
+ * e m_hi + rsr(e m_lo, 16) exactly, as e m_hi 2^16 is a multiple of 2^16. Either way each product is
+ * bounded by |e| < 2^14 alone, which the analyser sees (the whole product's bound needs |e| <= sqrt(v)). */
+#if SLIPEST_HAS_SMMULR
+HOT int32_t norm_z(int32_t e, int32_t mult)
+{
+    int32_t z;
+    __asm__("smmulr %0, %1, %2" : "=r"(z) : "r"(e * 65536), "r"(mult));
+    return SAT(z, 15);
+}
+#else
+HOT int32_t norm_z(int32_t e, int32_t mult)
+{
+    const uint32_t m_lo = (uint32_t)mult & 0xFFFFu;
+    return SAT((e * asr32(mult, 16u)) + rsr32(e * (int32_t)m_lo, 16u), 15);
+}
+#endif
+
 /* One hidden unit after LayerNorm's centring: z = rsr(e M, 16) (Q12; |e M| <= sqrt(30) 2^28
  * (1 + 1e-5) because |e| <= sqrt(v), so |z| < 22500), u = rsr(gamma z, U_SHIFT) + beta saturated
  * to int16 (counted), then GELU. Returns g with |g| < 2^15. */
 HOT int32_t hidden_out(const slipest_model_q_t *m, unsigned u_shift, int32_t u_half, unsigned to_q15, int32_t e,
                        int32_t mult, int i, uint16_t *sat)
 {
-    int32_t z = rsr32(e * mult, 16u);
+    int32_t z = norm_z(e, mult);
     int32_t u = rsr_h((int32_t)m->gamma[i] * z, u_half, u_shift) + m->beta[i];
     if (u > 32767) {
         u = 32767;
@@ -207,10 +261,11 @@ int slipest_infer_q(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_F
     int32_t hmax = INT32_MIN, hmin = INT32_MAX, sum, dmax, t, r, acc0, acc1, acc2;
     const int16_t *w2;
     uint32_t mx, s, eps, v, usum = 0u;
-    unsigned k1, k2;
+    unsigned nb, k1, k2;
     uint16_t sat = 0u;
     unsigned u_shift, to_q15;
     int32_t u_half;
+    int32_t k2_half;
     int i, best;
 
     if (m == 0 || feat_q == 0 || logits == 0) {
@@ -230,31 +285,36 @@ int slipest_infer_q(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_F
         hmin = y < hmin ? y : hmin;
     }
 
-    /* LayerNorm. Block shift k1 so that |h'| <= 2^24 (max|h| = max(|hmax|, |hmin|)). */
+    /* LayerNorm. Block shift k1 so that |h'| <= 2^h_bits <= 2^24 (max|h| = max(|hmax|, |hmin|)). */
     mx = hmax < 0 ? 0u - (uint32_t)hmax : (uint32_t)hmax;
     s = hmin < 0 ? 0u - (uint32_t)hmin : (uint32_t)hmin;
     mx = s > mx ? s : mx;
-    k1 = bitlen32(mx) > m->h_bits ? bitlen32(mx) - m->h_bits : 0u;
-    if (k1 == 0u) {
-        /* h' = h and |sum| <= 30 2^24: the wrapped unsigned sum is the exact sum, and 0u - usum
-         * is then <= 2^31 when usum encodes a negative value; negated minus one first, so that
-         * no value of usum overflows */
-        sum = usum <= (uint32_t)INT32_MAX ? (int32_t)usum : -(int32_t)(0u - usum - 1u) - 1;
-    } else {
-        sum = 0;
+    nb = bitlen32(mx);
+    k1 = nb > m->h_bits ? nb - m->h_bits : 0u;          /* <= 31 - 23 */
+    if (k1 != 0u) {
+        usum = 0u;
         for (i = 0; i < NH; ++i) {
             h[i] = rsr32(h[i], k1);
-            sum += h[i];                                /* |sum| <= 30 2^24 */
+            usum += (uint32_t)h[i];
         }
     }
+    /* h' = rsr(h, k1) has |h'| <= 2^24, so |sum| <= 30 2^24 and the wrapped unsigned sum is the
+     * exact sum (for k1 = 0 the one accumulated with layer 1); 0u - usum is then <= 2^31 when usum
+     * encodes a negative value, so it is negated minus one first: no value of usum overflows. */
+    sum = usum <= (uint32_t)INT32_MAX ? (int32_t)usum : -(int32_t)(0u - usum - 1u) - 1;
+    /* the saturations below never act (bounds above); sum and every h' then fit 30 h' - sum */
+    sum = SAT(sum, 30);
     /* d_i = 30 h'_i - sum is monotonic in h'_i and rsr is monotonic: max|d| from hmax/hmin. */
-    dmax = NH * rsr32(hmax, k1) - sum;
-    t = sum - NH * rsr32(hmin, k1);
+    dmax = NH * SAT(rsr32(hmax, k1), 25) - sum;
+    t = sum - NH * SAT(rsr32(hmin, k1), 25);
     dmax = t > dmax ? t : dmax;                         /* >= 0, < 2^30 */
-    k2 = bitlen32((uint32_t)dmax) > m->e_bits ? bitlen32((uint32_t)dmax) - m->e_bits : 0u;
+    nb = bitlen32((uint32_t)dmax);
+    k2 = nb > m->e_bits ? nb - m->e_bits : 0u;
+    k2_half = (int32_t)((1u << k2) >> 1);               /* rounding constant, hoisted (0 for k2 = 0) */
     s = 0u;
     for (i = 0; i < NH; ++i) {
-        int32_t e = rsr32(NH * h[i] - sum, k2);         /* |d| < 2^30, |e| <= 2^13 */
+        /* |d| < 2^30 and |e| <= 2^e_bits <= 2^13 (k2 from max|d|): the saturations never act */
+        int32_t e = SAT(rsr_h(NH * SAT(h[i], 25) - sum, k2_half, k2), 14);
         h[i] = e;
         s += (uint32_t)(e * e);                         /* s <= 30 2^26 < 2^31 */
     }

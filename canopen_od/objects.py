@@ -49,7 +49,7 @@ IDX_UPLOAD = 0x2006
 
 COUNTERS = ("frames_received", "frames_rejected", "samples_dropped", "windows_flagged", "windows_done",
             "saturations", "rpdo_received", "sdo_aborts_sent", "sdo_aborts_received", "emcy_sent",
-            "block_sequence_errors", "nmt_commands", "frames_ignored")
+            "block_sequence_errors", "nmt_commands", "frames_ignored", "rpdo_no_model")
 STORE_COUNTERS = ("uploads_started", "uploads_aborted", "images_accepted", "refused_length", "refused_format",
                   "refused_arch", "refused_crc", "refused_hash", "refused_range", "refused_hmac", "refused_version",
                   "activations", "rollbacks", "nvm_errors", "boot_fallbacks")
@@ -148,7 +148,7 @@ def objects() -> list[Entry]:
         ("version", UNSIGNED32, "ro", 0, "model", 0),
         ("hash32", UNSIGNED32, "ro", 0, "model", 1),
         ("sha256", OCTET_STRING, "ro", 0, "model", 2),
-        ("slot", UNSIGNED8, "ro", 0, "model", 3),  # 0xFF: the built-in model
+        ("slot", UNSIGNED8, "ro", 0, "model", 3),  # 0xFF: the built-in model, 0xFE: no model
         ("library version", UNSIGNED16, "ro", 0, "model", 4),
     ])
     e += _record(IDX_COMMAND, "Model command", [

@@ -103,11 +103,14 @@ static int bootup(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
     return 1;
 }
 
-/* Reset application: a fresh estimator on the active model, counters cleared. */
+/* Reset application: a fresh estimator on the active model (the store's, else the built-in
+ * one), counters cleared. With neither, the estimator is left without a model: it takes no
+ * telemetry until a model is activated (see rpdo()). */
 static slipest_status_t reset_application(slipest_co_t *co)
 {
     const slipest_model_q_t *mq = co->builtin_q;
     const slipest_model_f32_t *mf = co->builtin_f;
+    slipest_status_t st;
     co->from_store = 0u;
     if (co->store != NULL && slipest_store_model_q(co->store) != NULL) {
         mq = slipest_store_model_q(co->store);
@@ -122,7 +125,23 @@ static slipest_status_t reset_application(slipest_co_t *co)
     (void)memset(co->pdo, 0, sizeof co->pdo);
     co->err_reg = 0u;
     co->last_store_status = 0;
-    return slipest_node_init(&co->est, mq, mf);
+    if (mq == NULL) {
+        (void)memset(&co->est, 0, sizeof co->est); /* model pointers NULL: no model */
+        st = slipest_extractor_init(&co->est.ex);
+    } else {
+        st = slipest_node_init(&co->est, mq, mf);
+    }
+    return st;
+}
+
+/* Boot-up message, then, when no model can run, the no-model EMCY (out has room for both). */
+static int boot(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
+{
+    int n = bootup(co, now_ms, out);
+    if (slipest_node_model_q(&co->est) == NULL) {
+        n += slipest_co_emcy(co, SLIPEST_CO_EMCY_NO_MODEL, SLIPEST_CO_ERR_MANUFACTURER, SLIPEST_E_STATE, &out[n]);
+    }
+    return n;
 }
 
 int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_store_t *store,
@@ -130,9 +149,9 @@ int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_
                     slipest_frame_t *out, size_t cap)
 {
     slipest_status_t st;
-    if (co == NULL || out == NULL || builtin_q == NULL) return SLIPEST_E_NULL;
+    if (co == NULL || out == NULL) return SLIPEST_E_NULL;
     if (node_id < 1u || node_id > 127u) return SLIPEST_E_RANGE;
-    if (cap < 1u) return SLIPEST_E_OVERFLOW;
+    if (cap < ((builtin_q == NULL) ? 2u : 1u)) return SLIPEST_E_OVERFLOW;
     (void)memset(co, 0, sizeof *co);
     co->node_id = node_id;
     co->serial = serial;
@@ -141,7 +160,7 @@ int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_
     co->builtin_f = builtin_f;
     st = reset_application(co);
     if (st != SLIPEST_OK) return st;
-    return bootup(co, now_ms, out);
+    return boot(co, now_ms, out);
 }
 
 static int nmt(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, slipest_frame_t *out)
@@ -162,7 +181,7 @@ static int nmt(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, sli
         slipest_co_sdo_reset(co);
         if (reset_application(co) != SLIPEST_OK) return 0;
         co->cnt[SLIPEST_CO_CNT_NMT_COMMANDS] = nmt_count;
-        return bootup(co, now_ms, out);
+        return boot(co, now_ms, out);
     }
     case NMT_RESET_COMMUNICATION: return bootup(co, now_ms, out);
     default: return ignored(co); /* unknown command (NMT has no answer) */
@@ -214,6 +233,12 @@ static int rpdo(slipest_co_t *co, unsigned k, const slipest_frame_t *in, slipest
         return 0;
     }
     (void)memcpy(co->pdo[k], in->data, in->dlc);
+    if (slipest_node_model_q(&co->est) == NULL) {
+        /* no model yet (none built in, no valid slot): no estimate, counted; the no-model EMCY
+         * went out at boot and the error register says so until a model is activated */
+        co->cnt[SLIPEST_CO_CNT_RPDO_NO_MODEL]++;
+        return 0;
+    }
     dbc.id = p->dbc_id;
     dbc.dlc = p->dlc;
     (void)memcpy(dbc.data, in->data, sizeof dbc.data);

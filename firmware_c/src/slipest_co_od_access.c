@@ -84,7 +84,7 @@ static uint32_t read_model(const slipest_co_t *co, unsigned what, uint8_t buf[32
     const slipest_model_q_t *m = slipest_node_model_q(&co->est);
     uint32_t v;
     switch (what) {
-    case 0u: v = m->version; break;
+    case 0u: v = (m == NULL) ? 0u : m->version; break; /* 0: no model */
     case 1u: v = slipest_model_hash32(m); break;
     case 2u: {
         /* the built-in model's sha256 is not compiled in: only a slot's image carries it */
@@ -97,6 +97,9 @@ static uint32_t read_model(const slipest_co_t *co, unsigned what, uint8_t buf[32
     case 3u: {
         int s = co->from_store ? slipest_store_active_slot(co->store) : SLIPEST_STORE_NO_SLOT;
         v = (s < 0) ? 0xFFu : (uint32_t)s;
+        if (m == NULL) {
+            v = 0xFEu; /* no model at all */
+        }
         break;
     }
     default: v = slipest_lib_version(); break;
@@ -179,7 +182,11 @@ static uint32_t command(slipest_co_t *co, unsigned what, uint32_t value, slipest
             if (slipest_store_model_q(co->store) != NULL) {
                 slipest_co_use_store_model(co);
             } else {
-                (void)slipest_node_set_model(&co->est, co->builtin_q, co->builtin_f);
+                if (slipest_node_set_model(&co->est, co->builtin_q, co->builtin_f) != SLIPEST_OK) {
+                    /* no built-in model either: stop estimating (the store's RAM copy is gone) */
+                    co->est.mq = NULL;
+                    co->est.mf = NULL;
+                }
                 co->from_store = 0u;
             }
         }

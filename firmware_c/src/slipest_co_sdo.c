@@ -146,7 +146,7 @@ static int download_initiate(slipest_co_t *co, const slipest_frame_t *in, slipes
     co->sdo.toggle = 0u;
     if (e->kind == SLIPEST_CO_KIND_DOMAIN) {
         code = domain_begin(co, co->sdo.size, &out[1], &n);
-    } else if (co->sdo.size > slipest_co_od_size(e)) {
+    } else if (co->sdo.size > e->size) {
         code = SLIPEST_CO_ABORT_TOO_HIGH;
     } else {
         code = 0u;

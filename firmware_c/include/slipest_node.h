@@ -102,6 +102,20 @@ const slipest_model_q_t *slipest_node_model_q(const slipest_node_t *node);
 int slipest_node_handle(slipest_node_t *node, const slipest_frame_t *in, slipest_frame_t *out, size_t cap);
 
 /**
+ * @brief Handle one telemetry frame (TELEM_WHEEL, TELEM_IMU, TELEM_ATTITUDE): exactly what
+ *        slipest_node_handle() does with these frames (slipest_node_handle() calls it for them).
+ *        For a profile whose only input is telemetry (the CANopen profile's RPDOs): its image
+ *        then does not link the FEATURES and CONTROL paths.
+ * @param[in,out] node  an initialised node
+ * @param[in]     in    the received frame
+ * @param[out]    out   receives up to SLIPEST_NODE_MAX_OUT output frames
+ * @param[in]     cap   capacity of out (must be >= SLIPEST_NODE_MAX_OUT)
+ * @return as slipest_node_handle(); any other frame ID is rejected with SLIPEST_E_UNKNOWN_ID
+ */
+int slipest_node_handle_telemetry(slipest_node_t *node, const slipest_frame_t *in, slipest_frame_t *out,
+                                  size_t cap);
+
+/**
  * @brief Count a frame the link layer could not decode (bad CRC, failed COBS, malformed SLCAN,
  *        overlong input): frames_received and frames_rejected both grow by 1.
  * @param[in,out] node  an initialised node

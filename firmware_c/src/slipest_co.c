@@ -242,7 +242,7 @@ static int rpdo(slipest_co_t *co, unsigned k, const slipest_frame_t *in, slipest
     dbc.id = p->dbc_id;
     dbc.dlc = p->dlc;
     (void)memcpy(dbc.data, in->data, sizeof dbc.data);
-    r = slipest_node_handle(&co->est, &dbc, est_out, SLIPEST_NODE_MAX_OUT);
+    r = slipest_node_handle_telemetry(&co->est, &dbc, est_out, SLIPEST_NODE_MAX_OUT);
     for (i = 0; i < r; i++) {
         n += to_tpdo(co, &est_out[i], &out[n]);
     }

@@ -252,6 +252,7 @@ static void no_builtin_model(const slipest_nvm_t *nvm)
     CHECK(n == 1 && out[0].id == 0x700u + ID);
     CHECK(rd(0x1001u, 0u, &code) == 0u && rd(0x2001u, 1u, &code) == 3u);
     CHECK(slipest_node_model_q(slipest_co_estimator(&co)) == slipest_store_model_q(&store));
+    CHECK(slipest_model_q_check(slipest_store_model_q(&store)) == SLIPEST_OK); /* the store's load passes the full check */
     send(0u, 2u, (const uint8_t[]){0x01u, ID});
     CHECK(one_window() == 1 && slipest_co_counter(&co, SLIPEST_CO_CNT_RPDO_NO_MODEL) == 0u);
 }

@@ -135,7 +135,25 @@ def _const_values(ents) -> list[int]:
     return vals
 
 
+# The C node decodes RPDO n as telemetry frame type n - 1 of slipest_node_telemetry(): a
+# sample counter, then signed 16-bit signals (slipest_co.c, rpdo()).
+_TELEMETRY = ("TELEM_WHEEL", "TELEM_IMU", "TELEM_ATTITUDE")
+
+
+def _check_rpdo_layouts() -> None:
+    for direction, number, rec in od.PDOS:
+        if direction != "rx":
+            continue
+        _, frame, fields = od.PDO_RECORDS[rec]
+        types = [t for _, t in fields]
+        if frame != _TELEMETRY[number - 1] or types[0] != od.UNSIGNED16 or \
+                any(t != od.INTEGER16 for t in types[1:]) or not 2 <= len(types) - 1 <= 3:
+            raise ValueError(f"RPDO{number}: the C node decodes {_TELEMETRY[number - 1]} "
+                             "(UNSIGNED16 counter, then 2..3 INTEGER16)")
+
+
 def c_source() -> str:
+    _check_rpdo_layouts()
     ents = od.objects()
     values = _const_values(ents)
     lines = [

@@ -153,7 +153,7 @@ def test_canopen_node_with_two_slots_on_m4(builds):
     # the CANopen profile takes telemetry only: the FEATURES / CONTROL paths of the plain profile stay out
     syms = subprocess.run(["arm-none-eabi-nm", str(builds["cortex-m4"] / "slipest_co_node.elf")],
                           capture_output=True, text=True, check=True).stdout.split()
-    assert "slipest_node_handle_telemetry" in syms and "slipest_node_handle" not in syms
+    assert "slipest_node_telemetry" in syms and "slipest_node_handle" not in syms
 
 
 # --------------------------------------------------------------------------- fuzzing

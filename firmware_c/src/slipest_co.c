@@ -1,5 +1,5 @@
 /* CANopen node: NMT slave, heartbeat, EMCY, and the static PDOs that carry the plain profile's
- * frames (RPDO -> DBC frame -> estimator -> DBC frames -> TPDO). */
+ * frames (RPDO -> telemetry values -> estimator -> DBC frames -> TPDO). */
 #include <string.h>
 
 #include "slipest_co_internal.h"
@@ -214,11 +214,19 @@ static int to_tpdo(slipest_co_t *co, const slipest_frame_t *f, slipest_frame_t *
     return 0;
 }
 
+/* A 16-bit two's complement wire value as int16_t (no implementation-defined conversion). */
+static int16_t wire_s16(uint32_t u)
+{
+    int32_t v = (u > 0x7FFFu) ? ((int32_t)u - 65536) : (int32_t)u; /* u < 2^16 */
+    return (int16_t)v;
+}
+
 static int rpdo(slipest_co_t *co, unsigned k, const slipest_frame_t *in, slipest_frame_t *out)
 {
     const slipest_co_pdo_t *p = &slipest_co_pdos[k];
-    slipest_frame_t dbc;
     slipest_frame_t est_out[SLIPEST_NODE_MAX_OUT];
+    int16_t v[3] = {0, 0, 0};
+    unsigned j;
     int r, i, n = 0;
     if (co->nmt != SLIPEST_CO_NMT_OPERATIONAL) {
         return ignored(co); /* PDOs only when operational */
@@ -239,10 +247,13 @@ static int rpdo(slipest_co_t *co, unsigned k, const slipest_frame_t *in, slipest
         co->cnt[SLIPEST_CO_CNT_RPDO_NO_MODEL]++;
         return 0;
     }
-    dbc.id = p->dbc_id;
-    dbc.dlc = p->dlc;
-    (void)memcpy(dbc.data, in->data, sizeof dbc.data);
-    r = slipest_node_handle_telemetry(&co->est, &dbc, est_out, SLIPEST_NODE_MAX_OUT);
+    /* RPDO k carries telemetry frame type k: UNSIGNED16 sample counter, then INTEGER16 signals,
+     * little-endian (canopen_od/generate.py refuses any other layout) */
+    for (j = 0; (j < 3u) && (((2u * j) + 4u) <= (unsigned)p->dlc); j++) {
+        v[j] = wire_s16(slipest_co_get_le(&in->data[2u + (2u * j)], 2u));
+    }
+    r = slipest_node_telemetry(&co->est, k, (uint16_t)slipest_co_get_le(in->data, 2u), v, est_out,
+                               SLIPEST_NODE_MAX_OUT);
     for (i = 0; i < r; i++) {
         n += to_tpdo(co, &est_out[i], &out[n]);
     }

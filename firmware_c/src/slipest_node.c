@@ -257,6 +257,19 @@ static int handle_features(slipest_node_t *node, unsigned part, uint16_t wc, con
     return n;
 }
 
+int slipest_node_telemetry(slipest_node_t *node, unsigned type, uint16_t counter, const int16_t *values,
+                           slipest_frame_t *out, size_t cap)
+{
+    /* where each frame's signals go in the sample (the order of handle_telem's callers below) */
+    static const uint8_t first[3] = {0u, 2u, 5u};
+    static const uint8_t count[3] = {2u, 3u, 2u};
+    if (node == NULL || values == NULL || out == NULL) return SLIPEST_E_NULL;
+    if (cap < SLIPEST_NODE_MAX_OUT) return SLIPEST_E_OVERFLOW;
+    node->c.frames_received++;
+    if (type > 2u) return reject(node, SLIPEST_E_UNKNOWN_ID);
+    return handle_telem(node, type, counter, values, first[type], count[type], out);
+}
+
 static void reset_state(slipest_node_t *node)
 {
     slipest_extractor_reset_grid(&node->ex);
@@ -265,23 +278,13 @@ static void reset_state(slipest_node_t *node)
     node->feat_mask = 0;
 }
 
-/* DLC that the DBC requires for a telemetry frame ID, or -1 if the ID is not telemetry */
-static int telemetry_dlc(uint32_t id)
+/* DLC that the DBC requires for an input frame ID, or -1 if the ID is not an input */
+static int expected_dlc(uint32_t id)
 {
     switch (id) {
     case SLIPEST_DBC_TELEM_WHEEL_FRAME_ID: return SLIPEST_DBC_TELEM_WHEEL_LENGTH;
     case SLIPEST_DBC_TELEM_IMU_FRAME_ID: return SLIPEST_DBC_TELEM_IMU_LENGTH;
     case SLIPEST_DBC_TELEM_ATTITUDE_FRAME_ID: return SLIPEST_DBC_TELEM_ATTITUDE_LENGTH;
-    default: return -1;
-    }
-}
-
-/* DLC that the DBC requires for an input frame ID, or -1 if the ID is not an input */
-static int expected_dlc(uint32_t id)
-{
-    int want = telemetry_dlc(id);
-    if (want >= 0) return want;
-    switch (id) {
     case SLIPEST_DBC_FEATURES_0_FRAME_ID: return SLIPEST_DBC_FEATURES_0_LENGTH;
     case SLIPEST_DBC_FEATURES_1_FRAME_ID: return SLIPEST_DBC_FEATURES_1_LENGTH;
     case SLIPEST_DBC_FEATURES_2_FRAME_ID: return SLIPEST_DBC_FEATURES_2_LENGTH;
@@ -291,9 +294,16 @@ static int expected_dlc(uint32_t id)
     }
 }
 
-/* A telemetry frame whose ID and length were checked: decode it into the sample being assembled. */
-static int telemetry(slipest_node_t *node, const slipest_frame_t *in, slipest_frame_t *out)
+int slipest_node_handle(slipest_node_t *node, const slipest_frame_t *in, slipest_frame_t *out, size_t cap)
 {
+    int want;
+    if (node == NULL || in == NULL || out == NULL) return SLIPEST_E_NULL;
+    if (cap < SLIPEST_NODE_MAX_OUT) return SLIPEST_E_OVERFLOW;
+    node->c.frames_received++;
+    want = expected_dlc(in->id);
+    if (want < 0) return reject(node, SLIPEST_E_UNKNOWN_ID);
+    if (in->dlc != (uint8_t)want) return reject(node, SLIPEST_E_LENGTH);
+
     switch (in->id) {
     case SLIPEST_DBC_TELEM_WHEEL_FRAME_ID: {
         struct slipest_dbc_telem_wheel_t m;
@@ -312,7 +322,7 @@ static int telemetry(slipest_node_t *node, const slipest_frame_t *in, slipest_fr
         v[2] = m.acc_z;
         return handle_telem(node, 1, m.sample_counter, v, 2, 3, out);
     }
-    default: { /* TELEM_ATTITUDE */
+    case SLIPEST_DBC_TELEM_ATTITUDE_FRAME_ID: {
         struct slipest_dbc_telem_attitude_t m;
         int16_t v[2];
         slipest_dbc_telem_attitude_unpack(&m, in->data, in->dlc);
@@ -320,36 +330,6 @@ static int telemetry(slipest_node_t *node, const slipest_frame_t *in, slipest_fr
         v[1] = m.pitch;
         return handle_telem(node, 2, m.sample_counter, v, 5, 2, out);
     }
-    }
-}
-
-int slipest_node_handle_telemetry(slipest_node_t *node, const slipest_frame_t *in, slipest_frame_t *out,
-                                  size_t cap)
-{
-    int want;
-    if (node == NULL || in == NULL || out == NULL) return SLIPEST_E_NULL;
-    if (cap < SLIPEST_NODE_MAX_OUT) return SLIPEST_E_OVERFLOW;
-    node->c.frames_received++;
-    want = telemetry_dlc(in->id);
-    if (want < 0) return reject(node, SLIPEST_E_UNKNOWN_ID);
-    if (in->dlc != (uint8_t)want) return reject(node, SLIPEST_E_LENGTH);
-    return telemetry(node, in, out);
-}
-
-int slipest_node_handle(slipest_node_t *node, const slipest_frame_t *in, slipest_frame_t *out, size_t cap)
-{
-    int want;
-    if (node == NULL || in == NULL || out == NULL) return SLIPEST_E_NULL;
-    if (cap < SLIPEST_NODE_MAX_OUT) return SLIPEST_E_OVERFLOW;
-    node->c.frames_received++;
-    want = expected_dlc(in->id);
-    if (want < 0) return reject(node, SLIPEST_E_UNKNOWN_ID);
-    if (in->dlc != (uint8_t)want) return reject(node, SLIPEST_E_LENGTH);
-
-    switch (in->id) {
-    case SLIPEST_DBC_TELEM_WHEEL_FRAME_ID:
-    case SLIPEST_DBC_TELEM_IMU_FRAME_ID:
-    case SLIPEST_DBC_TELEM_ATTITUDE_FRAME_ID: return telemetry(node, in, out);
     case SLIPEST_DBC_FEATURES_0_FRAME_ID: {
         struct slipest_dbc_features_0_t m;
         int16_t v[3];

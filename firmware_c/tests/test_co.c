@@ -198,7 +198,9 @@ static int one_window(void)
     unsigned k;
     int windows = 0, i;
     for (k = 0; k < 100u; k++) {
-        uint8_t d[8] = {(uint8_t)k, (uint8_t)(k >> 8), (uint8_t)(k % 7u), 0, 3, 0, 0, 0};
+        /* odd samples carry negative signals (0xFFxx): the RPDO decoder's sign conversion */
+        uint8_t neg = (uint8_t)((k & 1u) != 0u ? 0xFFu : 0u);
+        uint8_t d[8] = {(uint8_t)k, (uint8_t)(k >> 8), (uint8_t)(k % 7u), neg, 3, neg, 0, neg};
         send(0x200u + ID, 6u, d);
         send(0x300u + ID, 8u, d);
         send(0x400u + ID, 6u, d);
@@ -255,6 +257,20 @@ static void no_builtin_model(const slipest_nvm_t *nvm)
     CHECK(slipest_model_q_check(slipest_store_model_q(&store)) == SLIPEST_OK); /* the store's load passes the full check */
     send(0u, 2u, (const uint8_t[]){0x01u, ID});
     CHECK(one_window() == 1 && slipest_co_counter(&co, SLIPEST_CO_CNT_RPDO_NO_MODEL) == 0u);
+    /* the estimator's decoded-telemetry entry the RPDOs use */
+    {
+        slipest_node_t node;
+        const int16_t vals[3] = {1, -2, 3};
+        slipest_counters_t c;
+        CHECK(slipest_node_init(&node, slipest_store_model_q(&store), NULL) == SLIPEST_OK);
+        CHECK(slipest_node_telemetry(NULL, 0u, 0u, vals, out, SLIPEST_NODE_MAX_OUT) == SLIPEST_E_NULL);
+        CHECK(slipest_node_telemetry(&node, 0u, 0u, NULL, out, SLIPEST_NODE_MAX_OUT) == SLIPEST_E_NULL);
+        CHECK(slipest_node_telemetry(&node, 0u, 0u, vals, out, 1u) == SLIPEST_E_OVERFLOW);
+        CHECK(slipest_node_telemetry(&node, 3u, 0u, vals, out, SLIPEST_NODE_MAX_OUT) == SLIPEST_E_UNKNOWN_ID);
+        CHECK(slipest_node_telemetry(&node, 1u, 0u, vals, out, SLIPEST_NODE_MAX_OUT) == 0);
+        CHECK(slipest_node_telemetry(&node, 1u, 0u, vals, out, SLIPEST_NODE_MAX_OUT) == SLIPEST_E_ORDER); /* duplicate */
+        CHECK(slipest_node_counters(&node, &c) == SLIPEST_OK && c.frames_received == 3u && c.frames_rejected == 2u);
+    }
 }
 
 int main(void)

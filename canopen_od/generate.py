@@ -42,6 +42,8 @@ def c_header() -> str:
         "#include <stdint.h>",
         "",
         f"#define SLIPEST_CO_OD_N {len(ents)}u",
+        f"#define SLIPEST_CO_N_OBJECTS {len(_objects(ents))}u",
+        f"#define SLIPEST_CO_N_VALUES {len(_const_values(ents))}u",
         f"#define SLIPEST_CO_VENDOR_ID 0x{od.VENDOR_ID:08X}u",
         f"#define SLIPEST_CO_PRODUCT_CODE 0x{od.PRODUCT_CODE:08X}u",
         f"#define SLIPEST_CO_REVISION 0x{od.REVISION:08X}u",
@@ -64,15 +66,23 @@ def c_header() -> str:
         "#define SLIPEST_CO_PAYLOAD_DBC 0u",
         "#define SLIPEST_CO_PAYLOAD_MODEL_STATUS 1u",
         "",
-        "/** One object dictionary entry (sorted by index, then sub-index). */",
+        "/* The dictionary is packed for flash: one 4-byte row per object (its index and where its",
+        " * sub-indices start; sub-indices run 0..n_subs-1 without gaps), one 4-byte row per",
+        " * sub-index, and the constant values once each in their own table. */",
+        "",
+        "/** One object (sorted by index). */",
         "typedef struct {",
-        "    uint32_t value;   /**< default / constant value */",
-        "    uint16_t index;   /**< object index */",
-        "    uint16_t arg;     /**< kind-specific argument */",
-        "    uint8_t sub;      /**< sub-index */",
-        "    uint8_t dtype;    /**< CiA 301 data type code */",
-        "    uint8_t flags;    /**< SLIPEST_CO_ACC_R / _W, SLIPEST_CO_PLUS_ID */",
-        "    uint8_t kind;     /**< SLIPEST_CO_KIND_* */",
+        "    uint16_t index; /**< object index */",
+        "    uint8_t first;  /**< slipest_co_od row of its sub-index 0 */",
+        "    uint8_t n_subs; /**< sub-indices 0..n_subs-1 */",
+        "} slipest_co_object_t;",
+        "",
+        "/** One sub-index of an object. */",
+        "typedef struct {",
+        "    uint8_t kind;  /**< SLIPEST_CO_KIND_* */",
+        "    uint8_t flags; /**< SLIPEST_CO_ACC_R / _W, SLIPEST_CO_PLUS_ID */",
+        "    uint8_t size;  /**< bytes of the value (0: DOMAIN) */",
+        "    uint8_t arg;   /**< kind-specific argument; a constant's row in slipest_co_od_values */",
         "} slipest_co_entry_t;",
         "",
         "/** One static PDO: predefined-connection-set COB-ID base, length, payload. */",
@@ -83,8 +93,12 @@ def c_header() -> str:
         "    uint8_t payload;   /**< SLIPEST_CO_PAYLOAD_* */",
         "} slipest_co_pdo_t;",
         "",
-        "/** The object dictionary. */",
+        "/** The objects, sorted by index. */",
+        "extern const slipest_co_object_t slipest_co_objects[SLIPEST_CO_N_OBJECTS];",
+        "/** The sub-indices of every object, object by object. */",
         "extern const slipest_co_entry_t slipest_co_od[SLIPEST_CO_OD_N];",
+        "/** The constant values (each once). */",
+        "extern const uint32_t slipest_co_od_values[SLIPEST_CO_N_VALUES];",
         "/** The PDOs: RPDOs (1..SLIPEST_CO_N_RPDO) first, then TPDOs; index = payload buffer. */",
         "extern const slipest_co_pdo_t slipest_co_pdos[SLIPEST_CO_N_PDO];",
         "",
@@ -94,21 +108,75 @@ def c_header() -> str:
     return "\n".join(lines)
 
 
+def _objects(ents) -> list[tuple[int, int, int]]:
+    """(index, first row, number of sub-indices) per object; sub-indices must run 0..n-1."""
+    out: list[tuple[int, int, int]] = []
+    for row, e in enumerate(ents):
+        if out and out[-1][0] == e.index:
+            index, first, n = out[-1]
+            out[-1] = (index, first, n + 1)
+        else:
+            out.append((e.index, row, 1))
+        if e.sub != out[-1][2] - 1:
+            raise ValueError(f"0x{e.index:04X}: sub-indices must run 0, 1, 2, ... (sub {e.sub})")
+    if len(ents) > 255 or any(n > 255 for _, _, n in out):
+        raise ValueError("the packed table holds at most 255 rows")
+    return out
+
+
+def _const_values(ents) -> list[int]:
+    """Every distinct constant value, in order of first use."""
+    vals: list[int] = []
+    for e in ents:
+        if e.kind == "const":
+            v = _split_default(e.default)[0]
+            if v not in vals:
+                vals.append(v)
+    return vals
+
+
+# The C node decodes RPDO n as telemetry frame type n - 1 of slipest_node_telemetry(): a
+# sample counter, then signed 16-bit signals (slipest_co.c, rpdo()).
+_TELEMETRY = ("TELEM_WHEEL", "TELEM_IMU", "TELEM_ATTITUDE")
+
+
+def _check_rpdo_layouts() -> None:
+    for direction, number, rec in od.PDOS:
+        if direction != "rx":
+            continue
+        _, frame, fields = od.PDO_RECORDS[rec]
+        types = [t for _, t in fields]
+        if frame != _TELEMETRY[number - 1] or types[0] != od.UNSIGNED16 or \
+                any(t != od.INTEGER16 for t in types[1:]) or not 2 <= len(types) - 1 <= 3:
+            raise ValueError(f"RPDO{number}: the C node decodes {_TELEMETRY[number - 1]} "
+                             "(UNSIGNED16 counter, then 2..3 INTEGER16)")
+
+
 def c_source() -> str:
+    _check_rpdo_layouts()
+    ents = od.objects()
+    values = _const_values(ents)
     lines = [
         "/* Generated by canopen_od/generate.py from canopen_od/objects.py: do not edit. */",
         '#include "slipest_co_od.h"',
         "",
         '#include "slipest_dbc.h"',
         "",
-        "const slipest_co_entry_t slipest_co_od[SLIPEST_CO_OD_N] = {",
+        "const slipest_co_object_t slipest_co_objects[SLIPEST_CO_N_OBJECTS] = {",
     ]
-    for e in od.objects():
+    for index, first, n in _objects(ents):
+        lines.append(f"    {{0x{index:04X}u, {first}u, {n}u}},")
+    lines += ["};", "", "const slipest_co_entry_t slipest_co_od[SLIPEST_CO_OD_N] = {"]
+    for e in ents:
         value, plus = _split_default(e.default)
         flags = ACCESS_BITS[e.access] | (4 if plus else 0)
-        lines.append(f"    {{0x{value:08X}u, 0x{e.index:04X}u, 0x{e.arg:04X}u, {e.sub}u, 0x{e.dtype:02X}u, {flags}u, "
-                     f"SLIPEST_CO_KIND_{e.kind.upper()}}}, "
-                     f"/* {e.parent + ': ' if e.parent else ''}{e.name} */")
+        arg = values.index(value) if e.kind == "const" else e.arg
+        if not 0 <= arg <= 255:
+            raise ValueError(f"0x{e.index:04X} sub {e.sub}: argument {arg} does not fit a byte")
+        lines.append(f"    {{SLIPEST_CO_KIND_{e.kind.upper()}, {flags}u, {od.TYPE_BYTES[e.dtype]}u, {arg}u}}, "
+                     f"/* 0x{e.index:04X} {e.sub}: {e.parent + ': ' if e.parent else ''}{e.name} */")
+    lines += ["};", "", "const uint32_t slipest_co_od_values[SLIPEST_CO_N_VALUES] = {"]
+    lines += [f"    0x{v:08X}u," for v in values]
     lines += ["};", "", "const slipest_co_pdo_t slipest_co_pdos[SLIPEST_CO_N_PDO] = {"]
     for direction, number, rec in sorted(od.PDOS, key=lambda p: od.pdo_slot(p[0], p[1])):
         name, frame, fields = od.PDO_RECORDS[rec]

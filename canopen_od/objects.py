@@ -9,7 +9,7 @@ Each entry: (index, sub, name, data type, access, default, kind, arg, pdo_mappab
   hb_time    producer heartbeat time 0x1017 (read/write)
   err_reg    error register 0x1001
   serial     identity serial number (given to slipest_co_init)
-  pdo        bytes of the last payload of a PDO: arg = (pdo number << 8) | byte offset
+  pdo        bytes of the last payload of a PDO: arg = (pdo number << 4) | byte offset
   model      the active model: arg 0 version, 1 hash32, 2 sha256, 3 slot, 4 library version
   counter    node counter number arg (slipest_co_counter())
   slot       slot arg >> 4, field arg & 15: 0 state, 1 length, 2 version, 3 hash32
@@ -49,7 +49,7 @@ IDX_UPLOAD = 0x2006
 
 COUNTERS = ("frames_received", "frames_rejected", "samples_dropped", "windows_flagged", "windows_done",
             "saturations", "rpdo_received", "sdo_aborts_sent", "sdo_aborts_received", "emcy_sent",
-            "block_sequence_errors", "nmt_commands", "frames_ignored")
+            "block_sequence_errors", "nmt_commands", "frames_ignored", "rpdo_no_model")
 STORE_COUNTERS = ("uploads_started", "uploads_aborted", "images_accepted", "refused_length", "refused_format",
                   "refused_arch", "refused_crc", "refused_hash", "refused_range", "refused_hmac", "refused_version",
                   "activations", "rollbacks", "nvm_errors", "boot_fallbacks")
@@ -148,7 +148,7 @@ def objects() -> list[Entry]:
         ("version", UNSIGNED32, "ro", 0, "model", 0),
         ("hash32", UNSIGNED32, "ro", 0, "model", 1),
         ("sha256", OCTET_STRING, "ro", 0, "model", 2),
-        ("slot", UNSIGNED8, "ro", 0, "model", 3),  # 0xFF: the built-in model
+        ("slot", UNSIGNED8, "ro", 0, "model", 3),  # 0xFF: the built-in model, 0xFE: no model
         ("library version", UNSIGNED16, "ro", 0, "model", 4),
     ])
     e += _record(IDX_COMMAND, "Model command", [
@@ -174,7 +174,7 @@ def objects() -> list[Entry]:
         access = "rww" if direction == "rx" else "ro"
         subs, off = [], 0
         for fname, t in fields:
-            subs.append((fname, t, access, 0, "pdo", (slot << 8) | off, True))
+            subs.append((fname, t, access, 0, "pdo", (slot << 4) | off, True))
             off += TYPE_BYTES[t]
         e += _record(rec, name, subs)
     e.sort(key=lambda x: (x.index, x.sub))

@@ -217,11 +217,13 @@ if(NOT SLIPEST_TARGET_FPU AND NOT SLIPEST_TARGET_INTEGER_ONLY)
                    -P ${FW}/cmake/check_softfloat.cmake)
 endif()
 # size matters more than speed outside the inference kernels (per-frame code, run at 150 Hz; the model
-# store runs at boot and per upload)
+# store, the image reader and the model checks run at boot and once per upload or activation)
 set_source_files_properties(${FW}/src/slipest_co.c ${FW}/src/slipest_co_sdo.c ${FW}/src/slipest_co_od_access.c
                             "${GEN}/slipest_co_od.c" PROPERTIES COMPILE_OPTIONS -Os)
 set_source_files_properties(${FW}/src/slipest_node.c ${FW}/src/slipest_slcan.c ${FW}/src/slipest_cobs.c
                             ${FW}/src/slipest_crc.c ${FW}/src/slipest_status.c ${FW}/src/slipest_features.c
                             ${FW}/src/slipest_store.c ${FW}/src/slipest_sha256.c
+                            ${FW}/src/slipest_image.c ${FW}/src/slipest_model.c ${FW}/src/slipest_node_model.c
+                            ${FW}/src/slipest_model_hash.c
                             "${GEN}/slipest_dbc.c"
                             PROPERTIES COMPILE_OPTIONS -Os)

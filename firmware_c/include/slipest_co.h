@@ -13,7 +13,7 @@
  * - static PDOs: RPDO1..3 carry the three telemetry frames, TPDO1..3 the estimate, TPDO4 the
  *   active model's hash32 and version. Their payload bytes are those of the DBC frames, so the
  *   estimates are those of the plain profile, bit for bit,
- * - an EMCY producer for faults (refused image, NVM error, RPDO length error).
+ * - an EMCY producer for faults (refused image, NVM error, RPDO length error, no model to run).
  * COB-IDs are the predefined connection set of the node id. The object dictionary (and the EDS)
  * are generated from canopen_od/objects.py into slipest_co_od.h/.c at build time.
  * All state lives in slipest_co_t: no globals, no malloc.
@@ -54,6 +54,7 @@ extern "C" {
 #define SLIPEST_CO_EMCY_HARDWARE 0x5000u   /**< an NVM callback failed */
 #define SLIPEST_CO_EMCY_DATA_SET 0x6300u   /**< a model image was refused (byte 3: slipest status) */
 #define SLIPEST_CO_EMCY_PDO_LENGTH 0x8210u /**< an RPDO had the wrong length */
+#define SLIPEST_CO_EMCY_NO_MODEL 0xFF00u   /**< device specific: no model to run (none built in, no valid slot) */
 
 /* SDO abort codes (CiA 301) the server sends. */
 #define SLIPEST_CO_ABORT_TOGGLE 0x05030000u /**< toggle bit not alternated */
@@ -96,7 +97,7 @@ typedef struct {
 typedef struct {
     slipest_node_t est;                  /**< the estimator (the plain profile's node) */
     slipest_store_t *store;              /**< model slots, or NULL (no model upload) */
-    const slipest_model_q_t *builtin_q;  /**< model when no slot holds one */
+    const slipest_model_q_t *builtin_q;  /**< model when no slot holds one, or NULL (none built in) */
     const slipest_model_f32_t *builtin_f; /**< its float model, or NULL */
     slipest_co_sdo_t sdo;                /**< SDO server */
     uint32_t serial;                     /**< identity serial number (0x1018 sub 4) */
@@ -114,17 +115,25 @@ typedef struct {
 /**
  * @brief Start a CANopen node: the estimator runs the store's active model (or the built-in one
  *        when the store is NULL or holds none); writes the boot-up message and enters
- *        pre-operational.
+ *        pre-operational. A flight image may link no built-in model (builtin_q NULL): the launch
+ *        model is then provisioned into a slot before flight, through the store like an upload.
+ *        With no model at all the node still boots and serves NMT, heartbeat and SDO (so a
+ *        model can be uploaded and activated), sends the EMCY SLIPEST_CO_EMCY_NO_MODEL after the
+ *        boot-up message (error register bit 7 set until an activation succeeds), sends no
+ *        estimate TPDO, and counts the RPDOs it takes meanwhile (SLIPEST_CO_CNT_RPDO_NO_MODEL);
+ *        0x2001 then reads version 0, hash32 0 and slot 0xFE.
  * @param[out] co        node context
  * @param[in]  node_id   CANopen node id, 1..127
  * @param[in]  serial    identity serial number (0x1018 sub 4)
  * @param[in]  store     an opened model store, or NULL (then 0x2000 refuses downloads)
- * @param[in]  builtin_q model used while no slot holds one (validated, e.g. slipest_bundle_model_q())
+ * @param[in]  builtin_q model used while no slot holds one (validated, e.g. slipest_bundle_model_q()),
+ *                       or NULL for none
  * @param[in]  builtin_f its float model, or NULL
  * @param[in]  now_ms    current tick in milliseconds (any origin, wraps)
  * @param[out] out       receives the boot-up frame
- * @param[in]  cap       capacity of out (>= 1)
- * @return 1 (frames written), SLIPEST_E_NULL, SLIPEST_E_RANGE (node id) or SLIPEST_E_OVERFLOW
+ * @param[in]  cap       capacity of out (>= 1; >= 2 when builtin_q is NULL: boot-up and EMCY)
+ * @return frames written (1, or 2 with the no-model EMCY), SLIPEST_E_NULL, SLIPEST_E_RANGE
+ *         (node id) or SLIPEST_E_OVERFLOW
  */
 int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_store_t *store,
                     const slipest_model_q_t *builtin_q, const slipest_model_f32_t *builtin_f, uint32_t now_ms,

@@ -102,6 +102,24 @@ const slipest_model_q_t *slipest_node_model_q(const slipest_node_t *node);
 int slipest_node_handle(slipest_node_t *node, const slipest_frame_t *in, slipest_frame_t *out, size_t cap);
 
 /**
+ * @brief One telemetry frame's content, already decoded: what slipest_node_handle() does with a
+ *        TELEM_WHEEL, TELEM_IMU or TELEM_ATTITUDE frame after decoding it (counted as a received
+ *        frame). For a profile that carries the same fields in its own frames (the CANopen
+ *        profile's RPDOs): its image then links neither the DBC decoders nor the FEATURES and
+ *        CONTROL paths.
+ * @param[in,out] node     an initialised node
+ * @param[in]     type     0 TELEM_WHEEL (wheel_speed, motor_current), 1 TELEM_IMU (acc_x, acc_y,
+ *                         acc_z), 2 TELEM_ATTITUDE (roll, pitch)
+ * @param[in]     counter  the frame's sample_counter
+ * @param[in]     values   its signals in that order, raw (the DBC frame's integers)
+ * @param[out]    out      receives up to SLIPEST_NODE_MAX_OUT output frames
+ * @param[in]     cap      capacity of out (must be >= SLIPEST_NODE_MAX_OUT)
+ * @return as slipest_node_handle(); a type above 2 is rejected with SLIPEST_E_UNKNOWN_ID
+ */
+int slipest_node_telemetry(slipest_node_t *node, unsigned type, uint16_t counter, const int16_t *values,
+                           slipest_frame_t *out, size_t cap);
+
+/**
  * @brief Count a frame the link layer could not decode (bad CRC, failed COBS, malformed SLCAN,
  *        overlong input): frames_received and frames_rejected both grow by 1.
  * @param[in,out] node  an initialised node

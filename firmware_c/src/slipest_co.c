@@ -1,5 +1,5 @@
 /* CANopen node: NMT slave, heartbeat, EMCY, and the static PDOs that carry the plain profile's
- * frames (RPDO -> DBC frame -> estimator -> DBC frames -> TPDO). */
+ * frames (RPDO -> telemetry values -> estimator -> DBC frames -> TPDO). */
 #include <string.h>
 
 #include "slipest_co_internal.h"
@@ -103,11 +103,14 @@ static int bootup(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
     return 1;
 }
 
-/* Reset application: a fresh estimator on the active model, counters cleared. */
+/* Reset application: a fresh estimator on the active model (the store's, else the built-in
+ * one), counters cleared. With neither, the estimator is left without a model: it takes no
+ * telemetry until a model is activated (see rpdo()). */
 static slipest_status_t reset_application(slipest_co_t *co)
 {
     const slipest_model_q_t *mq = co->builtin_q;
     const slipest_model_f32_t *mf = co->builtin_f;
+    slipest_status_t st;
     co->from_store = 0u;
     if (co->store != NULL && slipest_store_model_q(co->store) != NULL) {
         mq = slipest_store_model_q(co->store);
@@ -122,7 +125,23 @@ static slipest_status_t reset_application(slipest_co_t *co)
     (void)memset(co->pdo, 0, sizeof co->pdo);
     co->err_reg = 0u;
     co->last_store_status = 0;
-    return slipest_node_init(&co->est, mq, mf);
+    if (mq == NULL) {
+        (void)memset(&co->est, 0, sizeof co->est); /* model pointers NULL: no model */
+        st = slipest_extractor_init(&co->est.ex);
+    } else {
+        st = slipest_node_init(&co->est, mq, mf);
+    }
+    return st;
+}
+
+/* Boot-up message, then, when no model can run, the no-model EMCY (out has room for both). */
+static int boot(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
+{
+    int n = bootup(co, now_ms, out);
+    if (slipest_node_model_q(&co->est) == NULL) {
+        n += slipest_co_emcy(co, SLIPEST_CO_EMCY_NO_MODEL, SLIPEST_CO_ERR_MANUFACTURER, SLIPEST_E_STATE, &out[n]);
+    }
+    return n;
 }
 
 int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_store_t *store,
@@ -130,9 +149,9 @@ int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_
                     slipest_frame_t *out, size_t cap)
 {
     slipest_status_t st;
-    if (co == NULL || out == NULL || builtin_q == NULL) return SLIPEST_E_NULL;
+    if (co == NULL || out == NULL) return SLIPEST_E_NULL;
     if (node_id < 1u || node_id > 127u) return SLIPEST_E_RANGE;
-    if (cap < 1u) return SLIPEST_E_OVERFLOW;
+    if (cap < ((builtin_q == NULL) ? 2u : 1u)) return SLIPEST_E_OVERFLOW;
     (void)memset(co, 0, sizeof *co);
     co->node_id = node_id;
     co->serial = serial;
@@ -141,7 +160,7 @@ int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_
     co->builtin_f = builtin_f;
     st = reset_application(co);
     if (st != SLIPEST_OK) return st;
-    return bootup(co, now_ms, out);
+    return boot(co, now_ms, out);
 }
 
 static int nmt(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, slipest_frame_t *out)
@@ -162,7 +181,7 @@ static int nmt(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, sli
         slipest_co_sdo_reset(co);
         if (reset_application(co) != SLIPEST_OK) return 0;
         co->cnt[SLIPEST_CO_CNT_NMT_COMMANDS] = nmt_count;
-        return bootup(co, now_ms, out);
+        return boot(co, now_ms, out);
     }
     case NMT_RESET_COMMUNICATION: return bootup(co, now_ms, out);
     default: return ignored(co); /* unknown command (NMT has no answer) */
@@ -195,11 +214,19 @@ static int to_tpdo(slipest_co_t *co, const slipest_frame_t *f, slipest_frame_t *
     return 0;
 }
 
+/* A 16-bit two's complement wire value as int16_t (no implementation-defined conversion). */
+static int16_t wire_s16(uint32_t u)
+{
+    int32_t v = (u > 0x7FFFu) ? ((int32_t)u - 65536) : (int32_t)u; /* u < 2^16 */
+    return (int16_t)v;
+}
+
 static int rpdo(slipest_co_t *co, unsigned k, const slipest_frame_t *in, slipest_frame_t *out)
 {
     const slipest_co_pdo_t *p = &slipest_co_pdos[k];
-    slipest_frame_t dbc;
     slipest_frame_t est_out[SLIPEST_NODE_MAX_OUT];
+    int16_t v[3] = {0, 0, 0};
+    unsigned j;
     int r, i, n = 0;
     if (co->nmt != SLIPEST_CO_NMT_OPERATIONAL) {
         return ignored(co); /* PDOs only when operational */
@@ -214,10 +241,19 @@ static int rpdo(slipest_co_t *co, unsigned k, const slipest_frame_t *in, slipest
         return 0;
     }
     (void)memcpy(co->pdo[k], in->data, in->dlc);
-    dbc.id = p->dbc_id;
-    dbc.dlc = p->dlc;
-    (void)memcpy(dbc.data, in->data, sizeof dbc.data);
-    r = slipest_node_handle(&co->est, &dbc, est_out, SLIPEST_NODE_MAX_OUT);
+    if (slipest_node_model_q(&co->est) == NULL) {
+        /* no model yet (none built in, no valid slot): no estimate, counted; the no-model EMCY
+         * went out at boot and the error register says so until a model is activated */
+        co->cnt[SLIPEST_CO_CNT_RPDO_NO_MODEL]++;
+        return 0;
+    }
+    /* RPDO k carries telemetry frame type k: UNSIGNED16 sample counter, then INTEGER16 signals,
+     * little-endian (canopen_od/generate.py refuses any other layout) */
+    for (j = 0; (j < 3u) && (((2u * j) + 4u) <= (unsigned)p->dlc); j++) {
+        v[j] = wire_s16(slipest_co_get_le(&in->data[2u + (2u * j)], 2u));
+    }
+    r = slipest_node_telemetry(&co->est, k, (uint16_t)slipest_co_get_le(in->data, 2u), v, est_out,
+                               SLIPEST_NODE_MAX_OUT);
     for (i = 0; i < r; i++) {
         n += to_tpdo(co, &est_out[i], &out[n]);
     }

@@ -22,9 +22,6 @@
  * set (no object / no sub-index; *entry untouched). */
 const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32_t *abort_code, uint16_t *entry);
 
-/* Bytes of an entry's value (0 for a DOMAIN). */
-uint32_t slipest_co_od_size(const slipest_co_entry_t *e);
-
 /* Read an entry's value, little-endian, into buf (32 bytes); *len receives its size.
  * Returns 0 or an SDO abort code. */
 uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e, uint8_t buf[32], uint32_t *len);

@@ -6,56 +6,27 @@
 
 const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32_t *abort_code, uint16_t *entry)
 {
-    /* binary search over the table sorted by (index, sub): at most log2(N)+1 steps */
-    uint32_t key = ((uint32_t)index << 8) | sub;
-    uint32_t lo = 0u, hi = SLIPEST_CO_OD_N;
-    int index_seen = 0;
+    /* binary search over the objects sorted by index: at most log2(N)+1 steps */
+    uint32_t lo = 0u, hi = SLIPEST_CO_N_OBJECTS;
     while (lo < hi) {
         uint32_t mid = lo + (hi - lo) / 2u;
-        const slipest_co_entry_t *e = &slipest_co_od[mid];
-        uint32_t k = ((uint32_t)e->index << 8) | e->sub;
-        if (e->index == index) {
-            index_seen = 1;
+        const slipest_co_object_t *o = &slipest_co_objects[mid];
+        if (o->index == index) {
+            if (sub >= o->n_subs) {
+                *abort_code = SLIPEST_CO_ABORT_NO_SUB;
+                return NULL;
+            }
+            *entry = (uint16_t)((uint16_t)o->first + sub); /* < SLIPEST_CO_OD_N (generated) */
+            return &slipest_co_od[*entry];
         }
-        if (k == key) {
-            *entry = (uint16_t)mid; /* < SLIPEST_CO_OD_N */
-            return e;
-        }
-        if (k < key) {
+        if (o->index < index) {
             lo = mid + 1u;
         } else {
             hi = mid;
         }
     }
-    /* the search may have skipped the index's other sub-indices: look at the neighbours */
-    if (!index_seen) {
-        if ((lo < SLIPEST_CO_OD_N && slipest_co_od[lo].index == index) ||
-            (lo > 0u && slipest_co_od[lo - 1u].index == index)) {
-            index_seen = 1;
-        }
-    }
-    *abort_code = index_seen ? SLIPEST_CO_ABORT_NO_SUB : SLIPEST_CO_ABORT_NO_OBJECT;
+    *abort_code = SLIPEST_CO_ABORT_NO_OBJECT;
     return NULL;
-}
-
-uint32_t slipest_co_od_size(const slipest_co_entry_t *e)
-{
-    switch (e->dtype) {
-    case 0x01u: /* BOOLEAN */
-    case 0x02u: /* INTEGER8 */
-    case 0x05u: /* UNSIGNED8 */
-        return 1u;
-    case 0x03u: /* INTEGER16 */
-    case 0x06u: /* UNSIGNED16 */
-        return 2u;
-    case 0x04u: /* INTEGER32 */
-    case 0x07u: /* UNSIGNED32 */
-        return 4u;
-    case 0x0Au: /* OCTET_STRING: the 32-byte sha256 */
-        return 32u;
-    default: /* DOMAIN */
-        return 0u;
-    }
 }
 
 static uint32_t store_counter(const slipest_store_counters_t *c, unsigned n)
@@ -84,7 +55,7 @@ static uint32_t read_model(const slipest_co_t *co, unsigned what, uint8_t buf[32
     const slipest_model_q_t *m = slipest_node_model_q(&co->est);
     uint32_t v;
     switch (what) {
-    case 0u: v = m->version; break;
+    case 0u: v = (m == NULL) ? 0u : m->version; break; /* 0: no model */
     case 1u: v = slipest_model_hash32(m); break;
     case 2u: {
         /* the built-in model's sha256 is not compiled in: only a slot's image carries it */
@@ -97,6 +68,9 @@ static uint32_t read_model(const slipest_co_t *co, unsigned what, uint8_t buf[32
     case 3u: {
         int s = co->from_store ? slipest_store_active_slot(co->store) : SLIPEST_STORE_NO_SLOT;
         v = (s < 0) ? 0xFFu : (uint32_t)s;
+        if (m == NULL) {
+            v = 0xFEu; /* no model at all */
+        }
         break;
     }
     default: v = slipest_lib_version(); break;
@@ -108,17 +82,17 @@ static uint32_t read_model(const slipest_co_t *co, unsigned what, uint8_t buf[32
 uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e, uint8_t buf[32], uint32_t *len)
 {
     uint32_t v = 0u;
-    *len = slipest_co_od_size(e);
+    *len = e->size;
     if ((e->flags & SLIPEST_CO_ACC_R) == 0u) return SLIPEST_CO_ABORT_WRITE_ONLY;
     switch (e->kind) {
     case SLIPEST_CO_KIND_CONST:
-        v = e->value + (((e->flags & SLIPEST_CO_PLUS_ID) != 0u) ? co->node_id : 0u);
+        v = slipest_co_od_values[e->arg] + (((e->flags & SLIPEST_CO_PLUS_ID) != 0u) ? co->node_id : 0u);
         break;
     case SLIPEST_CO_KIND_HB_TIME: v = co->hb_ms; break;
     case SLIPEST_CO_KIND_ERR_REG: v = co->err_reg; break;
     case SLIPEST_CO_KIND_SERIAL: v = co->serial; break;
     case SLIPEST_CO_KIND_PDO: {
-        unsigned pdo = (unsigned)e->arg >> 8, off = (unsigned)e->arg & 0xFFu;
+        unsigned pdo = (unsigned)e->arg >> 4, off = (unsigned)e->arg & 0xFu;
         if (pdo >= SLIPEST_CO_N_PDO || off + *len > 8u) return SLIPEST_CO_ABORT_GENERAL;
         (void)memcpy(buf, &co->pdo[pdo][off], *len); /* already little-endian wire bytes */
         return 0u;
@@ -179,7 +153,11 @@ static uint32_t command(slipest_co_t *co, unsigned what, uint32_t value, slipest
             if (slipest_store_model_q(co->store) != NULL) {
                 slipest_co_use_store_model(co);
             } else {
-                (void)slipest_node_set_model(&co->est, co->builtin_q, co->builtin_f);
+                if (slipest_node_set_model(&co->est, co->builtin_q, co->builtin_f) != SLIPEST_OK) {
+                    /* no built-in model either: stop estimating (the store's RAM copy is gone) */
+                    co->est.mq = NULL;
+                    co->est.mf = NULL;
+                }
                 co->from_store = 0u;
             }
         }
@@ -199,7 +177,7 @@ static uint32_t command(slipest_co_t *co, unsigned what, uint32_t value, slipest
 uint32_t slipest_co_od_write(slipest_co_t *co, const slipest_co_entry_t *e, const uint8_t *data, uint32_t len,
                              slipest_frame_t *out, int *n)
 {
-    uint32_t size = slipest_co_od_size(e);
+    uint32_t size = e->size;
     uint32_t v;
     if ((e->flags & SLIPEST_CO_ACC_W) == 0u) return SLIPEST_CO_ABORT_READ_ONLY;
     if (size == 0u || size > 4u) return SLIPEST_CO_ABORT_UNSUPPORTED; /* DOMAIN: via the transfer */
@@ -211,7 +189,7 @@ uint32_t slipest_co_od_write(slipest_co_t *co, const slipest_co_entry_t *e, cons
         co->hb_ms = (uint16_t)v;
         return 0u;
     case SLIPEST_CO_KIND_PDO: {
-        unsigned pdo = (unsigned)e->arg >> 8, off = (unsigned)e->arg & 0xFFu;
+        unsigned pdo = (unsigned)e->arg >> 4, off = (unsigned)e->arg & 0xFu;
         if (pdo >= SLIPEST_CO_N_PDO || off + len > 8u) return SLIPEST_CO_ABORT_GENERAL;
         (void)memcpy(&co->pdo[pdo][off], data, len); /* wire bytes; processed only as a whole RPDO */
         return 0u;

@@ -68,6 +68,36 @@ static int abort_frame(slipest_co_t *co, uint16_t index, uint8_t sub, uint32_t c
     return 1;
 }
 
+/* Abort the transfer in progress (its object in co->sdo). */
+static int abort_cur(slipest_co_t *co, uint32_t code, slipest_frame_t *out)
+{
+    return abort_frame(co, co->sdo.index, co->sdo.sub, code, out);
+}
+
+/* A response about the transfer's object: command byte, then its index and sub-index. */
+static void answer(slipest_co_t *co, uint8_t cmd, slipest_frame_t *out)
+{
+    frame8(co, out);
+    out->data[0] = cmd;
+    put_mux(out, co->sdo.index, co->sdo.sub);
+}
+
+/* An initiate request: take its object as the transfer's, end any transfer in progress, and find
+ * the object's entry; NULL when there is none (the abort is then written to out). */
+static const slipest_co_entry_t *open_entry(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_t *out)
+{
+    uint32_t code = 0u;
+    const slipest_co_entry_t *e;
+    co->sdo.index = (uint16_t)slipest_co_get_le(&in->data[1], 2u);
+    co->sdo.sub = in->data[3];
+    e = slipest_co_od_find(co->sdo.index, co->sdo.sub, &code, &co->sdo.entry);
+    end_transfer(co, 1);
+    if (e == NULL) {
+        (void)abort_cur(co, code, out);
+    }
+    return e;
+}
+
 void slipest_co_sdo_reset(slipest_co_t *co)
 {
     end_transfer(co, 1);
@@ -116,49 +146,39 @@ static uint32_t domain_finish(slipest_co_t *co, slipest_frame_t *out, int *n)
 
 static int download_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_t *out)
 {
-    uint16_t index = (uint16_t)slipest_co_get_le(&in->data[1], 2u);
-    uint8_t sub = in->data[3], cmd = in->data[0];
-    uint32_t code = 0u;
+    uint8_t cmd = in->data[0];
+    uint32_t code;
     int n = 1; /* the response first, an EMCY maybe after it */
-    const slipest_co_entry_t *e = slipest_co_od_find(index, sub, &code, &co->sdo.entry);
-    end_transfer(co, 1);
-    if (e == NULL) return abort_frame(co, index, sub, code, out);
-    co->sdo.index = index;
-    co->sdo.sub = sub;
-    if ((e->flags & SLIPEST_CO_ACC_W) == 0u) return abort_frame(co, index, sub, SLIPEST_CO_ABORT_READ_ONLY, out);
+    const slipest_co_entry_t *e = open_entry(co, in, out);
+    if (e == NULL) return 1;
+    if ((e->flags & SLIPEST_CO_ACC_W) == 0u) return abort_cur(co, SLIPEST_CO_ABORT_READ_ONLY, out);
     if ((cmd & 0x02u) != 0u) { /* expedited: 4 - n bytes in the frame */
         uint32_t len = ((cmd & 0x01u) != 0u) ? 4u - ((uint32_t)(cmd >> 2) & 3u) : 4u;
-        if (e->kind == SLIPEST_CO_KIND_DOMAIN) return abort_frame(co, index, sub, SLIPEST_CO_ABORT_TOO_LOW, out);
+        if (e->kind == SLIPEST_CO_KIND_DOMAIN) return abort_cur(co, SLIPEST_CO_ABORT_TOO_LOW, out);
         code = slipest_co_od_write(co, e, &in->data[4], len, &out[1], &n);
-        if (code != 0u) {
-            (void)abort_frame(co, index, sub, code, out);
-            return n;
-        }
-        frame8(co, out);
-        out->data[0] = 0x60u;
-        put_mux(out, index, sub);
-        return n;
-    }
-    /* segmented: the size must be indicated (a DOMAIN needs it to open the slot) */
-    if ((cmd & 0x01u) == 0u) return abort_frame(co, index, sub, SLIPEST_CO_ABORT_LENGTH, out);
-    co->sdo.size = slipest_co_get_le(&in->data[4], 4u);
-    co->sdo.done = 0u;
-    co->sdo.toggle = 0u;
-    if (e->kind == SLIPEST_CO_KIND_DOMAIN) {
-        code = domain_begin(co, co->sdo.size, &out[1], &n);
-    } else if (co->sdo.size > slipest_co_od_size(e)) {
-        code = SLIPEST_CO_ABORT_TOO_HIGH;
+    } else if ((cmd & 0x01u) == 0u) {
+        /* segmented: the size must be indicated (a DOMAIN needs it to open the slot) */
+        code = SLIPEST_CO_ABORT_LENGTH;
     } else {
-        code = 0u;
+        co->sdo.size = slipest_co_get_le(&in->data[4], 4u);
+        co->sdo.done = 0u;
+        co->sdo.toggle = 0u;
+        if (e->kind == SLIPEST_CO_KIND_DOMAIN) {
+            code = domain_begin(co, co->sdo.size, &out[1], &n);
+        } else if (co->sdo.size > e->size) {
+            code = SLIPEST_CO_ABORT_TOO_HIGH;
+        } else {
+            code = 0u;
+        }
+        if (code == 0u) {
+            co->sdo.state = SLIPEST_CO_SDO_DOWNLOAD;
+        }
     }
     if (code != 0u) {
-        (void)abort_frame(co, index, sub, code, out);
+        (void)abort_cur(co, code, out);
         return n;
     }
-    co->sdo.state = SLIPEST_CO_SDO_DOWNLOAD;
-    frame8(co, out);
-    out->data[0] = 0x60u;
-    put_mux(out, index, sub);
+    answer(co, 0x60u, out);
     return n;
 }
 
@@ -169,10 +189,10 @@ static int download_segment(slipest_co_t *co, const slipest_frame_t *in, slipest
     int n = 1;
     const slipest_co_entry_t *e = &slipest_co_od[co->sdo.entry];
     if (co->sdo.state != SLIPEST_CO_SDO_DOWNLOAD) {
-        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_COMMAND, out);
+        return abort_cur(co, SLIPEST_CO_ABORT_COMMAND, out);
     }
     if (((cmd >> 4) & 1u) != co->sdo.toggle) {
-        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_TOGGLE, out);
+        return abort_cur(co, SLIPEST_CO_ABORT_TOGGLE, out);
     }
     if (e->kind == SLIPEST_CO_KIND_DOMAIN) {
         code = domain_write(co, &in->data[1], len, &out[1], &n);
@@ -189,7 +209,7 @@ static int download_segment(slipest_co_t *co, const slipest_frame_t *in, slipest
         }
     }
     if (code != 0u) {
-        (void)abort_frame(co, co->sdo.index, co->sdo.sub, code, out);
+        (void)abort_cur(co, code, out);
         return n;
     }
     frame8(co, out);
@@ -203,26 +223,19 @@ static int download_segment(slipest_co_t *co, const slipest_frame_t *in, slipest
 
 static int upload_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_t *out)
 {
-    uint16_t index = (uint16_t)slipest_co_get_le(&in->data[1], 2u);
-    uint8_t sub = in->data[3];
-    uint32_t code = 0u, len = 0u;
-    const slipest_co_entry_t *e = slipest_co_od_find(index, sub, &code, &co->sdo.entry);
-    end_transfer(co, 1);
-    if (e == NULL) return abort_frame(co, index, sub, code, out);
+    uint32_t code, len = 0u;
+    const slipest_co_entry_t *e = open_entry(co, in, out);
+    if (e == NULL) return 1;
     code = slipest_co_od_read(co, e, co->sdo.buf, &len);
     if (code == 0u && len == 0u) code = SLIPEST_CO_ABORT_WRITE_ONLY; /* the DOMAIN is write-only */
-    if (code != 0u) return abort_frame(co, index, sub, code, out);
-    frame8(co, out);
-    put_mux(out, index, sub);
+    if (code != 0u) return abort_cur(co, code, out);
     if (len <= 4u) { /* expedited, size indicated */
-        out->data[0] = (uint8_t)(0x43u | ((4u - len) << 2));
+        answer(co, (uint8_t)(0x43u | ((4u - len) << 2)), out);
         (void)memcpy(&out->data[4], co->sdo.buf, len);
         return 1;
     }
-    out->data[0] = 0x41u; /* segmented, size indicated */
+    answer(co, 0x41u, out); /* segmented, size indicated */
     slipest_co_put_le(&out->data[4], len, 4u);
-    co->sdo.index = index;
-    co->sdo.sub = sub;
     co->sdo.size = len;
     co->sdo.done = 0u;
     co->sdo.toggle = 0u;
@@ -234,10 +247,10 @@ static int upload_segment(slipest_co_t *co, const slipest_frame_t *in, slipest_f
 {
     uint32_t len;
     if (co->sdo.state != SLIPEST_CO_SDO_UPLOAD) {
-        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_COMMAND, out);
+        return abort_cur(co, SLIPEST_CO_ABORT_COMMAND, out);
     }
     if (((in->data[0] >> 4) & 1u) != co->sdo.toggle) {
-        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_TOGGLE, out);
+        return abort_cur(co, SLIPEST_CO_ABORT_TOGGLE, out);
     }
     len = co->sdo.size - co->sdo.done;
     if (len > 7u) {
@@ -257,23 +270,19 @@ static int upload_segment(slipest_co_t *co, const slipest_frame_t *in, slipest_f
 
 static int block_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_t *out)
 {
-    uint16_t index = (uint16_t)slipest_co_get_le(&in->data[1], 2u);
-    uint8_t sub = in->data[3], cmd = in->data[0];
-    uint32_t code = 0u;
+    uint8_t cmd = in->data[0];
+    uint32_t code;
     int n = 1;
-    const slipest_co_entry_t *e = slipest_co_od_find(index, sub, &code, &co->sdo.entry);
-    end_transfer(co, 1);
-    if (e == NULL) return abort_frame(co, index, sub, code, out);
-    co->sdo.index = index;
-    co->sdo.sub = sub;
+    const slipest_co_entry_t *e = open_entry(co, in, out);
+    if (e == NULL) return 1;
     /* block transfers carry the model image only; small values go expedited */
-    if (e->kind != SLIPEST_CO_KIND_DOMAIN) return abort_frame(co, index, sub, SLIPEST_CO_ABORT_UNSUPPORTED, out);
-    if ((cmd & 0x02u) == 0u) return abort_frame(co, index, sub, SLIPEST_CO_ABORT_LENGTH, out);
+    if (e->kind != SLIPEST_CO_KIND_DOMAIN) return abort_cur(co, SLIPEST_CO_ABORT_UNSUPPORTED, out);
+    if ((cmd & 0x02u) == 0u) return abort_cur(co, SLIPEST_CO_ABORT_LENGTH, out);
     co->sdo.size = slipest_co_get_le(&in->data[4], 4u);
     co->sdo.done = 0u;
     code = domain_begin(co, co->sdo.size, &out[1], &n);
     if (code != 0u) {
-        (void)abort_frame(co, index, sub, code, out);
+        (void)abort_cur(co, code, out);
         return n;
     }
     co->sdo.crc_on = (uint8_t)((cmd >> 2) & 1u);
@@ -281,9 +290,7 @@ static int block_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_f
     co->sdo.seq_ok = 0u;
     co->sdo.seq_bad = 0u;
     co->sdo.state = SLIPEST_CO_SDO_BLOCK;
-    frame8(co, out);
-    out->data[0] = 0xA4u; /* block download response, the server checks CRCs */
-    put_mux(out, index, sub);
+    answer(co, 0xA4u, out); /* block download response, the server checks CRCs */
     out->data[4] = (uint8_t)SLIPEST_CO_BLKSIZE;
     return n;
 }
@@ -301,11 +308,11 @@ static int block_segment(slipest_co_t *co, const slipest_frame_t *in, slipest_fr
         uint32_t code;
         if (last == 0u && left <= 7u) {
             /* more segments announced than the indicated size holds */
-            return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_TOO_HIGH, out);
+            return abort_cur(co, SLIPEST_CO_ABORT_TOO_HIGH, out);
         }
         code = domain_write(co, &in->data[1], len, &out[1], &n);
         if (code != 0u) {
-            (void)abort_frame(co, co->sdo.index, co->sdo.sub, code, out);
+            (void)abort_cur(co, code, out);
             return 1 + n;
         }
         co->sdo.crc = crc16_update(co->sdo.crc, &in->data[1], len);
@@ -339,19 +346,19 @@ static int block_end(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_
     uint32_t code;
     int n = 1;
     if ((in->data[0] & 0xE3u) != 0xC1u) {
-        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_COMMAND, out);
+        return abort_cur(co, SLIPEST_CO_ABORT_COMMAND, out);
     }
     /* the last segment held 7 - unused bytes: they must be what the indicated size left */
     if (co->sdo.done != co->sdo.size || ((co->sdo.size % 7u) != 0u && (7u - unused) != co->sdo.size % 7u) ||
         ((co->sdo.size % 7u) == 0u && unused != 0u)) {
-        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_LENGTH, out);
+        return abort_cur(co, SLIPEST_CO_ABORT_LENGTH, out);
     }
     if (co->sdo.crc_on != 0u && (uint16_t)slipest_co_get_le(&in->data[1], 2u) != co->sdo.crc) {
-        return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_CRC, out);
+        return abort_cur(co, SLIPEST_CO_ABORT_CRC, out);
     }
     code = domain_finish(co, &out[1], &n);
     if (code != 0u) {
-        (void)abort_frame(co, co->sdo.index, co->sdo.sub, code, out);
+        (void)abort_cur(co, code, out);
         return n;
     }
     co->sdo.state = SLIPEST_CO_SDO_IDLE;
@@ -386,7 +393,7 @@ int slipest_co_sdo_request(slipest_co_t *co, const slipest_frame_t *in, uint32_t
     case CCS_BLOCK_DOWNLOAD:
         if ((in->data[0] & 0x01u) == 0u) return block_initiate(co, in, out);
         if (co->sdo.state != SLIPEST_CO_SDO_BLOCK_END) {
-            return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_COMMAND, out);
+            return abort_cur(co, SLIPEST_CO_ABORT_COMMAND, out);
         }
         return block_end(co, in, out);
     default: /* block upload and anything else */
@@ -399,5 +406,5 @@ int slipest_co_sdo_tick(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
 {
     if (co->sdo.state == SLIPEST_CO_SDO_IDLE) return 0;
     if ((uint32_t)(now_ms - co->sdo.last_ms) < SLIPEST_CO_SDO_TIMEOUT_MS) return 0;
-    return abort_frame(co, co->sdo.index, co->sdo.sub, SLIPEST_CO_ABORT_TIMEOUT, out);
+    return abort_cur(co, SLIPEST_CO_ABORT_TIMEOUT, out);
 }

@@ -257,6 +257,19 @@ static int handle_features(slipest_node_t *node, unsigned part, uint16_t wc, con
     return n;
 }
 
+int slipest_node_telemetry(slipest_node_t *node, unsigned type, uint16_t counter, const int16_t *values,
+                           slipest_frame_t *out, size_t cap)
+{
+    /* where each frame's signals go in the sample (the order of handle_telem's callers below) */
+    static const uint8_t first[3] = {0u, 2u, 5u};
+    static const uint8_t count[3] = {2u, 3u, 2u};
+    if (node == NULL || values == NULL || out == NULL) return SLIPEST_E_NULL;
+    if (cap < SLIPEST_NODE_MAX_OUT) return SLIPEST_E_OVERFLOW;
+    node->c.frames_received++;
+    if (type > 2u) return reject(node, SLIPEST_E_UNKNOWN_ID);
+    return handle_telem(node, type, counter, values, first[type], count[type], out);
+}
+
 static void reset_state(slipest_node_t *node)
 {
     slipest_extractor_reset_grid(&node->ex);

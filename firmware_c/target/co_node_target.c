@@ -1,13 +1,14 @@
-/* The CANopen node on a CPU target (QEMU): model store with two slots on an NVM area, the node
- * booting on the built-in model, a model image arriving by SDO block download (with the CiA 301
- * CRC), its activation, then one window of telemetry RPDOs whose estimate TPDOs must come out.
+/* The CANopen node on a CPU target (QEMU), in its flight configuration: no built-in model. The
+ * launch model (the bundle's model.img) is provisioned into slot A through the store, as at
+ * integration; the node boots on it; the "fused" model (the same image as a newer version)
+ * arrives by SDO block download (with the CiA 301 CRC), is activated, then one window of
+ * telemetry RPDOs must give its estimate TPDOs.
  * Prints key=value lines for `fleetlab bench c` (context sizes, peak stack of the heaviest calls)
  * and PASS / FAIL. The NVM area stands for the integrator's flash: it is not node RAM. */
 #include <stdint.h>
 #include <string.h>
 
 #include "semihost.h"
-#include "slipest_bundle.h"
 #include "slipest_co.h"
 #include "slipest_store.h"
 
@@ -106,6 +107,25 @@ static void set_in(uint32_t id, uint8_t dlc, const uint8_t *data)
     now++;
 }
 
+/* CRC-32 register update (zlib polynomial, reflected), bitwise: the re-versioned image's CRC */
+static uint32_t crc32_update(uint32_t crc, uint8_t byte)
+{
+    int b;
+    crc ^= byte;
+    for (b = 0; b < 8; b++) crc = (crc & 1u) ? (crc >> 1) ^ 0xEDB88320u : crc >> 1;
+    return crc;
+}
+
+/* Byte i of the fused image: the launch image with model version `version` (header bytes 34..37,
+ * little-endian) and the CRC-32 field (first trailer bytes) that goes with it. */
+static uint8_t fused_byte(uint32_t i, uint32_t version, uint32_t crc)
+{
+    uint32_t len = (uint32_t)co_image_len, crc_at = len - SLIPEST_IMAGE_TRAILER_SIZE;
+    if (i >= 34u && i < 38u) return (uint8_t)(version >> (8u * (i - 34u)));
+    if (i >= crc_at && i < crc_at + 4u) return (uint8_t)(crc >> (8u * (i - crc_at)));
+    return co_image[i];
+}
+
 static uint16_t crc16(uint16_t crc, const uint8_t *d, uint32_t n)
 {
     uint32_t i;
@@ -132,6 +152,7 @@ int main(void)
     slipest_nvm_t nvm;
     uint8_t req[8] = {0};
     uint32_t len = (uint32_t)co_image_len, off = 0, stack_finish = 0, stack_activate = 0, stack_window = 0, s;
+    uint32_t version, crc32 = 0xFFFFFFFFu, i;
     uint16_t crc = 0;
     unsigned seq = 0, k;
     int windows = 0, r;
@@ -145,12 +166,24 @@ int main(void)
     nvm.ctx = NULL;
     r = slipest_store_open(&store, &nvm, NULL, 0u);
     check(r == SLIPEST_E_STATE, "an erased NVM holds no model");
-#ifndef SLIPEST_Q_ONLY
-    r = slipest_co_init(&co, NODE_ID, 1u, &store, slipest_bundle_model_q(), slipest_bundle_model_f32(), now, out, 1u);
-#else
-    r = slipest_co_init(&co, NODE_ID, 1u, &store, slipest_bundle_model_q(), NULL, now, out, 1u);
-#endif
-    check(r == 1 && out[0].id == 0x700u + NODE_ID && out[0].data[0] == 0u, "boot-up message");
+    /* integration: the launch model into slot A, through the store exactly like an upload */
+    check(slipest_store_begin(&store, len, 0u) == SLIPEST_OK, "provisioning: begin");
+    check(slipest_store_write(&store, 0u, co_image, len) == SLIPEST_OK, "provisioning: write");
+    check(slipest_store_finish(&store) == SLIPEST_OK, "provisioning: image validated");
+    check(slipest_store_activate(&store) == SLIPEST_OK && slipest_store_active_slot(&store) == 0,
+          "provisioning: slot A active");
+    /* power cycle: the store reopens on slot A, the node boots on it (no built-in model linked) */
+    r = slipest_store_open(&store, &nvm, NULL, 0u);
+    check(r == SLIPEST_OK && slipest_store_active_slot(&store) == 0, "reboot on the provisioned slot");
+    r = slipest_co_init(&co, NODE_ID, 1u, &store, NULL, NULL, now, out, 2u);
+    check(r == 1 && out[0].id == 0x700u + NODE_ID && out[0].data[0] == 0u, "boot-up message, no EMCY");
+    check(slipest_node_model_q(slipest_co_estimator(&co)) == slipest_store_model_q(&store),
+          "the node runs the slot's model");
+    version = slipest_store_model_q(&store)->version + 1u;
+
+    /* the fused model: the same parameters as a newer version (the store refuses an older one) */
+    for (i = 0; i < len - SLIPEST_IMAGE_TRAILER_SIZE; i++) crc32 = crc32_update(crc32, fused_byte(i, version, 0u));
+    crc32 ^= 0xFFFFFFFFu;
 
     /* SDO block download of the image into 0x2000, CRC requested */
     req[0] = 0xC6u; /* block download, CRC supported, size indicated */
@@ -167,8 +200,8 @@ int main(void)
         memset(req, 0, sizeof req);
         seq++;
         req[0] = (uint8_t)(seq | (off + n >= len ? 0x80u : 0u));
-        memcpy(&req[1], &co_image[off], n);
-        crc = crc16(crc, &co_image[off], n);
+        for (i = 0; i < n; i++) req[1u + i] = fused_byte(off + i, version, crc32);
+        crc = crc16(crc, &req[1], n);
         off += n;
         set_in(0x600u + NODE_ID, 8u, req);
         handle_in(0);
@@ -193,7 +226,8 @@ int main(void)
     req[3] = 1u;
     req[4] = 1u;
     check(sdo(req, 0x60u, 1, &stack_activate) == 0u, "activation");
-    check(slipest_store_active_slot(&store) >= 0, "a slot is active");
+    check(slipest_store_active_slot(&store) == 1 && slipest_node_model_q(slipest_co_estimator(&co))->version == version,
+          "slot B active with the fused model");
 
     /* NMT start, then one window of telemetry RPDOs (100 samples x 3 frames) */
     req[0] = 0x01u;

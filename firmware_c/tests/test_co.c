@@ -1,6 +1,7 @@
 /* C unit tests of the CANopen node (slipest_co.h) with the model store on a RAM NVM: NMT,
  * heartbeat, every SDO service and its abort codes, block download (CRC, sequence errors,
- * lengths), activation / rollback / abort commands, PDOs and EMCY. */
+ * lengths), activation / rollback / abort commands, PDOs and EMCY; and the flight configuration
+ * with no built-in model: no model and no slot, an upload into it, provisioning then boot. */
 #include <stdio.h>
 #include <string.h>
 
@@ -189,6 +190,87 @@ static int emcy_in_out(uint16_t code)
         if (out[i].id == 0x080u + ID && (uint16_t)(out[i].data[0] | out[i].data[1] << 8) == code) return 1;
     }
     return 0;
+}
+
+/* One window of RPDOs (100 samples x 3 frames): the number of estimate TPDO1s that came out. */
+static int one_window(void)
+{
+    unsigned k;
+    int windows = 0, i;
+    for (k = 0; k < 100u; k++) {
+        /* odd samples carry negative signals (0xFFxx): the RPDO decoder's sign conversion */
+        uint8_t neg = (uint8_t)((k & 1u) != 0u ? 0xFFu : 0u);
+        uint8_t d[8] = {(uint8_t)k, (uint8_t)(k >> 8), (uint8_t)(k % 7u), neg, 3, neg, 0, neg};
+        send(0x200u + ID, 6u, d);
+        send(0x300u + ID, 8u, d);
+        send(0x400u + ID, 6u, d);
+        for (i = 0; i < n; i++) windows += out[i].id == 0x180u + ID;
+    }
+    return windows;
+}
+
+/* The flight configuration: no built-in model (builtin_q NULL). */
+static void no_builtin_model(const slipest_nvm_t *nvm)
+{
+    uint32_t code;
+    memset(mem, 0xFF, sizeof mem);
+    CHECK(slipest_store_open(&store, nvm, NULL, 0u) == SLIPEST_E_STATE);
+    /* no model and no slot: the node boots, says so by EMCY, and still answers NMT and SDO */
+    CHECK(slipest_co_init(&co, ID, 9u, &store, NULL, NULL, 0u, out, 1u) == SLIPEST_E_OVERFLOW); /* no room for the EMCY */
+    n = slipest_co_init(&co, ID, 9u, &store, NULL, NULL, 0u, out, 2u);
+    CHECK(n == 2 && out[0].id == 0x700u + ID && out[0].data[0] == 0u);
+    CHECK(emcy_in_out(SLIPEST_CO_EMCY_NO_MODEL) && out[1].data[2] == 0x81u);
+    CHECK(slipest_node_model_q(slipest_co_estimator(&co)) == NULL);
+    CHECK(rd(0x1001u, 0u, &code) == 0x81u && code == 0u);
+    CHECK(rd(0x2001u, 1u, &code) == 0u && code == 0u); /* version 0 */
+    CHECK(rd(0x2001u, 2u, &code) == 0u && code == 0u); /* hash32 0 */
+    CHECK((rd(0x2001u, 4u, &code) & 0xFFu) == 0xFEu && code == 0u); /* slot: no model */
+    (void)rd(0x2001u, 3u, &code);
+    CHECK(code == SLIPEST_CO_ABORT_NO_DATA);
+    CHECK(wr(0x2002u, 2u, 1u, 1u) == SLIPEST_CO_ABORT_STATE); /* nothing to roll back to */
+    CHECK(slipest_co_tick(&co, 1000u, out, 2u) == 1 && out[0].data[0] == 0x7Fu); /* heartbeat */
+    send(0u, 2u, (const uint8_t[]){0x01u, ID});
+    CHECK(slipest_co_nmt_state(&co) == SLIPEST_CO_NMT_OPERATIONAL);
+    CHECK(one_window() == 0 && n == 0); /* no estimate without a model */
+    CHECK(slipest_co_counter(&co, SLIPEST_CO_CNT_RPDO_NO_MODEL) == 300u);
+    CHECK(slipest_co_counter(&co, SLIPEST_CO_CNT_RPDO_RECEIVED) == 300u);
+    CHECK(slipest_co_counter(&co, SLIPEST_CO_CNT_WINDOWS_DONE) == 0u);
+    CHECK(rd(0x2003u, 14u, &code) == 300u && code == 0u);
+    CHECK(rd(0x2100u, 1u, &code) == 99u); /* the RPDO payloads are still kept */
+    send(0x200u + ID, 5u, (const uint8_t[]){0, 0, 1, 0, 2}); /* a wrong length is still an error */
+    CHECK(n == 1 && emcy_in_out(SLIPEST_CO_EMCY_PDO_LENGTH));
+    send(0u, 2u, (const uint8_t[]){0x81u, ID}); /* reset node: boot-up, and the EMCY again */
+    CHECK(n == 2 && out[0].id == 0x700u + ID && emcy_in_out(SLIPEST_CO_EMCY_NO_MODEL));
+    CHECK(slipest_co_counter(&co, SLIPEST_CO_CNT_RPDO_NO_MODEL) == 0u);
+    /* a model uploaded and activated: the error register clears, estimates start at a window boundary */
+    CHECK(block(img, img_len, (uint32_t)img_len, 0u, 0) == 0u);
+    CHECK(wr(0x2002u, 1u, 1u, 1u) == 0u && emcy_in_out(SLIPEST_CO_EMCY_RESET));
+    CHECK(rd(0x1001u, 0u, &code) == 0u && rd(0x2001u, 1u, &code) == 3u && (rd(0x2001u, 4u, &code) & 0xFFu) == 0u);
+    send(0u, 2u, (const uint8_t[]){0x01u, ID});
+    CHECK(one_window() == 1);
+    /* provisioning then boot: after a power cycle the node boots on the slot, with no EMCY */
+    CHECK(slipest_store_open(&store, nvm, NULL, 0u) == SLIPEST_OK);
+    n = slipest_co_init(&co, ID, 9u, &store, NULL, NULL, 0u, out, 2u);
+    CHECK(n == 1 && out[0].id == 0x700u + ID);
+    CHECK(rd(0x1001u, 0u, &code) == 0u && rd(0x2001u, 1u, &code) == 3u);
+    CHECK(slipest_node_model_q(slipest_co_estimator(&co)) == slipest_store_model_q(&store));
+    CHECK(slipest_model_q_check(slipest_store_model_q(&store)) == SLIPEST_OK); /* the store's load passes the full check */
+    send(0u, 2u, (const uint8_t[]){0x01u, ID});
+    CHECK(one_window() == 1 && slipest_co_counter(&co, SLIPEST_CO_CNT_RPDO_NO_MODEL) == 0u);
+    /* the estimator's decoded-telemetry entry the RPDOs use */
+    {
+        slipest_node_t node;
+        const int16_t vals[3] = {1, -2, 3};
+        slipest_counters_t c;
+        CHECK(slipest_node_init(&node, slipest_store_model_q(&store), NULL) == SLIPEST_OK);
+        CHECK(slipest_node_telemetry(NULL, 0u, 0u, vals, out, SLIPEST_NODE_MAX_OUT) == SLIPEST_E_NULL);
+        CHECK(slipest_node_telemetry(&node, 0u, 0u, NULL, out, SLIPEST_NODE_MAX_OUT) == SLIPEST_E_NULL);
+        CHECK(slipest_node_telemetry(&node, 0u, 0u, vals, out, 1u) == SLIPEST_E_OVERFLOW);
+        CHECK(slipest_node_telemetry(&node, 3u, 0u, vals, out, SLIPEST_NODE_MAX_OUT) == SLIPEST_E_UNKNOWN_ID);
+        CHECK(slipest_node_telemetry(&node, 1u, 0u, vals, out, SLIPEST_NODE_MAX_OUT) == 0);
+        CHECK(slipest_node_telemetry(&node, 1u, 0u, vals, out, SLIPEST_NODE_MAX_OUT) == SLIPEST_E_ORDER); /* duplicate */
+        CHECK(slipest_node_counters(&node, &c) == SLIPEST_OK && c.frames_received == 3u && c.frames_rejected == 2u);
+    }
 }
 
 int main(void)
@@ -446,7 +528,7 @@ int main(void)
         static const struct {
             uint16_t index;
             uint8_t subs;
-        } recs[] = {{0x2003u, 13u}, {0x2004u, 8u}, {0x2005u, 15u}, {0x2006u, 3u}, {0x2110u, 6u}, {0x2111u, 2u},
+        } recs[] = {{0x2003u, 14u}, {0x2004u, 8u}, {0x2005u, 15u}, {0x2006u, 3u}, {0x2110u, 6u}, {0x2111u, 2u},
                     {0x2112u, 2u}, {0x2113u, 2u}, {0x2101u, 4u}, {0x2001u, 2u}};
         unsigned r, k;
         for (r = 0; r < sizeof recs / sizeof recs[0]; r++) {
@@ -471,5 +553,6 @@ int main(void)
     CHECK(n == 1 && slipest_co_counter(&co, SLIPEST_CO_CNT_WINDOWS_DONE) == 0u && rd(0x2001u, 1u, &code) == 3u);
     CHECK(slipest_co_counter(NULL, 0u) == 0u && slipest_co_estimator(&co) != NULL && slipest_co_size() > 0u);
     CHECK(slipest_co_store_size() == sizeof(slipest_store_t) && slipest_co_max_out() == SLIPEST_CO_MAX_OUT);
+    no_builtin_model(&nvm);
     CHECK_DONE();
 }

@@ -1,51 +1,30 @@
 /* libFuzzer: arbitrary operation sequences on the CANopen node (slipest_co.h) with its model store
  * on a RAM NVM: NMT commands, raw SDO requests, RPDOs of any length, raw frames of any ID, time
  * steps, block and segmented downloads of the example image with one byte changed, power cycles.
- * After every operation: at most SLIPEST_CO_MAX_OUT frames of at most 8 bytes, only on the node's
- * own COB-IDs, and the active model passes slipest_model_q_check() (ASan + UBSan build). */
+ * After every frame: at most SLIPEST_CO_MAX_OUT frames out, of at most 8 bytes, only on the node's
+ * own COB-IDs. After every operation (a frame, a tick, a whole download, a power cycle): the active
+ * model passes slipest_model_q_check() and runs on extreme inputs; between the frames of a download
+ * a changed model struct is checked at once (ASan + UBSan build; the check is cached on the model's
+ * bytes, see fuzz_model_check.h). */
 #include <stddef.h>
 #include <stdint.h>
-#include <stdio.h>
 #include <string.h>
 
+#include "fuzz_model_check.h"
+#include "fuzz_nvm.h"
 #include "slipest_bundle.h"
 #include "slipest_co.h"
 
-#define SECTOR 64u
 #define ID 5u
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
-static uint8_t mem[SLIPEST_STORE_NVM_SECTORS(SECTOR) * SECTOR];
-static uint8_t seed_img[SLIPEST_IMAGE_MAX_SIZE];
-static size_t seed_len;
 static slipest_store_t store;
 static slipest_co_t co;
+static slipest_nvm_t nvm;
 static uint32_t now;
-
-static slipest_status_t f_read(void *ctx, uint32_t addr, uint8_t *buf, uint32_t len)
-{
-    (void)ctx;
-    if (addr > sizeof mem || len > sizeof mem - addr) __builtin_trap();
-    memcpy(buf, mem + addr, len);
-    return SLIPEST_OK;
-}
-
-static slipest_status_t f_write(void *ctx, uint32_t addr, const uint8_t *buf, uint32_t len)
-{
-    (void)ctx;
-    if (len != SECTOR || addr % SECTOR != 0u || addr + len > sizeof mem) __builtin_trap();
-    memcpy(mem + addr, buf, len);
-    return SLIPEST_OK;
-}
-
-static slipest_status_t f_erase(void *ctx, uint32_t addr)
-{
-    (void)ctx;
-    if (addr % SECTOR != 0u || addr + SECTOR > sizeof mem) __builtin_trap();
-    memset(mem + addr, 0xFF, SECTOR);
-    return SLIPEST_OK;
-}
+static const uint8_t *seed_img;
+static size_t seed_len;
 
 static void check_out(const slipest_frame_t *out, int n)
 {
@@ -60,7 +39,7 @@ static void check_out(const slipest_frame_t *out, int n)
             __builtin_trap();
         }
     }
-    if (slipest_model_q_check(slipest_node_model_q(slipest_co_estimator(&co))) != SLIPEST_OK) __builtin_trap();
+    fuzz_check_model_q_struct(slipest_node_model_q(slipest_co_estimator(&co)), 0);
 }
 
 static void frame(uint32_t id, uint8_t dlc, const uint8_t *d)
@@ -75,7 +54,6 @@ static void frame(uint32_t id, uint8_t dlc, const uint8_t *d)
 
 static void boot(void)
 {
-    slipest_nvm_t nvm = {f_read, f_write, f_erase, SECTOR, SLIPEST_STORE_NVM_SECTORS(SECTOR), NULL};
     slipest_frame_t out[1];
     (void)slipest_store_open(&store, &nvm, NULL, 0u);
     if (slipest_co_init(&co, ID, 1u, &store, slipest_bundle_model_q(), NULL, now, out, 1u) != 1) __builtin_trap();
@@ -119,13 +97,8 @@ static void download(int block, uint32_t at, uint8_t x)
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     size_t i = 0;
-    if (seed_len == 0u) {
-        FILE *fp = fopen(SLIPEST_FUZZ_IMAGE, "rb");
-        if (fp == NULL) __builtin_trap();
-        seed_len = fread(seed_img, 1, sizeof seed_img, fp);
-        fclose(fp);
-    }
-    memset(mem, 0xFF, sizeof mem);
+    seed_img = fuzz_seed_image(&seed_len);
+    fuzz_nvm_reset(&nvm);
     now = 0;
     boot();
     while (i + 10u <= size) {
@@ -146,6 +119,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         case 6: boot(); break;
         default: frame((((uint32_t)p[1] << 3) | (p[9] & 7u)) & 0x7FFu, (uint8_t)(p[9] >> 4), p + 2); break;
         }
+        /* every parameter of the active model, after each operation (frames check its struct) */
+        fuzz_check_model_q(slipest_node_model_q(slipest_co_estimator(&co)), 0);
     }
     return 0;
 }

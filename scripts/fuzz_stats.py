@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
         data = load(args.stats, args.fresh)
         today = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d")
         data["targets"][args.target] = entry(executions_from_log(args.log), args.seconds, args.clean == "true",
-                                             today, f"scripts/fuzz.sh, {args.mode} mode ({args.stats.parent.name})")
+                                             today, f"scripts/fuzz.sh, {args.mode} mode ({args.log.parent.parent.name})")
         save(args.stats, data, args.mode)
         return 0
     if not re.fullmatch(r"\d{4}-\d{2}-\d{2}", args.date):

@@ -59,16 +59,34 @@ static void boot(void)
     if (slipest_co_init(&co, ID, 1u, &store, slipest_bundle_model_q(), NULL, now, out, 1u) != 1) __builtin_trap();
 }
 
-/* the seed image with byte `at` xor `x`, by block download (block != 0) or segmented download */
-static void download(int block, uint32_t at, uint8_t x)
+/* CRC-16 of CiA 301 block transfers (polynomial 0x1021, initial 0), the client's side */
+static uint16_t block_crc(const uint8_t *p, uint32_t n)
+{
+    uint16_t crc = 0u;
+    uint32_t i;
+    int b;
+    for (i = 0; i < n; i++) {
+        crc ^= (uint16_t)(p[i] << 8);
+        for (b = 0; b < 8; b++) crc = (crc & 0x8000u) ? (uint16_t)((crc << 1) ^ 0x1021u) : (uint16_t)(crc << 1);
+    }
+    return crc;
+}
+
+/* the seed image with byte `at` xor `x`, by block download (block != 0) or segmented download;
+ * a block download announces a CRC and sends it right (crc_mode 1) or as 0, almost always wrong
+ * (0), or announces none (2, 3): only with a right or no CRC does a block download reach the
+ * store's finish */
+static void download(int block, uint32_t at, uint8_t x, unsigned crc_mode)
 {
     uint8_t img[SLIPEST_IMAGE_MAX_SIZE], d[8];
     uint32_t off = 0, len = (uint32_t)seed_len;
     unsigned seq = 0, t = 0;
+    uint16_t crc;
     memcpy(img, seed_img, seed_len);
     if (len > 0u) img[at % len] ^= x;
+    crc = crc_mode == 1u ? block_crc(img, len) : 0u;
     memset(d, 0, 8);
-    d[0] = block ? 0xC6u : 0x21u;
+    d[0] = block ? (crc_mode < 2u ? 0xC6u : 0xC2u) : 0x21u;
     d[2] = 0x20u;
     d[4] = (uint8_t)len;
     d[5] = (uint8_t)(len >> 8);
@@ -89,7 +107,9 @@ static void download(int block, uint32_t at, uint8_t x)
     }
     if (block) {
         memset(d, 0, 8);
-        d[0] = (uint8_t)(0xC1u | ((7u - (len % 7u == 0u ? 7u : len % 7u)) << 2)); /* CRC left 0: often wrong */
+        d[0] = (uint8_t)(0xC1u | ((7u - (len % 7u == 0u ? 7u : len % 7u)) << 2));
+        d[1] = (uint8_t)crc;
+        d[2] = (uint8_t)(crc >> 8);
         frame(0x600u + ID, 8u, d);
     }
 }
@@ -114,8 +134,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             check_out(out, slipest_co_tick(&co, now, out, SLIPEST_CO_MAX_OUT));
             break;
         }
-        case 4: download(1, (uint32_t)p[1] | (uint32_t)p[2] << 8, p[3]); break;
-        case 5: download(0, (uint32_t)p[1] | (uint32_t)p[2] << 8, p[3]); break;
+        case 4: download(1, (uint32_t)p[1] | (uint32_t)p[2] << 8, p[3], p[4] & 3u); break;
+        case 5: download(0, (uint32_t)p[1] | (uint32_t)p[2] << 8, p[3], 0u); break;
         case 6: boot(); break;
         default: frame((((uint32_t)p[1] << 3) | (p[9] & 7u)) & 0x7FFu, (uint8_t)(p[9] >> 4), p + 2); break;
         }

@@ -5,8 +5,12 @@
 #                                             (default $FLEETLAB_FUZZ_SECONDS or 60), in parallel
 #   scripts/fuzz.sh --long [EXECS] [BUILD_DIR] long mode: every target until EXECS executions
 #                                             (default $FUZZ_EXECS or 10000000), one after the
-#                                             other on one core; writes BUILD_DIR/fuzz-stats.json
+#                                             other on one core; MERGES each target's campaign into
+#                                             $FUZZ_STATS (default BUILD_DIR/fuzz-stats.json): the
+#                                             other targets' entries stay (scripts/fuzz_stats.py)
 #   FUZZ_TARGETS="fuzz_push fuzz_cobs" scripts/fuzz.sh ...   only these targets (default: all)
+#   FUZZ_MAX_SECONDS=N scripts/fuzz.sh --long ...  also stop each target after N seconds (recorded
+#                                             with the executions it reached)
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 MODE=short
@@ -18,6 +22,7 @@ else
   SECONDS_PER_TARGET="${1:-${FLEETLAB_FUZZ_SECONDS:-60}}"
 fi
 BUILD="${2:-$ROOT/build/fuzz}"
+STATS="${FUZZ_STATS:-$BUILD/fuzz-stats.json}"
 TARGETS=(fuzz_payload fuzz_node_frames fuzz_image fuzz_cobs fuzz_slcan fuzz_push fuzz_store fuzz_co_frames)
 if [[ -n "${FUZZ_TARGETS:-}" ]]; then
   read -r -a TARGETS <<<"$FUZZ_TARGETS"
@@ -46,33 +51,34 @@ report_fail() {
   tail -20 "$LOGS/$1.log" >&2
 }
 
+record() { # target, seconds, clean: one line for the caller, one entry in $STATS
+  local execs
+  execs=$(grep -E "stat::number_of_executed_units" "$LOGS/$1.log" | awk '{print $2}')
+  echo "$1 executions=${execs:-0} seconds=$2"
+  "$PY" "$ROOT/scripts/fuzz_stats.py" record "$STATS" "$1" "$LOGS/$1.log" "$2" "$3" --mode "$MODE"
+}
+
 status=0
-declare -A SECS
 if [[ "$MODE" == short ]]; then
+  rm -f "$STATS" # a short run is a fresh record of all its targets
   pids=()
   for t in "${TARGETS[@]}"; do
     run_one "$t" -max_total_time="$SECONDS_PER_TARGET" &
     pids+=($!)
   done
   for i in "${!TARGETS[@]}"; do
-    wait "${pids[$i]}" || { report_fail "${TARGETS[$i]}"; status=1; }
-    SECS[${TARGETS[$i]}]=$SECONDS_PER_TARGET
+    ok=true
+    wait "${pids[$i]}" || { report_fail "${TARGETS[$i]}"; status=1; ok=false; }
+    record "${TARGETS[$i]}" "$SECONDS_PER_TARGET" "$ok"
   done
 else
+  limit=()
+  [[ -n "${FUZZ_MAX_SECONDS:-}" ]] && limit=(-max_total_time="$FUZZ_MAX_SECONDS")
   for t in "${TARGETS[@]}"; do
     start=$(date +%s)
-    run_one "$t" -runs="$EXECS" || { report_fail "$t"; status=1; }
-    SECS[$t]=$(( $(date +%s) - start ))
+    ok=true
+    run_one "$t" -runs="$EXECS" "${limit[@]}" || { report_fail "$t"; status=1; ok=false; }
+    record "$t" $(( $(date +%s) - start )) "$ok" # after each target: a later crash keeps this one
   done
 fi
-
-json="{\"mode\": \"$MODE\", \"date\": \"$(date -u +%Y-%m-%dT%H:%M:%SZ)\", \"sanitizers\": \"address,undefined\", \"targets\": {"
-sep=""
-for t in "${TARGETS[@]}"; do
-  execs=$(grep -E "stat::number_of_executed_units" "$LOGS/$t.log" | awk '{print $2}')
-  echo "$t executions=${execs:-0} seconds=${SECS[$t]}"
-  json+="$sep\"$t\": {\"executions\": ${execs:-0}, \"seconds\": ${SECS[$t]}}"
-  sep=", "
-done
-echo "$json}, \"clean\": $([[ $status == 0 ]] && echo true || echo false)}" >"$BUILD/fuzz-stats.json"
 exit $status

@@ -9,6 +9,7 @@ target (default 60, the three targets run in parallel).
 from __future__ import annotations
 
 import ctypes
+import json
 import os
 import re
 import select
@@ -168,6 +169,10 @@ def test_fuzzers_run_clean(tmp_path):
     assert set(execs) == {"fuzz_slcan", "fuzz_cobs", "fuzz_push", "fuzz_image", "fuzz_node_frames", "fuzz_payload",
                           "fuzz_store", "fuzz_co_frames"}
     assert all(int(v) > 1000 for v in execs.values()), execs
+    # the record fleetlab assure reads: a fresh short-mode file with every target, clean
+    stats = json.loads((tmp_path / "fuzz" / "fuzz-stats.json").read_text())
+    assert stats["mode"] == "short" and stats["clean"] is True
+    assert {t: str(v["executions"]) for t, v in stats["targets"].items()} == execs
     print(proc.stdout)
 
 

@@ -1,72 +1,19 @@
 /* libFuzzer: arbitrary sequences of model-store operations (begin, chunked writes of a valid or
  * mutated image, finish, activate, rollback, abort, reboot) over a RAM NVM that fails or
  * corrupts on command. After every operation: whatever model the store calls active passes
- * slipest_model_q_check() and runs without UB on extreme inputs (ASan + UBSan build).
+ * slipest_model_q_check() and runs without UB on extreme inputs (ASan + UBSan build; the check
+ * is cached on the model's bytes, see fuzz_model_check.h).
  * The image written is the example bundle's model.img (path compiled in), so mutations reach
  * finish and activation instead of dying at the magic. */
 #include <stddef.h>
 #include <stdint.h>
-#include <stdio.h>
 #include <string.h>
 
-#include "slipest_infer.h"
+#include "fuzz_model_check.h"
+#include "fuzz_nvm.h"
 #include "slipest_store.h"
 
-#define SECTOR 64u
-#define N_SECT (SLIPEST_STORE_NVM_SECTORS(SECTOR))
-
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
-
-static uint8_t mem[N_SECT * SECTOR];
-static uint8_t seed_img[SLIPEST_IMAGE_MAX_SIZE];
-static size_t seed_len;
-static int fail_next; /* fail the next write/erase */
-
-static slipest_status_t f_read(void *ctx, uint32_t addr, uint8_t *buf, uint32_t len)
-{
-    (void)ctx;
-    if (addr > sizeof mem || len > sizeof mem - addr) __builtin_trap(); /* the store stays inside */
-    memcpy(buf, mem + addr, len);
-    return SLIPEST_OK;
-}
-
-static slipest_status_t f_write(void *ctx, uint32_t addr, const uint8_t *buf, uint32_t len)
-{
-    (void)ctx;
-    if (len != SECTOR || addr % SECTOR != 0u || addr + len > sizeof mem) __builtin_trap();
-    if (fail_next) {
-        fail_next = 0;
-        return SLIPEST_E_NVM;
-    }
-    memcpy(mem + addr, buf, len);
-    return SLIPEST_OK;
-}
-
-static slipest_status_t f_erase(void *ctx, uint32_t addr)
-{
-    (void)ctx;
-    if (addr % SECTOR != 0u || addr + SECTOR > sizeof mem) __builtin_trap();
-    if (fail_next) {
-        fail_next = 0;
-        return SLIPEST_E_NVM;
-    }
-    memset(mem + addr, 0xFF, SECTOR);
-    return SLIPEST_OK;
-}
-
-static void check_active(const slipest_store_t *st)
-{
-    const slipest_model_q_t *m = slipest_store_model_q(st);
-    int16_t x[SLIPEST_N_FEATURES];
-    int32_t logits[SLIPEST_N_CLASSES];
-    uint16_t sat;
-    int j;
-    if (m == NULL) return;
-    if (slipest_model_q_check(m) != SLIPEST_OK) __builtin_trap();
-    for (j = 0; j < SLIPEST_N_FEATURES; j++) x[j] = (int16_t)(j & 1 ? -32768 : 32767);
-    j = slipest_infer_q(m, x, logits, &sat);
-    if (j < 0 || j > 2) __builtin_trap();
-}
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
@@ -76,23 +23,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     slipest_nvm_t nvm;
     size_t p = 0, img_len;
     uint32_t off = 0;
+    const uint8_t *seed = fuzz_seed_image(&img_len);
 
-    if (seed_len == 0u) {
-        FILE *fp = fopen(SLIPEST_FUZZ_IMAGE, "rb");
-        if (fp == NULL) __builtin_trap();
-        seed_len = fread(seed_img, 1, sizeof seed_img, fp);
-        fclose(fp);
-    }
-    memset(mem, 0xFF, sizeof mem);
-    fail_next = 0;
-    memcpy(img, seed_img, seed_len);
-    img_len = seed_len;
-    nvm.read = f_read;
-    nvm.write = f_write;
-    nvm.erase = f_erase;
-    nvm.sector_size = SECTOR;
-    nvm.n_sectors = N_SECT;
-    nvm.ctx = NULL;
+    fuzz_nvm_reset(&nvm);
+    memcpy(img, seed, img_len);
     /* first byte: authentication on or off */
     (void)slipest_store_open(&st, &nvm, (size > 0 && (data[0] & 0x80u)) ? key : NULL, 16u);
     while (p < size) {
@@ -123,7 +57,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         case 7: /* reboot */
             (void)slipest_store_open(&st, &nvm, (arg & 0x80u) ? key : NULL, 16u);
             break;
-        case 8: fail_next = 1; break;
+        case 8: fuzz_nvm_fail_next(); break;
         case 9: /* mutate the image to upload: one byte, or the model version */
             if (p < size) {
                 uint8_t v = data[p++];
@@ -132,10 +66,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             }
             break;
         default: /* corrupt one NVM byte (a bit flip in flash) */
-            if (p < size) mem[((size_t)arg * 256u + data[p++]) % sizeof mem] ^= 0x10u;
+            if (p < size) fuzz_nvm_mem[((size_t)arg * 256u + data[p++]) % sizeof fuzz_nvm_mem] ^= 0x10u;
             break;
         }
-        check_active(&st);
+        fuzz_check_model_q(slipest_store_model_q(&st), 1);
     }
     return 0;
 }

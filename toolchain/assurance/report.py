@@ -192,8 +192,12 @@ def assure(args: argparse.Namespace) -> int:
     stats_file = args.fuzz_stats or next((p for p in DEFAULT_FUZZ_STATS if p.exists()), None)
     if stats_file and stats_file.exists():
         st = json.loads(stats_file.read_text())
-        frows = ["| Target | Executions | Seconds |", "|---|---:|---:|"]
-        frows += [f"| {t} | {v['executions']:,} | {v['seconds']} |" for t, v in st["targets"].items()]
+        # a long-mode file merges campaigns of several dates: each target carries its own date, clean flag and
+        # source (older files have none of these; "-" then)
+        frows = ["| Target | Executions | Seconds | Date | Clean | Source |", "|---|---:|---:|---|---|---|"]
+        frows += [f"| {t} | {v['executions']:,} | {v['seconds']} | {v.get('date', '-')} | "
+                  f"{'-' if 'clean' not in v else ('yes' if v['clean'] else 'CRASH')} | {v.get('source', '-')} |"
+                  for t, v in st["targets"].items()]
         fewest = min(v["executions"] for v in st["targets"].values())
         summary_row("Fuzzing (last campaign, ASan+UBSan)", f"{st['mode']} run {st['date']}, "
                     f"min {fewest:,} executions/target, {'clean' if st['clean'] else 'CRASH'}", st["clean"])

@@ -34,6 +34,12 @@ def load(stats: Path, fresh: bool) -> dict:
     if stats.exists() and not fresh:
         data = json.loads(stats.read_text())
         data.setdefault("targets", {})
+        for t in data["targets"].values():
+            # a file of the fuzz.sh before per-target records: its one date and clean flag held for all
+            t.setdefault("clean", bool(data.get("clean", False)))
+            t.setdefault("date", str(data.get("date", "-"))[:10])
+            t.setdefault("source", f"scripts/fuzz.sh, {data.get('mode', '?')} mode (file of before per-target records)")
+            t.setdefault("exec_per_s", round(t["executions"] / t["seconds"]) if t.get("seconds") else None)
         return data
     return {"targets": {}}
 

@@ -57,3 +57,16 @@ def test_a_crash_is_kept_and_marks_the_file_unclean(tmp_path):
     run("record", str(stats), "fuzz_cobs", str(log(tmp_path, "cobs", 5)), "1", "true", "--fresh", "--mode", "short")
     st = json.loads(stats.read_text())
     assert list(st["targets"]) == ["fuzz_cobs"] and st["mode"] == "short" and st["clean"] is True
+
+
+def test_a_file_of_the_old_format_is_merged_into(tmp_path):
+    """fuzz.sh wrote one date and one clean flag for all targets before: they carry over to each target."""
+    stats = tmp_path / "fuzz-stats.json"
+    stats.write_text(json.dumps({"mode": "long", "date": "2026-11-23T10:00:00Z", "sanitizers": "address,undefined",
+                                 "targets": {"fuzz_image": {"executions": 10914310, "seconds": 343}}, "clean": True}))
+    run("record", str(stats), "fuzz_cobs", str(log(tmp_path, "cobs", 10_000_000)), "119", "true")
+    st = json.loads(stats.read_text())
+    old = st["targets"]["fuzz_image"]
+    assert old["executions"] == 10914310 and old["clean"] is True and old["date"] == "2026-11-23"
+    assert old["exec_per_s"] == 31820 and "before per-target records" in old["source"]
+    assert st["clean"] is True and set(st["targets"]) == {"fuzz_image", "fuzz_cobs"}

@@ -11,6 +11,7 @@
 #include "slipest_node.h"
 #include "slipest_vectors.h"
 #include "target_vectors.h"
+#include "target_measure.h"
 
 #if defined(SLIPEST_COUNT_BY_TRACE)
 #define N_BENCH 16u /* every instruction is a trace line: fewer inferences */
@@ -19,7 +20,6 @@
 #define N_BENCH 64u
 #define REPS 16u
 #endif
-#define PAINT 0xC5C5C5C5u
 
 static int16_t q_in[N_BENCH][12];
 static float f_in[N_BENCH][12];
@@ -114,27 +114,6 @@ __attribute__((noinline)) static void node_last_frame(uint32_t unused)
     node_out_bytes += (uint32_t)slipest_node_handle(&node, &last_frame, last_out, SLIPEST_NODE_MAX_OUT);
 }
 
-/* Peak stack bytes used by fn below the caller's stack pointer. */
-__attribute__((noinline)) static uint32_t stack_use(void (*fn)(uint32_t))
-{
-    uint32_t sp;
-    volatile uint32_t *p, *lo; /* volatile: no memset call, which would use the painted stack */
-#if defined(__riscv)
-    __asm volatile("mv %0, sp" : "=r"(sp));
-#elif defined(__powerpc__)
-    __asm volatile("mr %0, 1" : "=r"(sp));
-#elif defined(__sparc__)
-    __asm volatile("mov %%sp, %0" : "=r"(sp));
-#else
-    __asm volatile("mov %0, sp" : "=r"(sp));
-#endif
-    lo = (volatile uint32_t *)(sp - 4096u);
-    for (p = lo; p < (volatile uint32_t *)sp; p++) *p = PAINT; /* nothing lives below sp */
-    fn(0);
-    for (p = lo; p < (volatile uint32_t *)sp && *p == PAINT; p++) {
-    }
-    return sp - (uint32_t)(uintptr_t)p;
-}
 
 /* ---- the node main loop: telemetry frames as SLCAN text in, estimate frames out ---- */
 
@@ -180,13 +159,6 @@ __attribute__((noinline)) static void node_sample(uint32_t k)
     }
 }
 
-static void put_kv(const char *k, uint32_t v)
-{
-    semihost_puts(k);
-    semihost_puts("=");
-    semihost_put_uint(v);
-    semihost_puts("\n");
-}
 
 int main(void)
 {
@@ -210,32 +182,32 @@ int main(void)
     counter_start();
 
 #if defined(SLIPEST_COUNT_BY_TRACE)
-    put_kv("calib_instructions", 1u); /* a trace line is one instruction */
-    put_kv("calib_ticks", 1u);
+    target_put_kv("calib_instructions", 1u); /* a trace line is one instruction */
+    target_put_kv("calib_ticks", 1u);
 #else
     t = ticks_now();
     calibration_loop(1000000u);
-    put_kv("calib_instructions", 2000000u);
-    put_kv("calib_ticks", ticks_since(t));
+    target_put_kv("calib_instructions", 2000000u);
+    target_put_kv("calib_ticks", ticks_since(t));
 #endif
 
     t = ticks_now();
     for (r = 0; r < REPS; r++)
         for (i = 0; i < N_BENCH; i++) sink += (int32_t)i; /* loop overhead only */
-    put_kv("empty_ticks", ticks_since(t));
+    target_put_kv("empty_ticks", ticks_since(t));
 
     t = ticks_now();
     for (r = 0; r < REPS; r++)
         for (i = 0; i < N_BENCH; i++) one_q(i);
-    put_kv("q_ticks", ticks_since(t));
+    target_put_kv("q_ticks", ticks_since(t));
 #ifndef SLIPEST_Q_ONLY
     t = ticks_now();
     for (r = 0; r < REPS; r++)
         for (i = 0; i < N_BENCH; i++) one_f32(i);
-    put_kv("f32_ticks", ticks_since(t));
-    put_kv("stack_f32", stack_use(one_f32));
+    target_put_kv("f32_ticks", ticks_since(t));
+    target_put_kv("stack_f32", target_stack_use(one_f32));
 #endif
-    put_kv("inferences", REPS * N_BENCH);
+    target_put_kv("inferences", REPS * N_BENCH);
 
 #ifndef SLIPEST_Q_ONLY
     if (slipest_node_init(&node, model_q, model_f32) != SLIPEST_OK) return 1;
@@ -245,7 +217,7 @@ int main(void)
     slipest_slcan_rx_init(&slcan);
     t = ticks_now();
     for (i = 0; i < 99u; i++) node_sample(i); /* one window minus its last sample */
-    put_kv("node_99_samples_ticks", ticks_since(t));
+    target_put_kv("node_99_samples_ticks", ticks_since(t));
     {
         /* sample 99: wheel and IMU frames normally, the attitude frame under the stack meter */
         slipest_frame_t f, out[SLIPEST_NODE_MAX_OUT];
@@ -254,10 +226,10 @@ int main(void)
         telem_frame(&f, SLIPEST_DBC_TELEM_IMU_FRAME_ID, 99u, 10, -20, 9810);
         slipest_node_handle(&node, &f, out, SLIPEST_NODE_MAX_OUT);
         telem_frame(&last_frame, SLIPEST_DBC_TELEM_ATTITUDE_FRAME_ID, 99u, 5, -7, 0);
-        put_kv("stack_node_window", stack_use(node_last_frame));
+        target_put_kv("stack_node_window", target_stack_use(node_last_frame));
     }
-    put_kv("node_windows", node.c.windows_done);
-    put_kv("stack_q", stack_use(one_q));
-    put_kv("node_bytes", (uint32_t)sizeof(slipest_node_t));
+    target_put_kv("node_windows", node.c.windows_done);
+    target_put_kv("stack_q", target_stack_use(one_q));
+    target_put_kv("node_bytes", (uint32_t)sizeof(slipest_node_t));
     return 0;
 }

@@ -87,7 +87,7 @@ class CCanopenNode:
             ("slipest_co_store_size", ctypes.c_size_t, []),
             ("slipest_bundle_model_q", vp, []),
             ("slipest_bundle_model_f32", vp, []),
-            ("slipest_store_open", ctypes.c_int, [vp, ctypes.POINTER(CNvm), vp, ctypes.c_size_t]),
+            ("slipest_store_open", ctypes.c_int, [vp, ctypes.POINTER(CNvm), vp]),
             ("slipest_co_init", ctypes.c_int, [vp, ctypes.c_uint8, ctypes.c_uint32, vp, vp, vp, ctypes.c_uint32, fp,
                                                ctypes.c_size_t]),
             ("slipest_co_handle", ctypes.c_int, [vp, fp, ctypes.c_uint32, fp, ctypes.c_size_t]),
@@ -114,7 +114,7 @@ class CCanopenNode:
             self._store = None
             if self.nvm is not None:
                 self._store = ctypes.create_string_buffer(self.lib.slipest_co_store_size())
-                st = self.lib.slipest_store_open(self._store, ctypes.byref(self.nvm.struct), None, 0)
+                st = self.lib.slipest_store_open(self._store, ctypes.byref(self.nvm.struct), None)
                 if st not in (SLIPEST_OK, SLIPEST_E_STATE, SLIPEST_E_NVM):
                     raise OSError(f"slipest_store_open failed ({st})")
             n = self.lib.slipest_co_init(self._co, self.node_id, self.serial, self._store,

@@ -138,8 +138,8 @@ def test_bench_c_prints_one_json_object(builds, capsys):
 def test_canopen_node_with_two_slots_on_m4(builds):
     """The CANopen node image (firmware_c/target/co_node_target.c) under QEMU, in its flight configuration:
     the launch model provisioned into slot A through the store, boot on it, the fused model by SDO block
-    download, activation, one window of RPDOs; its RAM within the issue's 4 KB goal, flash measured by part
-    (the 12 KB goal is reported, see docs/model_update.md); no built-in model linked."""
+    download, activation, one window of RPDOs; its RAM and flash within the issue's goals (4 KB, 12 KB),
+    flash measured by part; no built-in model linked. Also the same node built to authenticate images."""
     from fleetlab.host_tools.firmware.bench import canopen_node_figures
 
     out = ctest(builds["cortex-m4"], "co_node")
@@ -149,6 +149,14 @@ def test_canopen_node_with_two_slots_on_m4(builds):
     assert fig["ram_bytes"] <= fig["goals"]["ram_bytes"]
     assert fig["flash_bytes_by_part"]["canopen"] > 0 and fig["flash_bytes_by_part"]["store"] > 0
     assert fig["flash_bytes"] == sum(fig["flash_bytes_by_part"].values())
+    # the keyless node links no SHA-256; the authenticating build (signed images only, the unsigned
+    # one refused) does, and still fits 4 KB of RAM
+    assert "PASS" in ctest(builds["cortex-m4"], "co_node_auth")
+    auth = fig["with_auth"]
+    assert auth["ram_bytes"] <= fig["goals"]["ram_bytes"] and auth["image_bytes"] == fig["image_bytes"] + 32
+    assert auth["flash_bytes"] > fig["flash_bytes"] + 1000
+    keyless = library_footprint(builds["cortex-m4"] / "slipest_co_node.elf.map", "libslipest_q.a")
+    assert "slipest_sha256.c.obj" not in keyless or keyless["slipest_sha256.c.obj"]["flash"] < 64  # ct_equal only
     linked = library_footprint(builds["cortex-m4"] / "slipest_co_node.elf.map", "libslipest_q.a")
     assert "slipest_bundle_q.c.obj" not in linked and "slipest_store.c.obj" in linked  # models are data
     # the CANopen profile takes telemetry only: the FEATURES / CONTROL paths of the plain profile stay out

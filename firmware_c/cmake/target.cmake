@@ -33,7 +33,7 @@ if(SLIPEST_TARGET_KERNEL_OPT)
 endif()
 
 # runtime of the test images: startup + host I/O (semihosting on bare metal, stdio in user mode)
-set(rt_sources ${TGT}/target_vectors.c ${TGT}/target_measure.c)
+set(rt_sources ${TGT}/target_vectors.c ${TGT}/target_measure.c ${TGT}/target_nvm.c)
 foreach(s ${SLIPEST_TARGET_STARTUP})
   list(APPEND rt_sources ${TGT}/${s})
 endforeach()
@@ -51,7 +51,7 @@ set_source_files_properties(${TGT}/target_measure.c PROPERTIES COMPILE_OPTIONS -
 set_source_files_properties(${TGT}/freestanding_libc.c PROPERTIES
                             COMPILE_OPTIONS "-fno-builtin;-fno-tree-loop-distribute-patterns")
 add_library(slipest_rt STATIC ${rt_sources})
-target_include_directories(slipest_rt PUBLIC ${TGT})
+target_include_directories(slipest_rt PUBLIC ${TGT} PRIVATE ${SLIPEST_INCLUDES})
 target_compile_options(slipest_rt PRIVATE ${SLIPEST_WARNINGS})
 target_compile_definitions(slipest_rt PRIVATE SLIPEST_VECTORS_PATH="${VECTORS_BIN}")
 if(SLIPEST_APBUART_BASE)
@@ -171,6 +171,11 @@ if(EXISTS "${SLIPEST_BUNDLE}/model.img")
   slipest_image(slipest_co_node slipest_q ${TGT}/co_node_target.c)
   target_sources(slipest_co_node PRIVATE "${CMAKE_BINARY_DIR}/co_image.c")
   slipest_qemu_test(co_node_${SLIPEST_CPU} slipest_co_node)
+  # the same node authenticating images (HMAC-SHA256): signed uploads only, and its flash
+  slipest_image(slipest_co_node_auth slipest_q ${TGT}/co_node_target.c)
+  target_sources(slipest_co_node_auth PRIVATE "${CMAKE_BINARY_DIR}/co_image.c")
+  target_compile_definitions(slipest_co_node_auth PRIVATE CO_NODE_AUTH)
+  slipest_qemu_test(co_node_auth_${SLIPEST_CPU} slipest_co_node_auth)
 endif()
 
 # --- cost image: where instructions can be counted (SysTick or minstret under -icount, or the exec trace) ---

@@ -124,18 +124,17 @@ static void use_store_model(void)
 static int open_store(const char *path, uint32_t sector)
 {
     slipest_nvm_t nvm;
-    const uint8_t *key = NULL;
-    size_t key_len = 0u;
+    const slipest_store_auth_t *auth = NULL;
     int st;
 #ifdef SLIPEST_HMAC_KEY
-    key = slipest_hmac_key;
-    key_len = sizeof slipest_hmac_key;
+    static const slipest_store_auth_t hmac = SLIPEST_STORE_AUTH_HMAC_SHA256(slipest_hmac_key, sizeof slipest_hmac_key);
+    auth = &hmac;
 #endif
     if (emu_nvm_open(&nvm_file, path, sector, SLIPEST_STORE_NVM_SECTORS(sector), &nvm) != 0) {
         fprintf(stderr, "slipest_emu: cannot open NVM file %s: %s\n", path, strerror(errno));
         return 2;
     }
-    st = slipest_store_open(&store, &nvm, key, key_len);
+    st = slipest_store_open(&store, &nvm, auth);
     if (st != SLIPEST_OK && st != SLIPEST_E_STATE && st != SLIPEST_E_NVM) {
         fprintf(stderr, "slipest_emu: store: %s\n", slipest_status_str(st));
         return 2;

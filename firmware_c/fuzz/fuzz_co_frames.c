@@ -55,7 +55,7 @@ static void frame(uint32_t id, uint8_t dlc, const uint8_t *d)
 static void boot(void)
 {
     slipest_frame_t out[1];
-    (void)slipest_store_open(&store, &nvm, NULL, 0u);
+    (void)slipest_store_open(&store, &nvm, NULL);
     if (slipest_co_init(&co, ID, 1u, &store, slipest_bundle_model_q(), NULL, now, out, 1u) != 1) __builtin_trap();
 }
 

@@ -20,6 +20,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     static slipest_store_t st;
     static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
     static const uint8_t key[16] = {1, 2, 3};
+    static const slipest_store_auth_t auth = SLIPEST_STORE_AUTH_HMAC_SHA256(key, sizeof key);
     slipest_nvm_t nvm;
     size_t p = 0, img_len;
     uint32_t off = 0;
@@ -28,7 +29,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     fuzz_nvm_reset(&nvm);
     memcpy(img, seed, img_len);
     /* first byte: authentication on or off */
-    (void)slipest_store_open(&st, &nvm, (size > 0 && (data[0] & 0x80u)) ? key : NULL, 16u);
+    (void)slipest_store_open(&st, &nvm, (size > 0 && (data[0] & 0x80u)) ? &auth : NULL);
     while (p < size) {
         uint8_t op = data[p++];
         uint8_t arg = p < size ? data[p++] : 0u;
@@ -55,7 +56,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         case 5: (void)slipest_store_rollback(&st); break;
         case 6: (void)slipest_store_abort(&st); break;
         case 7: /* reboot */
-            (void)slipest_store_open(&st, &nvm, (arg & 0x80u) ? key : NULL, 16u);
+            (void)slipest_store_open(&st, &nvm, (arg & 0x80u) ? &auth : NULL);
             break;
         case 8: fuzz_nvm_fail_next(); break;
         case 9: /* mutate the image to upload: one byte, or the model version */

@@ -106,7 +106,10 @@ int slipest_node_handle(slipest_node_t *node, const slipest_frame_t *in, slipest
  *        TELEM_WHEEL, TELEM_IMU or TELEM_ATTITUDE frame after decoding it (counted as a received
  *        frame). For a profile that carries the same fields in its own frames (the CANopen
  *        profile's RPDOs): its image then links neither the DBC decoders nor the FEATURES and
- *        CONTROL paths.
+ *        CONTROL paths nor the status packers. The estimate frames are the same; every
+ *        SLIPEST_STATUS_EVERY windows, where slipest_node_handle() adds the three status frames,
+ *        this adds one STATUS_MODEL frame with an all-zero payload instead: the point at which
+ *        the profile sends its own status (the CANopen node: the model status TPDO).
  * @param[in,out] node     an initialised node
  * @param[in]     type     0 TELEM_WHEEL (wheel_speed, motor_current), 1 TELEM_IMU (acc_x, acc_y,
  *                         acc_z), 2 TELEM_ATTITUDE (roll, pitch)

@@ -32,6 +32,7 @@
 
 #include "slipest_image.h"
 #include "slipest_model.h"
+#include "slipest_sha256.h"
 #include "slipest_status.h"
 
 #ifdef __cplusplus
@@ -76,6 +77,28 @@ typedef struct {
     uint32_t n_sectors;   /**< sectors in the area, >= SLIPEST_STORE_NVM_SECTORS(sector_size) */
     void *ctx;            /**< passed to every callback */
 } slipest_nvm_t;
+
+/**
+ * Image authentication: the key and the HMAC-SHA256 the store runs over an image's header and
+ * payload. The store reaches the MAC only through these pointers, so a node that opens its store
+ * without authentication (auth NULL) links no SHA-256 code at all (about 1.2 KB of flash on the
+ * Cortex-M4). Fill it with SLIPEST_STORE_AUTH_HMAC_SHA256().
+ */
+typedef struct {
+    const uint8_t *key; /**< the provisioned key; must outlive the store */
+    size_t key_len;     /**< bytes of key, at least 1 (longer than 64: hashed first, RFC 2104) */
+    /** slipest_hmac_sha256_init() */
+    void (*init)(slipest_hmac_sha256_t *h, const uint8_t *key, size_t key_len);
+    /** slipest_hmac_sha256_update() */
+    void (*update)(slipest_hmac_sha256_t *h, const uint8_t *data, size_t len);
+    /** slipest_hmac_sha256_final() */
+    void (*final)(slipest_hmac_sha256_t *h, uint8_t tag[SLIPEST_SHA256_SIZE]);
+} slipest_store_auth_t;
+
+/** Initialiser of a slipest_store_auth_t for fleetlab's HMAC-SHA256 with key (key_len bytes):
+ *  `static const slipest_store_auth_t auth = SLIPEST_STORE_AUTH_HMAC_SHA256(key, sizeof key);` */
+#define SLIPEST_STORE_AUTH_HMAC_SHA256(key, key_len) \
+    {(key), (key_len), slipest_hmac_sha256_init, slipest_hmac_sha256_update, slipest_hmac_sha256_final}
 
 /** State of one slot. */
 typedef enum {
@@ -135,8 +158,7 @@ typedef struct {
 /** All state of a model store (caller-allocated; no globals, no malloc). Treat as opaque. */
 typedef struct {
     slipest_nvm_t nvm;                    /**< copy of the NVM interface */
-    const uint8_t *key;                   /**< HMAC key, NULL = no authentication */
-    size_t key_len;                       /**< bytes of key */
+    const slipest_store_auth_t *auth;     /**< image authentication, NULL = none */
     uint32_t slot_sectors;                /**< sectors per slot */
     slipest_store_record_t rec;           /**< newest valid commit record (seq 0: none) */
     uint8_t rec_sector;                   /**< record sector holding rec */
@@ -163,21 +185,19 @@ typedef struct {
 
 /**
  * @brief Open the store at boot: read both commit records, take the newest valid one whose
- *        active slot fully validates (CRC, hash, every model check, HMAC when a key is given),
+ *        active slot fully validates (CRC, hash, every model check, HMAC when auth is given),
  *        and load that slot's model into RAM.
  * @param[out] store    store state to initialise
  * @param[in]  nvm      NVM interface (copied)
- * @param[in]  key      HMAC-SHA256 key, or NULL for no authentication (then key_len is ignored);
+ * @param[in]  auth     image authentication (SLIPEST_STORE_AUTH_HMAC_SHA256()), or NULL for none;
  *                      must outlive the store
- * @param[in]  key_len  bytes of key (at least 1 when key is not NULL; a key longer than 64 bytes is
- *                      hashed first, as RFC 2104 says; the CMake option takes 16..64 bytes)
  * @return SLIPEST_OK (a model is active); SLIPEST_E_STATE (no valid model on the NVM: the store
  *         is usable for an upload and the caller runs its built-in model); SLIPEST_E_NVM (a read
- *         failed: as E_STATE); SLIPEST_E_NULL; SLIPEST_E_RANGE (sector size, sector count or key
- *         length out of range: the store is not usable)
+ *         failed: as E_STATE); SLIPEST_E_NULL; SLIPEST_E_RANGE (sector size, sector count, or an auth
+ *         with no key, key_len 0 or a NULL function: the store is not usable)
  */
-slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t *nvm, const uint8_t *key,
-                                    size_t key_len);
+slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t *nvm,
+                                    const slipest_store_auth_t *auth);
 
 /**
  * @brief Start an upload into the inactive slot (the one no record names as active): erase it.

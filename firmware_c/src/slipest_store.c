@@ -11,7 +11,6 @@
 
 #include "slipest_image_internal.h"
 #include "slipest_model_internal.h"
-#include "slipest_sha256.h"
 
 #define REC_MAGIC "SLPR"
 #define REC_LAYOUT 1u
@@ -267,8 +266,8 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
     w.s = s;
     w.load = load;
     w.crc = 0xFFFFFFFFu;
-    if (s->key != NULL) {
-        slipest_hmac_sha256_init(&w.mac, s->key, s->key_len);
+    if (s->auth != NULL) {
+        s->auth->init(&w.mac, s->auth->key, s->auth->key_len);
     }
     /* len <= SLIPEST_IMAGE_MAX_SIZE, so at most SLIPEST_STORE_SLOT_SECTORS(S) iterations */
     while (pos < len) {
@@ -294,8 +293,8 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
                 payload_byte(&w, b);
             }
             w.crc = slipest_crc32_update(w.crc, &b, 1u);
-            if (s->key != NULL) {
-                slipest_hmac_sha256_update(&w.mac, &b, 1u);
+            if (s->auth != NULL) {
+                s->auth->update(&w.mac, &b, 1u);
             }
         }
     }
@@ -305,11 +304,11 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
     if (slipest_image_check_hash32(w.hdr, w.tail) != SLIPEST_OK) {
         return SLIPEST_E_HASH;
     }
-    if (s->key != NULL) {
+    if (s->auth != NULL) {
         if ((w.flags & SLIPEST_IMAGE_FLAG_HMAC) == 0u) {
             return SLIPEST_E_AUTH;
         }
-        slipest_hmac_sha256_final(&w.mac, tag);
+        s->auth->final(&w.mac, tag);
         if (0 == slipest_ct_equal(tag, &w.tail[SLIPEST_IMAGE_TRAILER_SIZE], SLIPEST_SHA256_SIZE)) {
             return SLIPEST_E_AUTH;
         }
@@ -397,50 +396,46 @@ static void count_refusal(slipest_store_t *s, slipest_status_t st)
 }
 
 /* ------------------------------------------------------------------ commit records */
+/* the per-slot fields of r in record order: word j of the slot table is field j % 4 of slot j / 4 */
+#define REC_SLOT_WORDS (4u * SLIPEST_STORE_N_SLOTS)
+
 static void record_encode(const slipest_store_record_t *r, uint8_t *p)
 {
-    unsigned k;
+    const uint32_t *field[4] = {r->length, r->crc, r->version, r->hash32};
+    unsigned j;
+    memset(p, 0, REC_BODY);
     memcpy(p, REC_MAGIC, 4);
     p[4] = (uint8_t)REC_LAYOUT;
-    p[5] = 0u;
-    p[6] = 0u;
-    p[7] = 0u;
     put_le32(&p[8], r->seq);
     p[12] = r->active == NO_SLOT ? 0xFFu : (uint8_t)r->active;
     p[13] = r->prev == NO_SLOT ? 0xFFu : (uint8_t)r->prev;
-    p[14] = 0u;
-    p[15] = 0u;
-    for (k = 0; k < SLIPEST_STORE_N_SLOTS; ++k) {
-        put_le32(&p[16u + 16u * k], r->length[k]);
-        put_le32(&p[20u + 16u * k], r->crc[k]);
-        put_le32(&p[24u + 16u * k], r->version[k]);
-        put_le32(&p[28u + 16u * k], r->hash32[k]);
+    for (j = 0; j < REC_SLOT_WORDS; ++j) {
+        put_le32(&p[16u + 4u * j], field[j % 4u][j / 4u]);
     }
     put_le32(&p[REC_BODY], slipest_crc32(p, REC_BODY));
 }
 
-/* 1 and *r filled when p holds a valid record */
+/* 1 and *r filled when p holds a valid record; 0 and r->seq 0 otherwise */
 static int record_decode(const uint8_t *p, slipest_store_record_t *r)
 {
-    unsigned k;
+    uint32_t *field[4] = {r->length, r->crc, r->version, r->hash32};
+    unsigned j;
+    r->seq = 0u;
     if (memcmp(p, REC_MAGIC, 4) != 0 || p[4] != REC_LAYOUT || slipest_image_le32(&p[REC_BODY]) != slipest_crc32(p, REC_BODY)) {
         return 0;
     }
     if (p[12] >= SLIPEST_STORE_N_SLOTS || (p[13] != 0xFFu && (p[13] >= SLIPEST_STORE_N_SLOTS || p[13] == p[12]))) {
         return 0;
     }
-    r->seq = slipest_image_le32(&p[8]);
     r->active = (int8_t)p[12];
     r->prev = NO_SLOT;
     if (p[13] != 0xFFu) {
         r->prev = (int8_t)p[13]; /* checked above: 0 or 1 */
     }
-    for (k = 0; k < SLIPEST_STORE_N_SLOTS; ++k) {
-        r->length[k] = slipest_image_le32(&p[16u + 16u * k]);
-        r->crc[k] = slipest_image_le32(&p[20u + 16u * k]);
-        r->version[k] = slipest_image_le32(&p[24u + 16u * k]);
-        r->hash32[k] = slipest_image_le32(&p[28u + 16u * k]);
+    for (j = 0; j < REC_SLOT_WORDS; ++j) {
+        field[j % 4u][j / 4u] = slipest_image_le32(&p[16u + 4u * j]);
     }
+    r->seq = slipest_image_le32(&p[8]); /* a record with sequence number 0 is no record */
     return r->seq != 0u;
 }
 
@@ -464,7 +459,7 @@ static slipest_status_t record_commit(slipest_store_t *s, const slipest_store_re
     return SLIPEST_OK;
 }
 
-/* slot states as the current record and upload imply */
+/* slot states as the current record implies: with no model loaded, no slot is active or a rollback target */
 static void derive_slot_states(slipest_store_t *s)
 {
     unsigned k;
@@ -473,19 +468,18 @@ static void derive_slot_states(slipest_store_t *s)
     }
     if (s->have_model != 0u) {
         s->slot_state[(unsigned)s->rec.active] = SLIPEST_SLOT_ACTIVE;
-    }
-    if (s->rec.seq != 0u && s->rec.prev != NO_SLOT) {
-        s->slot_state[(unsigned)s->rec.prev] = SLIPEST_SLOT_PREVIOUS;
+        if (s->rec.prev != NO_SLOT) {
+            s->slot_state[(unsigned)s->rec.prev] = SLIPEST_SLOT_PREVIOUS;
+        }
     }
 }
 
 /* ------------------------------------------------------------------ public API */
-slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t *nvm, const uint8_t *key,
-                                    size_t key_len)
+slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t *nvm,
+                                    const slipest_store_auth_t *auth)
 {
-    slipest_store_record_t cand[2];
-    int valid[2];
-    unsigned k, order[2];
+    slipest_store_record_t cand[2]; /* the record in each record sector; seq 0: none */
+    unsigned k, newest;
     uint8_t raw[SLIPEST_STORE_RECORD_SIZE];
     slipest_status_t st = SLIPEST_E_STATE;
 
@@ -493,39 +487,34 @@ slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t 
         return SLIPEST_E_NULL;
     }
     if (nvm->sector_size < SLIPEST_STORE_SECTOR_MIN || nvm->sector_size > SLIPEST_STORE_SECTOR_MAX ||
-        nvm->n_sectors < SLIPEST_STORE_NVM_SECTORS(nvm->sector_size) || (key != NULL && key_len == 0u)) {
+        nvm->n_sectors < SLIPEST_STORE_NVM_SECTORS(nvm->sector_size)) {
+        return SLIPEST_E_RANGE;
+    }
+    if (auth != NULL && (auth->key == NULL || auth->key_len == 0u || auth->init == NULL || auth->update == NULL ||
+                         auth->final == NULL)) {
         return SLIPEST_E_RANGE;
     }
     memset(store, 0, sizeof *store);
     store->nvm = *nvm;
-    store->key = key;
-    store->key_len = key != NULL ? key_len : 0u;
+    store->auth = auth;
     store->slot_sectors = SLIPEST_STORE_SLOT_SECTORS(nvm->sector_size);
     store->rec.active = NO_SLOT;
     store->rec.prev = NO_SLOT;
     store->upload_slot = NO_SLOT;
 
     for (k = 0; k < 2u; ++k) {
-        valid[k] = 0;
-        memset(&cand[k], 0, sizeof cand[k]);
-        if (nvm_read(store, k * nvm->sector_size, raw, sizeof raw) == SLIPEST_OK) {
-            valid[k] = record_decode(raw, &cand[k]);
-            if ((valid[k] == 0) && (raw[0] != 0xFFu)) { /* torn or corrupt, not blank */
-                store->c.boot_fallbacks++;
-            }
-        } else {
+        cand[k].seq = 0u;
+        if (nvm_read(store, k * nvm->sector_size, raw, sizeof raw) != SLIPEST_OK) {
             st = SLIPEST_E_NVM;
+        } else if ((record_decode(raw, &cand[k]) == 0) && (raw[0] != 0xFFu)) {
+            store->c.boot_fallbacks++; /* torn or corrupt, not blank */
         }
     }
     /* newest first; a record whose active slot no longer validates gives way to the older one */
-    order[0] = 0u;
-    if ((valid[1] != 0) && ((valid[0] == 0) || (cand[1].seq > cand[0].seq))) {
-        order[0] = 1u;
-    }
-    order[1] = 1u - order[0];
+    newest = (cand[1].seq > cand[0].seq) ? 1u : 0u;
     for (k = 0; k < 2u; ++k) {
-        unsigned r = order[k];
-        if (valid[r] == 0) {
+        unsigned r = (k == 0u) ? newest : 1u - newest;
+        if (cand[r].seq == 0u) {
             continue;
         }
         store->rec = cand[r];
@@ -536,20 +525,12 @@ slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t 
         }
         store->c.boot_fallbacks++;
     }
-    if (st != SLIPEST_OK && store->have_model == 0u) {
-        /* no record validates: keep the newest valid one (if any) only to place the next record */
-        if (valid[order[0]] != 0) {
-            store->rec = cand[order[0]];
-            store->rec_sector = (uint8_t)order[0];
-        }
+    if ((store->have_model == 0u) && (cand[newest].seq != 0u)) {
+        /* no record validates: keep the newest one only to place the next record */
+        store->rec = cand[newest];
+        store->rec_sector = (uint8_t)newest;
     }
     derive_slot_states(store);
-    if (store->have_model == 0u) {
-        unsigned j;
-        for (j = 0; j < SLIPEST_STORE_N_SLOTS; ++j) {
-            store->slot_state[j] = SLIPEST_SLOT_EMPTY;
-        }
-    }
     return st;
 }
 

@@ -13,6 +13,7 @@
 #include "slipest_sha256.h"
 #include "slipest_store.h"
 #include "slipest_vectors.h"
+#include "target_nvm.h"
 #include "target_vectors.h"
 
 #ifndef SLIPEST_STORE_IMAGE_PATH
@@ -29,33 +30,6 @@ __asm__(".section .rodata.slipest_store_image,\"a\"\n"
         "slipest_store_image_end:\n"
         ".previous\n");
 extern const uint8_t slipest_store_image[], slipest_store_image_end[];
-
-#define SECTOR 64u
-static uint8_t nvm_mem[SLIPEST_STORE_NVM_SECTORS(SECTOR) * SECTOR];
-
-static slipest_status_t m_read(void *ctx, uint32_t addr, uint8_t *buf, uint32_t len)
-{
-    (void)ctx;
-    if (addr > sizeof nvm_mem || len > sizeof nvm_mem - addr) return SLIPEST_E_RANGE;
-    memcpy(buf, &nvm_mem[addr], len);
-    return SLIPEST_OK;
-}
-
-static slipest_status_t m_write(void *ctx, uint32_t addr, const uint8_t *buf, uint32_t len)
-{
-    (void)ctx;
-    if (len != SECTOR || addr % SECTOR != 0u || addr > sizeof nvm_mem - SECTOR) return SLIPEST_E_RANGE;
-    memcpy(&nvm_mem[addr], buf, len);
-    return SLIPEST_OK;
-}
-
-static slipest_status_t m_erase(void *ctx, uint32_t addr)
-{
-    (void)ctx;
-    if (addr % SECTOR != 0u || addr > sizeof nvm_mem - SECTOR) return SLIPEST_E_RANGE;
-    memset(&nvm_mem[addr], 0xFF, SECTOR);
-    return SLIPEST_OK;
-}
 
 static slipest_store_t store;
 static slipest_node_t node;
@@ -103,14 +77,8 @@ int main(void)
     uint32_t i, q_fail = 0;
     int fails = 0, st = SLIPEST_OK;
 
-    memset(nvm_mem, 0xFF, sizeof nvm_mem);
-    nvm.read = m_read;
-    nvm.write = m_write;
-    nvm.erase = m_erase;
-    nvm.sector_size = SECTOR;
-    nvm.n_sectors = SLIPEST_STORE_NVM_SECTORS(SECTOR);
-    nvm.ctx = 0;
-    fails += step("boot on blank NVM", slipest_store_open(&store, &nvm, 0, 0u), SLIPEST_E_STATE);
+    target_nvm_init(&nvm);
+    fails += step("boot on blank NVM", slipest_store_open(&store, &nvm, NULL), SLIPEST_E_STATE);
     st = slipest_store_begin(&store, (uint32_t)n, 0u);
     for (off = 0; st == SLIPEST_OK && off < n; off += 7u) {
         st = slipest_store_write(&store, (uint32_t)off, &slipest_store_image[off], n - off < 7u ? n - off : 7u);
@@ -118,7 +86,7 @@ int main(void)
     fails += step("upload", st, SLIPEST_OK);
     fails += step("finish", slipest_store_finish(&store), SLIPEST_OK);
     fails += step("activate", slipest_store_activate(&store), SLIPEST_OK);
-    fails += step("reboot", slipest_store_open(&store, &nvm, 0, 0u), SLIPEST_OK);
+    fails += step("reboot", slipest_store_open(&store, &nvm, NULL), SLIPEST_OK);
     fails += step("node", slipest_node_init(&node, slipest_store_model_q(&store), 0), SLIPEST_OK);
     if (fails != 0) return 1;
 
@@ -138,11 +106,12 @@ int main(void)
         (void)slipest_store_write(&store, (uint32_t)off, &slipest_store_image[off], n - off < 100u ? n - off : 100u);
     }
     fails += step("same version refused", slipest_store_finish(&store), SLIPEST_E_STALE);
-    nvm_mem[2u * SECTOR + 1000u] ^= 0x01u;
-    fails += step("corrupt slot refused at boot", slipest_store_open(&store, &nvm, 0, 0u), SLIPEST_E_STATE);
+    target_nvm_mem[2u * TARGET_NVM_SECTOR + 1000u] ^= 0x01u;
+    fails += step("corrupt slot refused at boot", slipest_store_open(&store, &nvm, NULL), SLIPEST_E_STATE);
     {
         static const uint8_t key[16] = {7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7};
-        fails += step("boot with a key", slipest_store_open(&store, &nvm, key, sizeof key), SLIPEST_E_STATE);
+        static const slipest_store_auth_t auth = SLIPEST_STORE_AUTH_HMAC_SHA256(key, sizeof key);
+        fails += step("boot with a key", slipest_store_open(&store, &nvm, &auth), SLIPEST_E_STATE);
         fails += step("begin", slipest_store_begin(&store, (uint32_t)n, 0u), SLIPEST_OK);
         fails += step("write", slipest_store_write(&store, 0u, slipest_store_image, n), SLIPEST_OK);
         fails += step("unsigned image refused", slipest_store_finish(&store), SLIPEST_E_AUTH);

@@ -8,6 +8,7 @@
 #include "check.h"
 #include "slipest_bundle.h"
 #include "slipest_co.h"
+#include "slipest_dbc.h"
 #include "slipest_store.h"
 
 #define ID 5u
@@ -214,7 +215,7 @@ static void no_builtin_model(const slipest_nvm_t *nvm)
 {
     uint32_t code;
     memset(mem, 0xFF, sizeof mem);
-    CHECK(slipest_store_open(&store, nvm, NULL, 0u) == SLIPEST_E_STATE);
+    CHECK(slipest_store_open(&store, nvm, NULL) == SLIPEST_E_STATE);
     /* no model and no slot: the node boots, says so by EMCY, and still answers NMT and SDO */
     CHECK(slipest_co_init(&co, ID, 9u, &store, NULL, NULL, 0u, out, 1u) == SLIPEST_E_OVERFLOW); /* no room for the EMCY */
     n = slipest_co_init(&co, ID, 9u, &store, NULL, NULL, 0u, out, 2u);
@@ -249,7 +250,7 @@ static void no_builtin_model(const slipest_nvm_t *nvm)
     send(0u, 2u, (const uint8_t[]){0x01u, ID});
     CHECK(one_window() == 1);
     /* provisioning then boot: after a power cycle the node boots on the slot, with no EMCY */
-    CHECK(slipest_store_open(&store, nvm, NULL, 0u) == SLIPEST_OK);
+    CHECK(slipest_store_open(&store, nvm, NULL) == SLIPEST_OK);
     n = slipest_co_init(&co, ID, 9u, &store, NULL, NULL, 0u, out, 2u);
     CHECK(n == 1 && out[0].id == 0x700u + ID);
     CHECK(rd(0x1001u, 0u, &code) == 0u && rd(0x2001u, 1u, &code) == 3u);
@@ -273,6 +274,54 @@ static void no_builtin_model(const slipest_nvm_t *nvm)
     }
 }
 
+/* slipest_node_telemetry() gives slipest_node_handle()'s estimate frames, bit for bit, and one
+ * all-zero STATUS_MODEL frame where slipest_node_handle() gives the three status frames */
+static void test_telemetry_matches_handle(const slipest_model_q_t *mq)
+{
+    static const uint32_t ids[3] = {SLIPEST_DBC_TELEM_WHEEL_FRAME_ID, SLIPEST_DBC_TELEM_IMU_FRAME_ID,
+                                    SLIPEST_DBC_TELEM_ATTITUDE_FRAME_ID};
+    static const uint8_t n_vals[3] = {2u, 3u, 2u};
+    static const uint8_t zero[8] = {0};
+    slipest_node_t a, b;
+    slipest_frame_t fa[SLIPEST_NODE_MAX_OUT], fb[SLIPEST_NODE_MAX_OUT];
+    unsigned k, t, j, statuses = 0u, windows = 0u;
+    CHECK(slipest_node_init(&a, mq, NULL) == SLIPEST_OK && slipest_node_init(&b, mq, NULL) == SLIPEST_OK);
+    for (k = 0; k < 25u * SLIPEST_SAMPLES_PER_WINDOW; k++) {
+        for (t = 0; t < 3u; t++) {
+            slipest_frame_t in;
+            int16_t v[3] = {0, 0, 0};
+            int na, nb, i, m = 0;
+            memset(&in, 0, sizeof in);
+            in.id = ids[t];
+            in.dlc = (uint8_t)(2u + 2u * n_vals[t]);
+            in.data[0] = (uint8_t)k;
+            in.data[1] = (uint8_t)(k >> 8);
+            for (j = 0; j < n_vals[t]; j++) {
+                v[j] = (int16_t)((int)((k * 37u + j * 11u + t * 5u) % 2001u) - 1000);
+                in.data[2u + 2u * j] = (uint8_t)(uint16_t)v[j];
+                in.data[3u + 2u * j] = (uint8_t)((uint16_t)v[j] >> 8);
+            }
+            na = slipest_node_handle(&a, &in, fa, SLIPEST_NODE_MAX_OUT);
+            nb = slipest_node_telemetry(&b, t, (uint16_t)k, v, fb, SLIPEST_NODE_MAX_OUT);
+            CHECK(na >= 0 && nb >= 0);
+            for (i = 0; i < na && m < nb; i++, m++) {
+                CHECK(fa[i].id == fb[m].id && fa[i].dlc == fb[m].dlc);
+                if (fa[i].id == SLIPEST_DBC_STATUS_MODEL_FRAME_ID) {
+                    CHECK(i + 2 < na && fa[i + 1].id == SLIPEST_DBC_STATUS_RX_FRAME_ID &&
+                          fa[i + 2].id == SLIPEST_DBC_STATUS_LOSS_FRAME_ID && memcmp(fb[m].data, zero, 8) == 0);
+                    i += 2;
+                    statuses++;
+                } else {
+                    CHECK(memcmp(fa[i].data, fb[m].data, 8) == 0);
+                    windows += fa[i].id == SLIPEST_DBC_SLIP_ESTIMATE_FRAME_ID;
+                }
+            }
+            CHECK(i == na && m == nb);
+        }
+    }
+    CHECK(windows >= 2u * SLIPEST_STATUS_EVERY && statuses == windows / SLIPEST_STATUS_EVERY);
+}
+
 int main(void)
 {
     slipest_nvm_t nvm = {m_read, m_write, m_erase, SECTOR, SLIPEST_STORE_NVM_SECTORS(SECTOR), NULL};
@@ -286,7 +335,7 @@ int main(void)
     put_version(img, 3u); /* newer than the built-in model */
     fix_crc(img, img_len);
     memset(mem, 0xFF, sizeof mem);
-    CHECK(slipest_store_open(&store, &nvm, NULL, 0u) == SLIPEST_E_STATE);
+    CHECK(slipest_store_open(&store, &nvm, NULL) == SLIPEST_E_STATE);
 
     /* init and NMT */
     CHECK(slipest_co_init(NULL, ID, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 1u) == SLIPEST_E_NULL);
@@ -554,5 +603,6 @@ int main(void)
     CHECK(slipest_co_counter(NULL, 0u) == 0u && slipest_co_estimator(&co) != NULL && slipest_co_size() > 0u);
     CHECK(slipest_co_store_size() == sizeof(slipest_store_t) && slipest_co_max_out() == SLIPEST_CO_MAX_OUT);
     no_builtin_model(&nvm);
+    test_telemetry_matches_handle(slipest_bundle_model_q());
     CHECK_DONE();
 }

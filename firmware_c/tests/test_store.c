@@ -123,9 +123,12 @@ static int upload(const uint8_t *img, size_t len)
     return s == SLIPEST_OK ? slipest_store_finish(&st) : s;
 }
 
+/* open the store, authenticating with the 32-byte key k (NULL: no authentication) */
 static int reboot(const uint8_t *k)
 {
-    return slipest_store_open(&st, &nvm, k, k != NULL ? 32u : 0u);
+    static slipest_store_auth_t auth = SLIPEST_STORE_AUTH_HMAC_SHA256(NULL, 32u);
+    auth.key = k;
+    return slipest_store_open(&st, &nvm, k != NULL ? &auth : NULL);
 }
 
 static void fresh(void)
@@ -285,12 +288,25 @@ static void test_hmac(void)
     CHECK(upload(img, n) == SLIPEST_OK && slipest_store_activate(&st) == SLIPEST_OK);
     CHECK(reboot(key) == SLIPEST_OK && slipest_store_active_version(&st) == 1u);
     /* a node built with another key does not boot the slot (its tag no longer verifies) */
-    CHECK(slipest_store_open(&st, &nvm, other_key, 32u) == SLIPEST_E_STATE);
+    CHECK(reboot(other_key) == SLIPEST_E_STATE);
     /* without a key, a signed image is accepted (the tag is length-checked only) */
     CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_active_version(&st) == 1u);
     n = make_image(img, 2u, key);
     CHECK(upload(img, n) == SLIPEST_OK);
-    CHECK(slipest_store_open(&st, &nvm, key, 0u) == SLIPEST_E_RANGE);
+    {
+        /* an auth without a key, with key_len 0 or without a MAC function is refused */
+        slipest_store_auth_t bad = SLIPEST_STORE_AUTH_HMAC_SHA256(key, 0u);
+        CHECK(slipest_store_open(&st, &nvm, &bad) == SLIPEST_E_RANGE);
+        bad.key_len = 32u;
+        bad.key = NULL;
+        CHECK(slipest_store_open(&st, &nvm, &bad) == SLIPEST_E_RANGE);
+        bad.key = key;
+        bad.final = NULL;
+        CHECK(slipest_store_open(&st, &nvm, &bad) == SLIPEST_E_RANGE);
+        bad.final = slipest_hmac_sha256_final;
+        /* complete again: boots the slot signed with key (version 2 was READY, never activated) */
+        CHECK(slipest_store_open(&st, &nvm, &bad) == SLIPEST_OK && slipest_store_active_version(&st) == 1u);
+    }
 }
 
 static void test_nvm_errors_and_torn_record(void)
@@ -421,16 +437,16 @@ static void test_status_names(void)
 static void test_arguments(void)
 {
     slipest_nvm_t bad = nvm;
-    CHECK(slipest_store_open(NULL, &nvm, NULL, 0) == SLIPEST_E_NULL);
-    CHECK(slipest_store_open(&st, NULL, NULL, 0) == SLIPEST_E_NULL);
+    CHECK(slipest_store_open(NULL, &nvm, NULL) == SLIPEST_E_NULL);
+    CHECK(slipest_store_open(&st, NULL, NULL) == SLIPEST_E_NULL);
     bad.sector_size = 32u;
-    CHECK(slipest_store_open(&st, &bad, NULL, 0) == SLIPEST_E_RANGE);
+    CHECK(slipest_store_open(&st, &bad, NULL) == SLIPEST_E_RANGE);
     bad = nvm;
     bad.n_sectors = N_SECT - 1u;
-    CHECK(slipest_store_open(&st, &bad, NULL, 0) == SLIPEST_E_RANGE);
+    CHECK(slipest_store_open(&st, &bad, NULL) == SLIPEST_E_RANGE);
     bad = nvm;
     bad.erase = NULL;
-    CHECK(slipest_store_open(&st, &bad, NULL, 0) == SLIPEST_E_NULL);
+    CHECK(slipest_store_open(&st, &bad, NULL) == SLIPEST_E_NULL);
     CHECK(slipest_store_begin(NULL, 100, 0) == SLIPEST_E_NULL && slipest_store_finish(NULL) == SLIPEST_E_NULL);
     CHECK(slipest_store_model_q(NULL) == NULL && slipest_store_counters(NULL) == NULL);
     CHECK(slipest_store_active_slot(NULL) == SLIPEST_STORE_NO_SLOT);

@@ -67,7 +67,7 @@ def c_header() -> str:
         "#define SLIPEST_CO_PAYLOAD_MODEL_STATUS 1u",
         "",
         "/* The dictionary is packed for flash: one 4-byte row per object (its index and where its",
-        " * sub-indices start; sub-indices run 0..n_subs-1 without gaps), one 4-byte row per",
+        " * sub-indices start; sub-indices run 0..n_subs-1 without gaps), one 16-bit row per",
         " * sub-index, and the constant values once each in their own table. */",
         "",
         "/** One object (sorted by index). */",
@@ -77,13 +77,15 @@ def c_header() -> str:
         "    uint8_t n_subs; /**< sub-indices 0..n_subs-1 */",
         "} slipest_co_object_t;",
         "",
-        "/** One sub-index of an object. */",
-        "typedef struct {",
-        "    uint8_t kind;  /**< SLIPEST_CO_KIND_* */",
-        "    uint8_t flags; /**< SLIPEST_CO_ACC_R / _W, SLIPEST_CO_PLUS_ID */",
-        "    uint8_t size;  /**< bytes of the value (0: DOMAIN) */",
-        "    uint8_t arg;   /**< kind-specific argument; a constant's row in slipest_co_od_values */",
-        "} slipest_co_entry_t;",
+        "/** One sub-index of an object, 16 bits: bits 0-3 its kind (SLIPEST_CO_KIND_*), 4-6 its flags",
+        " *  (SLIPEST_CO_ACC_R / _W, SLIPEST_CO_PLUS_ID), 7-9 a size code c (the value has (1 << c) >> 1",
+        " *  bytes: 0 for the DOMAIN, 1, 2, 4 or 32), 10-15 the kind's argument (a constant's row in",
+        " *  slipest_co_od_values; for a PDO byte, 8 * payload buffer + offset). Read with the macros. */",
+        "typedef uint16_t slipest_co_entry_t;",
+        "#define SLIPEST_CO_KIND(e) ((unsigned)(e) & 0xFu)",
+        "#define SLIPEST_CO_FLAGS(e) (((unsigned)(e) >> 4) & 7u)",
+        "#define SLIPEST_CO_SIZE(e) ((1u << (((unsigned)(e) >> 7) & 7u)) >> 1)",
+        "#define SLIPEST_CO_ARG(e) ((unsigned)(e) >> 10)",
         "",
         "/** One static PDO: predefined-connection-set COB-ID base, length, payload. */",
         "typedef struct {",
@@ -152,6 +154,23 @@ def _check_rpdo_layouts() -> None:
                              "(UNSIGNED16 counter, then 2..3 INTEGER16)")
 
 
+# the size codes of the packed sub-index row: bytes = (1 << code) >> 1
+_SIZE_CODES = {0: 0, 1: 1, 2: 2, 4: 3, 32: 6}
+
+
+def _pack_entry(e, flags: int, arg: int) -> int:
+    """One sub-index as the 16-bit row slipest_co_od.h describes (SLIPEST_CO_KIND() ... _ARG())."""
+    kind, size = KINDS.index(e.kind), od.TYPE_BYTES[e.dtype]
+    where = f"0x{e.index:04X} sub {e.sub}"
+    if kind > 15 or flags > 7:
+        raise ValueError(f"{where}: kind {e.kind} or flags {flags} outgrow the packed row")
+    if size not in _SIZE_CODES:
+        raise ValueError(f"{where}: a {size}-byte value has no size code in the packed row")
+    if not 0 <= arg <= 63:
+        raise ValueError(f"{where}: argument {arg} outgrows the packed row's 6 bits")
+    return kind | flags << 4 | _SIZE_CODES[size] << 7 | arg << 10
+
+
 def c_source() -> str:
     _check_rpdo_layouts()
     ents = od.objects()
@@ -171,10 +190,8 @@ def c_source() -> str:
         value, plus = _split_default(e.default)
         flags = ACCESS_BITS[e.access] | (4 if plus else 0)
         arg = values.index(value) if e.kind == "const" else e.arg
-        if not 0 <= arg <= 255:
-            raise ValueError(f"0x{e.index:04X} sub {e.sub}: argument {arg} does not fit a byte")
-        lines.append(f"    {{SLIPEST_CO_KIND_{e.kind.upper()}, {flags}u, {od.TYPE_BYTES[e.dtype]}u, {arg}u}}, "
-                     f"/* 0x{e.index:04X} {e.sub}: {e.parent + ': ' if e.parent else ''}{e.name} */")
+        lines.append(f"    0x{_pack_entry(e, flags, arg):04X}u, /* 0x{e.index:04X} {e.sub}: "
+                     f"{e.parent + ': ' if e.parent else ''}{e.name} ({e.kind}, arg {arg}) */")
     lines += ["};", "", "const uint32_t slipest_co_od_values[SLIPEST_CO_N_VALUES] = {"]
     lines += [f"    0x{v:08X}u," for v in values]
     lines += ["};", "", "const slipest_co_pdo_t slipest_co_pdos[SLIPEST_CO_N_PDO] = {"]

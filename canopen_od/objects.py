@@ -9,7 +9,7 @@ Each entry: (index, sub, name, data type, access, default, kind, arg, pdo_mappab
   hb_time    producer heartbeat time 0x1017 (read/write)
   err_reg    error register 0x1001
   serial     identity serial number (given to slipest_co_init)
-  pdo        bytes of the last payload of a PDO: arg = (pdo number << 4) | byte offset
+  pdo        bytes of the last payload of a PDO: arg = 8 * payload buffer + byte offset
   model      the active model: arg 0 version, 1 hash32, 2 sha256, 3 slot, 4 library version
   counter    node counter number arg (slipest_co_counter())
   slot       slot arg >> 4, field arg & 15: 0 state, 1 length, 2 version, 3 hash32
@@ -174,7 +174,7 @@ def objects() -> list[Entry]:
         access = "rww" if direction == "rx" else "ro"
         subs, off = [], 0
         for fname, t in fields:
-            subs.append((fname, t, access, 0, "pdo", (slot << 4) | off, True))
+            subs.append((fname, t, access, 0, "pdo", 8 * slot + off, True))
             off += TYPE_BYTES[t]
         e += _record(rec, name, subs)
     e.sort(key=lambda x: (x.index, x.sub))

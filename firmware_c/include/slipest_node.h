@@ -44,7 +44,7 @@ typedef struct {
 } slipest_counters_t;
 
 /** Node context: all state of one estimator node (no globals, no malloc). */
-typedef struct {
+typedef struct slipest_node_s {
     slipest_extractor_t ex;     /**< window feature extractor */
     int16_t asm_sample[SLIPEST_N_CHANNELS]; /**< sample being assembled from TELEM_WHEEL/IMU/ATTITUDE */
     uint16_t asm_counter;                   /**< its sample counter */
@@ -57,6 +57,10 @@ typedef struct {
     const slipest_model_q_t *mq;   /**< active fixed-point model (validated) */
     const slipest_model_f32_t *mf; /**< active float model, NULL for none */
     uint32_t link_rejected; /**< rejected before a frame existed (CRC, COBS, SLCAN syntax) */
+    /** what goes out every SLIPEST_STATUS_EVERY windows, set by the entry point that takes the
+     *  frame (slipest_node_handle(): the packed status frames; slipest_node_telemetry(): a
+     *  marker). A pointer, so that an image using only the latter links no status packer. */
+    int (*status)(const struct slipest_node_s *node, slipest_frame_t *out, size_t cap);
 } slipest_node_t;
 
 /**

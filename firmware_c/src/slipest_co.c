@@ -1,5 +1,6 @@
 /* CANopen node: NMT slave, heartbeat, EMCY, and the static PDOs that carry the plain profile's
  * frames (RPDO -> telemetry values -> estimator -> DBC frames -> TPDO). */
+#include <stddef.h>
 #include <string.h>
 
 #include "slipest_co_internal.h"
@@ -20,18 +21,22 @@ const slipest_node_t *slipest_co_estimator(const slipest_co_t *co) { return co =
 
 uint32_t slipest_co_counter(const slipest_co_t *co, unsigned n)
 {
+    /* counters 0..5 are the estimator's slipest_counters_t fields (every one a uint32_t) */
+    static const uint8_t at[SLIPEST_CO_CNT_SATURATIONS + 1u] = {
+        [SLIPEST_CO_CNT_FRAMES_RECEIVED] = offsetof(slipest_counters_t, frames_received),
+        [SLIPEST_CO_CNT_FRAMES_REJECTED] = offsetof(slipest_counters_t, frames_rejected),
+        [SLIPEST_CO_CNT_SAMPLES_DROPPED] = offsetof(slipest_counters_t, samples_dropped),
+        [SLIPEST_CO_CNT_WINDOWS_FLAGGED] = offsetof(slipest_counters_t, windows_flagged),
+        [SLIPEST_CO_CNT_WINDOWS_DONE] = offsetof(slipest_counters_t, windows_done),
+        [SLIPEST_CO_CNT_SATURATIONS] = offsetof(slipest_counters_t, saturations)};
     slipest_counters_t c;
+    const uint8_t *bytes = (const uint8_t *)&c;
+    uint32_t v;
     if (co == NULL || n >= SLIPEST_CO_N_COUNTERS) return 0u;
-    if (n > SLIPEST_CO_CNT_SATURATIONS) return co->cnt[n];
+    if (n >= sizeof at) return co->cnt[n];
     (void)slipest_node_counters(&co->est, &c);
-    switch (n) {
-    case SLIPEST_CO_CNT_FRAMES_RECEIVED: return c.frames_received;
-    case SLIPEST_CO_CNT_FRAMES_REJECTED: return c.frames_rejected;
-    case SLIPEST_CO_CNT_SAMPLES_DROPPED: return c.samples_dropped;
-    case SLIPEST_CO_CNT_WINDOWS_FLAGGED: return c.windows_flagged;
-    case SLIPEST_CO_CNT_WINDOWS_DONE: return c.windows_done;
-    default: return c.saturations;
-    }
+    (void)memcpy(&v, &bytes[at[n]], sizeof v); /* a native value, not wire data */
+    return v;
 }
 
 int slipest_co_emcy(slipest_co_t *co, uint16_t code, uint8_t reg_bits, int status, slipest_frame_t *out)
@@ -89,6 +94,16 @@ static int ignored(slipest_co_t *co)
     return 0;
 }
 
+/* The NMT error control frame: boot-up (state 0) or a heartbeat (the NMT state). */
+static int nmt_state_frame(const slipest_co_t *co, uint8_t state, slipest_frame_t *out)
+{
+    out->id = 0x700u + co->node_id;
+    out->dlc = 1u;
+    (void)memset(out->data, 0, sizeof out->data);
+    out->data[0] = state;
+    return 1;
+}
+
 static int bootup(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
 {
     co->hb_ms = (uint16_t)SLIPEST_CO_HEARTBEAT_DEFAULT_MS;
@@ -96,11 +111,7 @@ static int bootup(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
     co->err_reg &= (uint8_t)~SLIPEST_CO_ERR_COMM;
     slipest_co_sdo_reset(co);
     co->nmt = SLIPEST_CO_NMT_PRE_OPERATIONAL; /* boot-up goes straight on to pre-operational */
-    out->id = 0x700u + co->node_id;
-    out->dlc = 1u;
-    (void)memset(out->data, 0, sizeof out->data);
-    out->data[0] = SLIPEST_CO_NMT_BOOTUP;
-    return 1;
+    return nmt_state_frame(co, SLIPEST_CO_NMT_BOOTUP, out);
 }
 
 /* Reset application: a fresh estimator on the active model (the store's, else the built-in
@@ -287,11 +298,7 @@ int slipest_co_tick(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out, siz
     if (cap < 2u) return SLIPEST_E_OVERFLOW;
     if (co->hb_ms != 0u && (uint32_t)(now_ms - co->hb_last_ms) >= co->hb_ms) {
         co->hb_last_ms = now_ms;
-        out[n].id = 0x700u + co->node_id;
-        out[n].dlc = 1u;
-        (void)memset(out[n].data, 0, sizeof out[n].data);
-        out[n].data[0] = co->nmt;
-        n++;
+        n += nmt_state_frame(co, co->nmt, &out[n]);
     }
     n += slipest_co_sdo_tick(co, now_ms, &out[n]);
     return n;

@@ -1,5 +1,6 @@
 /* CANopen object dictionary access: find an entry in the generated table and read or write
  * the value it names (the table says where a value lives; this file knows how to get it). */
+#include <stddef.h>
 #include <string.h>
 
 #include "slipest_co_internal.h"
@@ -29,25 +30,24 @@ const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32
     return NULL;
 }
 
+/* 0x2005 sub n + 1: store counter n, in slipest_store_counters_t's field order (every field a uint32_t) */
 static uint32_t store_counter(const slipest_store_counters_t *c, unsigned n)
 {
-    switch (n) {
-    case 0u: return c->uploads_started;
-    case 1u: return c->uploads_aborted;
-    case 2u: return c->images_accepted;
-    case 3u: return c->refused_length;
-    case 4u: return c->refused_format;
-    case 5u: return c->refused_arch;
-    case 6u: return c->refused_crc;
-    case 7u: return c->refused_hash;
-    case 8u: return c->refused_range;
-    case 9u: return c->refused_hmac;
-    case 10u: return c->refused_version;
-    case 11u: return c->activations;
-    case 12u: return c->rollbacks;
-    case 13u: return c->nvm_errors;
-    default: return c->boot_fallbacks;
+    static const uint8_t at[] = {
+        offsetof(slipest_store_counters_t, uploads_started), offsetof(slipest_store_counters_t, uploads_aborted),
+        offsetof(slipest_store_counters_t, images_accepted), offsetof(slipest_store_counters_t, refused_length),
+        offsetof(slipest_store_counters_t, refused_format),  offsetof(slipest_store_counters_t, refused_arch),
+        offsetof(slipest_store_counters_t, refused_crc),     offsetof(slipest_store_counters_t, refused_hash),
+        offsetof(slipest_store_counters_t, refused_range),   offsetof(slipest_store_counters_t, refused_hmac),
+        offsetof(slipest_store_counters_t, refused_version), offsetof(slipest_store_counters_t, activations),
+        offsetof(slipest_store_counters_t, rollbacks),       offsetof(slipest_store_counters_t, nvm_errors),
+        offsetof(slipest_store_counters_t, boot_fallbacks)};
+    const uint8_t *bytes = (const uint8_t *)c;
+    uint32_t v = 0u;
+    if (n < sizeof at) {
+        (void)memcpy(&v, &bytes[at[n]], sizeof v); /* the field's own bytes: a native value, not wire data */
     }
+    return v;
 }
 
 static uint32_t read_model(const slipest_co_t *co, unsigned what, uint8_t buf[32], uint32_t *len)
@@ -82,30 +82,32 @@ static uint32_t read_model(const slipest_co_t *co, unsigned what, uint8_t buf[32
 uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e, uint8_t buf[32], uint32_t *len)
 {
     uint32_t v = 0u;
-    *len = e->size;
-    if ((e->flags & SLIPEST_CO_ACC_R) == 0u) return SLIPEST_CO_ABORT_WRITE_ONLY;
-    switch (e->kind) {
+    unsigned flags = SLIPEST_CO_FLAGS(*e);
+    unsigned arg = SLIPEST_CO_ARG(*e);
+    *len = SLIPEST_CO_SIZE(*e);
+    if ((flags & SLIPEST_CO_ACC_R) == 0u) return SLIPEST_CO_ABORT_WRITE_ONLY;
+    switch (SLIPEST_CO_KIND(*e)) {
     case SLIPEST_CO_KIND_CONST:
-        v = slipest_co_od_values[e->arg] + (((e->flags & SLIPEST_CO_PLUS_ID) != 0u) ? co->node_id : 0u);
+        v = slipest_co_od_values[arg] + (((flags & SLIPEST_CO_PLUS_ID) != 0u) ? co->node_id : 0u);
         break;
     case SLIPEST_CO_KIND_HB_TIME: v = co->hb_ms; break;
     case SLIPEST_CO_KIND_ERR_REG: v = co->err_reg; break;
     case SLIPEST_CO_KIND_SERIAL: v = co->serial; break;
     case SLIPEST_CO_KIND_PDO: {
-        unsigned pdo = (unsigned)e->arg >> 4, off = (unsigned)e->arg & 0xFu;
+        unsigned pdo = arg >> 3, off = arg & 7u;
         if (pdo >= SLIPEST_CO_N_PDO || off + *len > 8u) return SLIPEST_CO_ABORT_GENERAL;
         (void)memcpy(buf, &co->pdo[pdo][off], *len); /* already little-endian wire bytes */
         return 0u;
     }
-    case SLIPEST_CO_KIND_MODEL: return read_model(co, e->arg, buf, len);
-    case SLIPEST_CO_KIND_COUNTER: v = slipest_co_counter(co, e->arg); break;
+    case SLIPEST_CO_KIND_MODEL: return read_model(co, arg, buf, len);
+    case SLIPEST_CO_KIND_COUNTER: v = slipest_co_counter(co, arg); break;
     case SLIPEST_CO_KIND_SLOT: {
         slipest_slot_info_t info;
         if (co->store == NULL) return SLIPEST_CO_ABORT_NO_DATA;
-        if (slipest_store_slot_info(co->store, (unsigned)e->arg >> 4, &info) != SLIPEST_OK) {
+        if (slipest_store_slot_info(co->store, arg >> 4, &info) != SLIPEST_OK) {
             return SLIPEST_CO_ABORT_GENERAL;
         }
-        switch (e->arg & 0xFu) {
+        switch (arg & 0xFu) {
         case 0u: v = (uint32_t)info.state; break;
         case 1u: v = info.length; break;
         case 2u: v = info.version; break;
@@ -115,12 +117,12 @@ uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e,
     }
     case SLIPEST_CO_KIND_STORE_CNT:
         if (co->store == NULL) return SLIPEST_CO_ABORT_NO_DATA;
-        v = store_counter(slipest_store_counters(co->store), e->arg);
+        v = store_counter(slipest_store_counters(co->store), arg);
         break;
     case SLIPEST_CO_KIND_UPLOAD:
-        if (e->arg == 0u) {
+        if (arg == 0u) {
             v = (co->store == NULL) ? 0u : (uint32_t)slipest_store_upload_state(co->store);
-        } else if (e->arg == 1u) {
+        } else if (arg == 1u) {
             v = (uint32_t)(uint8_t)co->last_store_status; /* two's complement byte */
         } else {
             v = co->sdo.done;
@@ -177,24 +179,25 @@ static uint32_t command(slipest_co_t *co, unsigned what, uint32_t value, slipest
 uint32_t slipest_co_od_write(slipest_co_t *co, const slipest_co_entry_t *e, const uint8_t *data, uint32_t len,
                              slipest_frame_t *out, int *n)
 {
-    uint32_t size = e->size;
+    uint32_t size = SLIPEST_CO_SIZE(*e);
+    unsigned arg = SLIPEST_CO_ARG(*e);
     uint32_t v;
-    if ((e->flags & SLIPEST_CO_ACC_W) == 0u) return SLIPEST_CO_ABORT_READ_ONLY;
+    if ((SLIPEST_CO_FLAGS(*e) & SLIPEST_CO_ACC_W) == 0u) return SLIPEST_CO_ABORT_READ_ONLY;
     if (size == 0u || size > 4u) return SLIPEST_CO_ABORT_UNSUPPORTED; /* DOMAIN: via the transfer */
     if (len > size) return SLIPEST_CO_ABORT_TOO_HIGH;
     if (len < size) return SLIPEST_CO_ABORT_TOO_LOW;
     v = slipest_co_get_le(data, len);
-    switch (e->kind) {
+    switch (SLIPEST_CO_KIND(*e)) {
     case SLIPEST_CO_KIND_HB_TIME:
         co->hb_ms = (uint16_t)v;
         return 0u;
     case SLIPEST_CO_KIND_PDO: {
-        unsigned pdo = (unsigned)e->arg >> 4, off = (unsigned)e->arg & 0xFu;
+        unsigned pdo = arg >> 3, off = arg & 7u;
         if (pdo >= SLIPEST_CO_N_PDO || off + len > 8u) return SLIPEST_CO_ABORT_GENERAL;
         (void)memcpy(&co->pdo[pdo][off], data, len); /* wire bytes; processed only as a whole RPDO */
         return 0u;
     }
-    case SLIPEST_CO_KIND_COMMAND: return command(co, e->arg, v, out, n);
+    case SLIPEST_CO_KIND_COMMAND: return command(co, arg, v, out, n);
     default: return SLIPEST_CO_ABORT_READ_ONLY;
     }
 }

@@ -44,7 +44,7 @@ static void put_mux(slipest_frame_t *f, uint16_t index, uint8_t sub)
 
 static int is_domain(const slipest_co_t *co)
 {
-    return slipest_co_od[co->sdo.entry].kind == SLIPEST_CO_KIND_DOMAIN;
+    return SLIPEST_CO_KIND(slipest_co_od[co->sdo.entry]) == SLIPEST_CO_KIND_DOMAIN;
 }
 
 /* End the transfer in progress; an open model upload is abandoned in the store. */
@@ -151,10 +151,10 @@ static int download_initiate(slipest_co_t *co, const slipest_frame_t *in, slipes
     int n = 1; /* the response first, an EMCY maybe after it */
     const slipest_co_entry_t *e = open_entry(co, in, out);
     if (e == NULL) return 1;
-    if ((e->flags & SLIPEST_CO_ACC_W) == 0u) return abort_cur(co, SLIPEST_CO_ABORT_READ_ONLY, out);
+    if ((SLIPEST_CO_FLAGS(*e) & SLIPEST_CO_ACC_W) == 0u) return abort_cur(co, SLIPEST_CO_ABORT_READ_ONLY, out);
     if ((cmd & 0x02u) != 0u) { /* expedited: 4 - n bytes in the frame */
         uint32_t len = ((cmd & 0x01u) != 0u) ? 4u - ((uint32_t)(cmd >> 2) & 3u) : 4u;
-        if (e->kind == SLIPEST_CO_KIND_DOMAIN) return abort_cur(co, SLIPEST_CO_ABORT_TOO_LOW, out);
+        if (SLIPEST_CO_KIND(*e) == SLIPEST_CO_KIND_DOMAIN) return abort_cur(co, SLIPEST_CO_ABORT_TOO_LOW, out);
         code = slipest_co_od_write(co, e, &in->data[4], len, &out[1], &n);
     } else if ((cmd & 0x01u) == 0u) {
         /* segmented: the size must be indicated (a DOMAIN needs it to open the slot) */
@@ -163,9 +163,9 @@ static int download_initiate(slipest_co_t *co, const slipest_frame_t *in, slipes
         co->sdo.size = slipest_co_get_le(&in->data[4], 4u);
         co->sdo.done = 0u;
         co->sdo.toggle = 0u;
-        if (e->kind == SLIPEST_CO_KIND_DOMAIN) {
+        if (SLIPEST_CO_KIND(*e) == SLIPEST_CO_KIND_DOMAIN) {
             code = domain_begin(co, co->sdo.size, &out[1], &n);
-        } else if (co->sdo.size > e->size) {
+        } else if (co->sdo.size > SLIPEST_CO_SIZE(*e)) {
             code = SLIPEST_CO_ABORT_TOO_HIGH;
         } else {
             code = 0u;
@@ -194,7 +194,7 @@ static int download_segment(slipest_co_t *co, const slipest_frame_t *in, slipest
     if (((cmd >> 4) & 1u) != co->sdo.toggle) {
         return abort_cur(co, SLIPEST_CO_ABORT_TOGGLE, out);
     }
-    if (e->kind == SLIPEST_CO_KIND_DOMAIN) {
+    if (SLIPEST_CO_KIND(*e) == SLIPEST_CO_KIND_DOMAIN) {
         code = domain_write(co, &in->data[1], len, &out[1], &n);
         if (code == 0u && (cmd & 0x01u) != 0u) code = domain_finish(co, &out[1], &n);
     } else if (co->sdo.done + len > co->sdo.size) {
@@ -276,7 +276,7 @@ static int block_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_f
     const slipest_co_entry_t *e = open_entry(co, in, out);
     if (e == NULL) return 1;
     /* block transfers carry the model image only; small values go expedited */
-    if (e->kind != SLIPEST_CO_KIND_DOMAIN) return abort_cur(co, SLIPEST_CO_ABORT_UNSUPPORTED, out);
+    if (SLIPEST_CO_KIND(*e) != SLIPEST_CO_KIND_DOMAIN) return abort_cur(co, SLIPEST_CO_ABORT_UNSUPPORTED, out);
     if ((cmd & 0x02u) == 0u) return abort_cur(co, SLIPEST_CO_ABORT_LENGTH, out);
     co->sdo.size = slipest_co_get_le(&in->data[4], 4u);
     co->sdo.done = 0u;

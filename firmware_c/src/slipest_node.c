@@ -86,11 +86,6 @@ int slipest_node_status(const slipest_node_t *node, slipest_frame_t *out, size_t
     return 3;
 }
 
-/* What goes out every SLIPEST_STATUS_EVERY windows: slipest_node_status() in the plain profile,
- * status_marker() for slipest_node_telemetry(). Passed down as a pointer so that an image using
- * only slipest_node_telemetry() links no DBC status packer. */
-typedef int (*status_fn_t)(const slipest_node_t *node, slipest_frame_t *out, size_t cap);
-
 /* a STATUS_MODEL frame with an all-zero payload: "status due here" for a profile with its own status */
 static int status_marker(const slipest_node_t *node, slipest_frame_t *out, size_t cap)
 {
@@ -98,7 +93,7 @@ static int status_marker(const slipest_node_t *node, slipest_frame_t *out, size_
     (void)cap;
     out->id = SLIPEST_DBC_STATUS_MODEL_FRAME_ID;
     out->dlc = SLIPEST_DBC_STATUS_MODEL_LENGTH;
-    memset(out->data, 0, sizeof out->data);
+    (void)memset(out->data, 0, sizeof out->data);
     return 1;
 }
 
@@ -106,7 +101,7 @@ static int status_marker(const slipest_node_t *node, slipest_frame_t *out, size_
  * n_samples = 0 for windows fed as FEATURES frames. */
 static int emit_estimate(slipest_node_t *node, uint16_t window_counter, const int16_t feat_q[SLIPEST_N_FEATURES],
                          const slipest_window_t *w, uint8_t flags, uint8_t n_samples, uint32_t extra_saturations,
-                         slipest_frame_t *out, status_fn_t status)
+                         slipest_frame_t *out)
 {
     struct slipest_dbc_slip_estimate_t est;
     struct slipest_dbc_slip_logits_01_t l01;
@@ -186,12 +181,12 @@ static int emit_estimate(slipest_node_t *node, uint16_t window_counter, const in
     node->c.windows_done++;
     if (node->c.windows_done % SLIPEST_STATUS_EVERY == 0u) {
         sync_counters(node);
-        n += status(node, out + n, 3u);
+        n += node->status(node, out + n, 3u);
     }
     return n;
 }
 
-static int emit_window(slipest_node_t *node, const slipest_window_t *w, slipest_frame_t *out, status_fn_t status)
+static int emit_window(slipest_node_t *node, const slipest_window_t *w, slipest_frame_t *out)
 {
     int16_t feat_q[SLIPEST_N_FEATURES];
     int sat = 0;
@@ -202,10 +197,10 @@ static int emit_window(slipest_node_t *node, const slipest_window_t *w, slipest_
     } else {
         memset(feat_q, 0, sizeof feat_q);
     }
-    return emit_estimate(node, (uint16_t)(w->index & 0xFFFFu), feat_q, w, flags, w->n, (uint32_t)sat, out, status);
+    return emit_estimate(node, (uint16_t)(w->index & 0xFFFFu), feat_q, w, flags, w->n, (uint32_t)sat, out);
 }
 
-static int push_sample(slipest_node_t *node, slipest_frame_t *out, status_fn_t status)
+static int push_sample(slipest_node_t *node, slipest_frame_t *out)
 {
     slipest_window_t closed[SLIPEST_MAX_CLOSED];
     int k, n = 0;
@@ -214,7 +209,7 @@ static int push_sample(slipest_node_t *node, slipest_frame_t *out, status_fn_t s
      * extractor may still see this sample as behind: reject the completing frame */
     if (r < 0) return reject(node, r);
     for (k = 0; k < r; k++) {
-        int e = emit_window(node, &closed[k], out + n, status);
+        int e = emit_window(node, &closed[k], out + n);
         if (e < 0) return e;
         n += e;
     }
@@ -223,7 +218,7 @@ static int push_sample(slipest_node_t *node, slipest_frame_t *out, status_fn_t s
 
 /* Telemetry frame of type `type` (0 wheel, 1 imu, 2 attitude) for sample `counter`. */
 static int handle_telem(slipest_node_t *node, unsigned type, uint16_t counter, const int16_t *vals, unsigned first,
-                        unsigned count, slipest_frame_t *out, status_fn_t status)
+                        unsigned count, slipest_frame_t *out)
 {
     unsigned i;
     if (node->asm_valid) {
@@ -245,7 +240,7 @@ static int handle_telem(slipest_node_t *node, unsigned type, uint16_t counter, c
         node->asm_sample[first + i] = vals[i];
     }
     node->asm_mask |= (uint8_t)(1u << type);
-    if (node->asm_mask == TELEM_ALL) return push_sample(node, out, status);
+    if (node->asm_mask == TELEM_ALL) return push_sample(node, out);
     return 0;
 }
 
@@ -269,7 +264,7 @@ static int handle_features(slipest_node_t *node, unsigned part, uint16_t wc, con
     node->feat_mask |= (uint8_t)(1u << part);
     if (node->feat_mask != FEATURES_ALL) return 0;
     node->feat_mask = 0;
-    n = emit_estimate(node, wc, node->feat_q, NULL, SLIPEST_FLAG_FEATURES_INPUT, 0, 0, out, slipest_node_status);
+    n = emit_estimate(node, wc, node->feat_q, NULL, SLIPEST_FLAG_FEATURES_INPUT, 0, 0, out);
     return n;
 }
 
@@ -283,7 +278,8 @@ int slipest_node_telemetry(slipest_node_t *node, unsigned type, uint16_t counter
     if (cap < SLIPEST_NODE_MAX_OUT) return SLIPEST_E_OVERFLOW;
     node->c.frames_received++;
     if (type > 2u) return reject(node, SLIPEST_E_UNKNOWN_ID);
-    return handle_telem(node, type, counter, values, first[type], count[type], out, status_marker);
+    node->status = status_marker;
+    return handle_telem(node, type, counter, values, first[type], count[type], out);
 }
 
 static void reset_state(slipest_node_t *node)
@@ -316,6 +312,7 @@ int slipest_node_handle(slipest_node_t *node, const slipest_frame_t *in, slipest
     if (node == NULL || in == NULL || out == NULL) return SLIPEST_E_NULL;
     if (cap < SLIPEST_NODE_MAX_OUT) return SLIPEST_E_OVERFLOW;
     node->c.frames_received++;
+    node->status = slipest_node_status;
     want = expected_dlc(in->id);
     if (want < 0) return reject(node, SLIPEST_E_UNKNOWN_ID);
     if (in->dlc != (uint8_t)want) return reject(node, SLIPEST_E_LENGTH);
@@ -327,7 +324,7 @@ int slipest_node_handle(slipest_node_t *node, const slipest_frame_t *in, slipest
         slipest_dbc_telem_wheel_unpack(&m, in->data, in->dlc);
         v[0] = m.wheel_speed;
         v[1] = m.motor_current;
-        return handle_telem(node, 0, m.sample_counter, v, 0, 2, out, slipest_node_status);
+        return handle_telem(node, 0, m.sample_counter, v, 0, 2, out);
     }
     case SLIPEST_DBC_TELEM_IMU_FRAME_ID: {
         struct slipest_dbc_telem_imu_t m;
@@ -336,7 +333,7 @@ int slipest_node_handle(slipest_node_t *node, const slipest_frame_t *in, slipest
         v[0] = m.acc_x;
         v[1] = m.acc_y;
         v[2] = m.acc_z;
-        return handle_telem(node, 1, m.sample_counter, v, 2, 3, out, slipest_node_status);
+        return handle_telem(node, 1, m.sample_counter, v, 2, 3, out);
     }
     case SLIPEST_DBC_TELEM_ATTITUDE_FRAME_ID: {
         struct slipest_dbc_telem_attitude_t m;
@@ -344,7 +341,7 @@ int slipest_node_handle(slipest_node_t *node, const slipest_frame_t *in, slipest
         slipest_dbc_telem_attitude_unpack(&m, in->data, in->dlc);
         v[0] = m.roll;
         v[1] = m.pitch;
-        return handle_telem(node, 2, m.sample_counter, v, 5, 2, out, slipest_node_status);
+        return handle_telem(node, 2, m.sample_counter, v, 5, 2, out);
     }
     case SLIPEST_DBC_FEATURES_0_FRAME_ID: {
         struct slipest_dbc_features_0_t m;

@@ -12,7 +12,6 @@
 #include "slipest_image_internal.h"
 #include "slipest_model_internal.h"
 
-#define REC_MAGIC "SLPR"
 #define REC_LAYOUT 1u
 #define REC_BODY (SLIPEST_STORE_RECORD_SIZE - 4u) /* bytes covered by the record CRC */
 #define NO_SLOT ((int8_t)SLIPEST_STORE_NO_SLOT)
@@ -134,88 +133,64 @@ static float bits_to_f32(uint32_t bits)
 }
 #endif
 
-/* one complete element: check it and, when loading, store it */
-static void visit(walk_t *w, unsigned seg, unsigned i, uint32_t raw)
+/* Where a fixed-point element goes when loading. v is its value, sign-extended from its width:
+ * the 16-bit segments' values fit int16_t, so their narrowing keeps the value. */
+static void store_q(slipest_store_t *s, unsigned seg, unsigned i, int32_t v)
 {
-    slipest_store_t *s = w->s;
-    slipest_status_t bad = SLIPEST_OK;
     switch (seg) {
-    case K_W1: {
-        int16_t v = to_s16(raw);
-        w->row_abs[i / (unsigned)SLIPEST_N_FEATURES] += abs16(v);
-        if (w->load != 0) {
-            s->qs.w1[i] = v;
-        }
-        break;
+    case K_W1: s->qs.w1[i] = (int16_t)v; break;       /* NOLINT(bugprone-narrowing-conversions) */
+    case K_B1: s->qs.b1[i] = v; break;
+    case K_GAMMA: s->qs.gamma[i] = (int16_t)v; break; /* NOLINT(bugprone-narrowing-conversions) */
+    case K_BETA: s->qs.beta[i] = v; break;
+    case K_W2: s->qs.w2[i] = (int16_t)v; break;       /* NOLINT(bugprone-narrowing-conversions) */
+    case K_B2: s->qs.b2[i] = v; break;
+    case K_GELU: s->qs.gelu[i] = (int16_t)v; break;   /* NOLINT(bugprone-narrowing-conversions) */
+    default: s->qs.rsqrt_seed[i] = (uint32_t)v; break; /* K_RSQRT: back to its bits */
     }
-    case K_B1:
-        if (0 == slipest_model_row_ok((int64_t)w->row_abs[i], to_s32(raw), SLIPEST_Q_ACC1_LIMIT)) {
-            bad = SLIPEST_E_RANGE;
-        }
-        if (w->load != 0) {
-            s->qs.b1[i] = to_s32(raw);
-        }
-        break;
-    case K_GAMMA:
-        if (w->load != 0) {
-            s->qs.gamma[i] = to_s16(raw);
-        }
+}
+
+/* one complete element of width `size` bytes: check it and, when loading, store it */
+static void visit(walk_t *w, unsigned seg, unsigned i, uint32_t raw, unsigned size)
+{
+    int32_t v = (size == 2u) ? (int32_t)to_s16(raw) : to_s32(raw);
+    int ok = 1;
+    switch (seg) {
+    case K_W1: w->row_abs[i / (unsigned)SLIPEST_N_FEATURES] += abs16((int16_t)v); break;
+    case K_W2: w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i / (unsigned)SLIPEST_N_HIDDEN] += abs16((int16_t)v); break;
+    case K_B1: ok = slipest_model_row_ok((int64_t)w->row_abs[i], v, SLIPEST_Q_ACC1_LIMIT); break;
+    case K_B2:
+        ok = slipest_model_row_ok((int64_t)w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i], v, SLIPEST_Q_ACC2_LIMIT);
         break;
     case K_BETA:
-        if (to_s32(raw) < -32768 || to_s32(raw) > 32767) {
-            bad = SLIPEST_E_RANGE;
-        }
-        if (w->load != 0) {
-            s->qs.beta[i] = to_s32(raw);
+        if ((v < -32768) || (v > 32767)) {
+            ok = 0;
         }
         break;
-    case K_W2: {
-        int16_t v = to_s16(raw);
-        w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i / (unsigned)SLIPEST_N_HIDDEN] += abs16(v);
-        if (w->load != 0) {
-            s->qs.w2[i] = v;
-        }
-        break;
-    }
-    case K_B2:
-        if (0 == slipest_model_row_ok((int64_t)w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i], to_s32(raw),
-                                      SLIPEST_Q_ACC2_LIMIT)) {
-            bad = SLIPEST_E_RANGE;
-        }
-        if (w->load != 0) {
-            s->qs.b2[i] = to_s32(raw);
-        }
-        break;
-    case K_GELU:
-        if (w->load != 0) {
-            s->qs.gelu[i] = to_s16(raw);
-        }
-        break;
-    case K_RSQRT:
-        if (slipest_model_seed_ok(raw, (int)i) == 0) {
-            bad = SLIPEST_E_RANGE;
-        }
-        if (w->load != 0) {
-            s->qs.rsqrt_seed[i] = raw;
-        }
-        break;
+    case K_RSQRT: ok = slipest_model_seed_ok(raw, (int)i); break;
+    case K_GAMMA: /* fall through: any int16 is a valid LayerNorm weight or GELU entry */
+    case K_GELU: break;
     default: /* the float model: finite parameters, positive finite LayerNorm eps */
         if ((f32_bits_finite(raw) == 0) || ((seg == K_FEPS) && ((raw == 0u) || (raw > 0x7F7FFFFFu)))) {
-            bad = SLIPEST_E_NONFINITE;
+            if (w->deferred == SLIPEST_OK) {
+                w->deferred = SLIPEST_E_NONFINITE;
+            }
         }
 #ifndef SLIPEST_Q_ONLY
         if (w->load != 0) {
             if (seg == K_FEPS) {
-                s->mf.ln_eps = bits_to_f32(raw);
+                w->s->mf.ln_eps = bits_to_f32(raw);
             } else {
-                f32_dst(s, seg)[i] = bits_to_f32(raw);
+                f32_dst(w->s, seg)[i] = bits_to_f32(raw);
             }
         }
 #endif
-        break;
+        return;
     }
-    if (bad != SLIPEST_OK && w->deferred == SLIPEST_OK) {
-        w->deferred = bad;
+    if (ok == 0 && w->deferred == SLIPEST_OK) {
+        w->deferred = SLIPEST_E_RANGE;
+    }
+    if (w->load != 0) {
+        store_q(w->s, seg, i, v);
     }
 }
 
@@ -238,7 +213,7 @@ static void payload_byte(walk_t *w, uint8_t b)
     if (w->nb < seg_size[w->seg]) {
         return;
     }
-    visit(w, w->seg, w->idx, w->acc);
+    visit(w, w->seg, w->idx, w->acc, seg_size[w->seg]);
     w->acc = 0u;
     w->nb = 0u;
     w->idx += 1u;
@@ -248,10 +223,17 @@ static void payload_byte(walk_t *w, uint8_t b)
     }
 }
 
+/* what a walk that passed learns about the image */
+typedef struct {
+    uint32_t crc;     /* its CRC-32 field */
+    uint32_t version; /* model version */
+    uint32_t hash32;  /* content hash32 */
+} image_id_t;
+
 /* Stream an image of len bytes from slot through every check of slipest_image_read() plus the
  * HMAC; with load, also decode it into the store's model storage. Returns the first failure in
- * the order header, CRC, hash, HMAC, parameters. *crc_out gets the image's CRC-32 field. */
-static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t len, int load, uint32_t *crc_out)
+ * the order header, CRC, hash, HMAC, parameters; on success *id describes the image. */
+static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t len, int load, image_id_t *id)
 {
     walk_t w;
     uint32_t pos = 0u, base = slot_addr(s, slot), S = s->nvm.sector_size, i, n;
@@ -321,7 +303,9 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
     if (w.deferred != SLIPEST_OK) {
         return w.deferred;
     }
-    *crc_out = slipest_image_le32(w.tail);
+    id->crc = slipest_image_le32(w.tail);
+    id->version = q.version;
+    id->hash32 = q.hash32;
     if (load == 0) {
         return SLIPEST_OK;
     }
@@ -367,11 +351,11 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
 /* Load slot's image as the active model; on failure no model is active. */
 static slipest_status_t load_slot(slipest_store_t *s, unsigned slot)
 {
-    uint32_t crc = 0u;
+    image_id_t id;
     slipest_status_t st;
     s->have_model = 0u;
-    st = walk_slot(s, slot, s->rec.length[slot], 1, &crc);
-    if (st == SLIPEST_OK && crc != s->rec.crc[slot]) st = SLIPEST_E_CRC; /* not the image the record names */
+    st = walk_slot(s, slot, s->rec.length[slot], 1, &id);
+    if (st == SLIPEST_OK && id.crc != s->rec.crc[slot]) st = SLIPEST_E_CRC; /* not the image the record names */
     if (st == SLIPEST_OK) {
         s->have_model = 1u;
     }
@@ -399,12 +383,14 @@ static void count_refusal(slipest_store_t *s, slipest_status_t st)
 /* the per-slot fields of r in record order: word j of the slot table is field j % 4 of slot j / 4 */
 #define REC_SLOT_WORDS (4u * SLIPEST_STORE_N_SLOTS)
 
+static const uint8_t rec_magic[4] = {0x53u, 0x4Cu, 0x50u, 0x52u}; /* "SLPR", no terminator */
+
 static void record_encode(const slipest_store_record_t *r, uint8_t *p)
 {
     const uint32_t *field[4] = {r->length, r->crc, r->version, r->hash32};
     unsigned j;
     memset(p, 0, REC_BODY);
-    memcpy(p, REC_MAGIC, 4);
+    memcpy(p, rec_magic, sizeof rec_magic);
     p[4] = (uint8_t)REC_LAYOUT;
     put_le32(&p[8], r->seq);
     p[12] = r->active == NO_SLOT ? 0xFFu : (uint8_t)r->active;
@@ -421,7 +407,7 @@ static int record_decode(const uint8_t *p, slipest_store_record_t *r)
     uint32_t *field[4] = {r->length, r->crc, r->version, r->hash32};
     unsigned j;
     r->seq = 0u;
-    if (memcmp(p, REC_MAGIC, 4) != 0 || p[4] != REC_LAYOUT || slipest_image_le32(&p[REC_BODY]) != slipest_crc32(p, REC_BODY)) {
+    if (memcmp(p, rec_magic, sizeof rec_magic) != 0 || p[4] != REC_LAYOUT || slipest_image_le32(&p[REC_BODY]) != slipest_crc32(p, REC_BODY)) {
         return 0;
     }
     if (p[12] >= SLIPEST_STORE_N_SLOTS || (p[13] != 0xFFu && (p[13] >= SLIPEST_STORE_N_SLOTS || p[13] == p[12]))) {
@@ -506,12 +492,17 @@ slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t 
         cand[k].seq = 0u;
         if (nvm_read(store, k * nvm->sector_size, raw, sizeof raw) != SLIPEST_OK) {
             st = SLIPEST_E_NVM;
-        } else if ((record_decode(raw, &cand[k]) == 0) && (raw[0] != 0xFFu)) {
-            store->c.boot_fallbacks++; /* torn or corrupt, not blank */
+        } else {
+            if ((record_decode(raw, &cand[k]) == 0) && (raw[0] != 0xFFu)) {
+                store->c.boot_fallbacks++; /* torn or corrupt, not blank */
+            }
         }
     }
     /* newest first; a record whose active slot no longer validates gives way to the older one */
-    newest = (cand[1].seq > cand[0].seq) ? 1u : 0u;
+    newest = 0u;
+    if (cand[1].seq > cand[0].seq) {
+        newest = 1u;
+    }
     for (k = 0; k < 2u; ++k) {
         unsigned r = (k == 0u) ? newest : 1u - newest;
         if (cand[r].seq == 0u) {
@@ -620,7 +611,8 @@ slipest_status_t slipest_store_write(slipest_store_t *store, uint32_t offset, co
 
 slipest_status_t slipest_store_finish(slipest_store_t *store)
 {
-    uint32_t crc = 0u, S;
+    image_id_t id;
+    uint32_t S;
     unsigned slot;
     slipest_status_t st;
     if (store == NULL) {
@@ -646,16 +638,10 @@ slipest_status_t slipest_store_finish(slipest_store_t *store)
         }
         store->buf_fill = 0u;
     }
-    st = walk_slot(store, slot, store->total_len, 0, &crc);
-    if (st == SLIPEST_OK) {
-        uint8_t hdr[SLIPEST_IMAGE_HEADER_SIZE];
-        st = nvm_read(store, slot_addr(store, slot), hdr, sizeof hdr);
-        store->ready.version = slipest_image_le32(&hdr[34]);
-        store->ready.hash32 = slipest_image_le32(&hdr[38]);
-        /* anti-rollback: only a newer model replaces the active one (rollback is its own command) */
-        if (st == SLIPEST_OK && store->have_model != 0u && store->ready.version <= store->mq.version) {
-            st = SLIPEST_E_STALE;
-        }
+    st = walk_slot(store, slot, store->total_len, 0, &id);
+    /* anti-rollback: only a newer model replaces the active one (rollback is its own command) */
+    if (st == SLIPEST_OK && store->have_model != 0u && id.version <= store->mq.version) {
+        st = SLIPEST_E_STALE;
     }
     if (st != SLIPEST_OK) {
         count_refusal(store, st);
@@ -664,7 +650,9 @@ slipest_status_t slipest_store_finish(slipest_store_t *store)
     }
     store->ready.state = SLIPEST_SLOT_READY;
     store->ready.length = store->total_len;
-    store->ready_crc = crc;
+    store->ready.version = id.version;
+    store->ready.hash32 = id.hash32;
+    store->ready_crc = id.crc;
     store->slot_state[slot] = SLIPEST_SLOT_READY;
     store->upload = SLIPEST_UPLOAD_READY;
     store->c.images_accepted++;
@@ -736,7 +724,7 @@ slipest_status_t slipest_store_rollback(slipest_store_t *store)
 {
     slipest_store_record_t r;
     unsigned prev;
-    uint32_t crc = 0u;
+    image_id_t id;
     slipest_status_t st;
     if (store == NULL) {
         return SLIPEST_E_NULL;
@@ -748,8 +736,8 @@ slipest_status_t slipest_store_rollback(slipest_store_t *store)
     if (store->slot_state[prev] != SLIPEST_SLOT_PREVIOUS) {
         return SLIPEST_E_STATE;
     }
-    st = walk_slot(store, prev, store->rec.length[prev], 0, &crc);
-    if (st == SLIPEST_OK && crc != store->rec.crc[prev]) {
+    st = walk_slot(store, prev, store->rec.length[prev], 0, &id);
+    if (st == SLIPEST_OK && id.crc != store->rec.crc[prev]) {
         st = SLIPEST_E_CRC;
     }
     if (st != SLIPEST_OK) {

@@ -291,6 +291,18 @@ def canopen_node_figures(build_dir: Path) -> dict:
     return fig
 
 
+def _goal_line(co_node: dict) -> str:
+    """The CANopen node's figures against issue 20's goals, keyless and authenticating."""
+    goals = co_node["goals"]
+
+    def verdict(fig: dict) -> str:
+        ok = fig["ram_bytes"] <= goals["ram_bytes"] and fig["flash_bytes"] <= goals["flash_bytes"]
+        return f"RAM {fig['ram_bytes']}/{goals['ram_bytes']}, flash {fig['flash_bytes']}/{goals['flash_bytes']} " \
+               f"({'met' if ok else 'over'})"
+
+    return f"keyless {verdict(co_node)}; with HMAC {verdict(co_node['with_auth'])}"
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bundle", type=Path, default=DEFAULT_BUNDLE, help="export bundle (default: the example bundle)")
     parser.add_argument("--build-dir", type=Path, default=REPO / "build" / "bench",
@@ -412,6 +424,7 @@ def run(args: argparse.Namespace) -> int:
         parts = ", ".join(f"{k} {v}" for k, v in co_node["flash_bytes_by_part"].items())
         print(f"{'m4_canopen_node_flash_by_part':42s} {parts}")
         print(f"{'m4_canopen_node_ram_parts':42s} " + ", ".join(f"{k} {v}" for k, v in co_node["ram_parts"].items()))
+        print(f"{'m4_canopen_node_goals':42s} {_goal_line(co_node)}")
         print()
         print(format_table(rows))
     return 0

@@ -10,6 +10,7 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "co_client_crc.h"
 #include "fuzz_model_check.h"
 #include "fuzz_nvm.h"
 #include "slipest_bundle.h"
@@ -59,21 +60,6 @@ static void boot(void)
     if (slipest_co_init(&co, ID, 1u, &store, slipest_bundle_model_q(), NULL, now, out, 1u) != 1) __builtin_trap();
 }
 
-/* CRC-16 of CiA 301 block transfers (polynomial 0x1021, initial 0), the client's side; kept out of
- * line so that fuzz_coverage_ignore.txt can leave it uninstrumented (a harness loop, a tenth of the
- * time when traced) */
-__attribute__((noinline)) static uint16_t block_crc(const uint8_t *p, uint32_t n)
-{
-    uint16_t crc = 0u;
-    uint32_t i;
-    int b;
-    for (i = 0; i < n; i++) {
-        crc ^= (uint16_t)(p[i] << 8);
-        for (b = 0; b < 8; b++) crc = (crc & 0x8000u) ? (uint16_t)((crc << 1) ^ 0x1021u) : (uint16_t)(crc << 1);
-    }
-    return crc;
-}
-
 /* the seed image with byte `at` xor `x`, by block download (block != 0) or segmented download;
  * a block download announces a CRC and sends it right (crc_mode 1) or as 0, almost always wrong
  * (0), or announces none (2, 3): only with a right or no CRC does a block download reach the
@@ -86,7 +72,7 @@ static void download(int block, uint32_t at, uint8_t x, unsigned crc_mode)
     uint16_t crc;
     memcpy(img, seed_img, seed_len);
     if (len > 0u) img[at % len] ^= x;
-    crc = crc_mode == 1u ? block_crc(img, len) : 0u;
+    crc = crc_mode == 1u ? co_client_crc16(0u, img, len) : 0u;
     memset(d, 0, 8);
     d[0] = block ? (crc_mode < 2u ? 0xC6u : 0xC2u) : 0x21u;
     d[2] = 0x20u;

@@ -81,7 +81,7 @@ typedef struct {
 /**
  * Image authentication: the key and the HMAC-SHA256 the store runs over an image's header and
  * payload. The store reaches the MAC only through these pointers, so a node that opens its store
- * without authentication (auth NULL) links no SHA-256 code at all (about 1.2 KB of flash on the
+ * without authentication (auth NULL) links no SHA-256 code at all (about 1.1 KB of flash on the
  * Cortex-M4). Fill it with SLIPEST_STORE_AUTH_HMAC_SHA256().
  */
 typedef struct {

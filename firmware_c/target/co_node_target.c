@@ -11,6 +11,7 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "co_client_crc.h"
 #include "semihost.h"
 #include "slipest_co.h"
 #include "slipest_store.h"
@@ -113,17 +114,6 @@ static uint32_t seal(uint32_t version)
     return crc ^ 0xFFFFFFFFu;
 }
 
-static uint16_t crc16(uint16_t crc, const uint8_t *d, uint32_t n)
-{
-    uint32_t i;
-    int b;
-    for (i = 0; i < n; i++) {
-        crc ^= (uint16_t)(d[i] << 8);
-        for (b = 0; b < 8; b++) crc = (crc & 0x8000u) ? (uint16_t)((crc << 1) ^ 0x1021u) : (uint16_t)(crc << 1);
-    }
-    return crc;
-}
-
 /* One SDO request; the first answer must start with `expect` (or any answer when expect is 0). */
 static uint32_t sdo(const uint8_t req[8], uint8_t expect, int measure, uint32_t *stack)
 {
@@ -194,7 +184,7 @@ int main(void)
         seq++;
         req[0] = (uint8_t)(seq | (off + n >= len ? 0x80u : 0u));
         for (i = 0; i < n; i++) req[1u + i] = image_byte(off + i, version, crc32);
-        crc = crc16(crc, &req[1], n);
+        crc = co_client_crc16(crc, &req[1], n);
         off += n;
         set_in(0x600u + NODE_ID, 8u, req);
         handle_in(0);

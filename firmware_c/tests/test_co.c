@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "check.h"
+#include "co_client_crc.h"
 #include "slipest_bundle.h"
 #include "slipest_co.h"
 #include "slipest_dbc.h"
@@ -81,17 +82,6 @@ static uint32_t wr(uint16_t index, uint8_t sub, uint32_t v, unsigned bytes)
     return aborted();
 }
 
-static uint16_t crc16(uint16_t crc, const uint8_t *d, size_t len)
-{
-    size_t i;
-    int b;
-    for (i = 0; i < len; i++) {
-        crc ^= (uint16_t)(d[i] << 8);
-        for (b = 0; b < 8; b++) crc = (crc & 0x8000u) ? (uint16_t)((crc << 1) ^ 0x1021u) : (uint16_t)(crc << 1);
-    }
-    return crc;
-}
-
 /* block download of data (len bytes, announced size `size`); skip_seq > 0 drops that segment once;
  * bad_crc corrupts the end CRC. Returns the abort code of the end (0 = accepted). */
 static uint32_t block(const uint8_t *data, size_t len, uint32_t size, unsigned skip_seq, int bad_crc)
@@ -130,7 +120,7 @@ static uint32_t block(const uint8_t *data, size_t len, uint32_t size, unsigned s
         }
         off += k;
     }
-    crc = crc16(0u, data, len);
+    crc = co_client_crc16(0u, data, len);
     {
         uint8_t d[8] = {0};
         size_t last = len % 7u == 0u ? 7u : len % 7u;

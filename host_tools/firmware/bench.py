@@ -44,7 +44,7 @@ import numpy as np
 
 from . import targets as target_registry
 from .build import cmake_build, run, run_image, run_record
-from ...paths import default_bundle, repo_root
+from fleetlab.paths import default_bundle, repo_root
 
 REPO = repo_root()
 DEFAULT_BUNDLE = default_bundle()

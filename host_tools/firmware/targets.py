@@ -15,7 +15,7 @@ import shlex
 from dataclasses import dataclass
 from pathlib import Path
 
-from ...paths import repo_root
+from fleetlab.paths import repo_root
 
 REPO = repo_root()
 

@@ -14,9 +14,9 @@ import sys
 import time
 from pathlib import Path
 
-from ..host_tools.firmware import targets as target_registry
-from ..host_tools.firmware.bench import target_costs
-from ..host_tools.firmware.build import cmake_build
+from fleetlab.host_tools.firmware import targets as target_registry
+from fleetlab.host_tools.firmware.bench import target_costs
+from fleetlab.host_tools.firmware.build import cmake_build
 from . import analysers, coverage, misra, stack, wcet
 from .sources import EXAMPLE_BUNDLE, REPO, run, tool_version
 

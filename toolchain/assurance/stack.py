@@ -18,7 +18,7 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..host_tools.firmware import targets as target_registry
+from fleetlab.host_tools.firmware import targets as target_registry
 from .sources import EXAMPLE_BUNDLE, FW, generate_dbc, include_dirs, library_sources, need, public_headers, run
 
 # the stack bound is computed for the reference target (the CPU whose painted stack bench c measures)

@@ -17,9 +17,9 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..host_tools.firmware import targets as target_registry
-from ..host_tools.firmware.bench import parse_kv
-from ..host_tools.firmware.build import cmake_build, run_image
+from fleetlab.host_tools.firmware import targets as target_registry
+from fleetlab.host_tools.firmware.bench import parse_kv
+from fleetlab.host_tools.firmware.build import cmake_build, run_image
 from .sources import EXAMPLE_BUNDLE, REPO
 
 IMAGE = "slipest_wcet_target_q.elf"

@@ -7,7 +7,7 @@ import argparse
 import json
 from pathlib import Path
 
-from ..host_tools.emulate import (
+from fleetlab.host_tools.emulate import (
     DEFAULT_SCALE,
     LINKS,
     REALTIME_FRAMES_PER_S,
@@ -16,9 +16,9 @@ from ..host_tools.emulate import (
     first_windows,
     soak_source,
 )
-from ..host_tools.sources import FeatureSource, TelemetrySource, resolve
-from ..host_tools.verify import faults as fault_mod
-from ..host_tools.wire.dbc import add_dbc_option, apply_dbc_option
+from fleetlab.host_tools.sources import FeatureSource, TelemetrySource, resolve
+from fleetlab.host_tools.verify import faults as fault_mod
+from fleetlab.host_tools.wire.dbc import add_dbc_option, apply_dbc_option
 from ..paths import default_bundle
 
 EPILOG = """\

@@ -116,3 +116,29 @@ def test_folder_rule_is_checked_and_fixed_idempotently(tmp_path):
 def test_the_tree_follows_the_folder_rule():
     r = subprocess.run([sys.executable, str(REPO / "scripts" / "fix_imports.py"), "--check"], capture_output=True, text=True)
     assert r.returncode == 0, r.stdout
+
+
+# Modules outside toolchain/cli/ that still build argument parsers, and why. The list only shrinks:
+# a new command's options belong in toolchain/cli/.
+ARGPARSE_OUTSIDE_CLI = {
+    "dbc/layout.py": "run by CMake as a script, without fleetlab installed",
+    "export/erf_table.py": "maintainer script (python -m), regenerates the GELU erf header",
+    "export/example.py": "maintainer script (python -m), regenerates the example bundle",
+    "host_tools/firmware/bench.py": "fleetlab bench c options (not yet moved)",
+    "host_tools/wire/dbc.py": "the shared --dbc option (not yet moved)",
+    "toolchain/data/bench.py": "fleetlab bench data options (not yet moved)",
+    "toolchain/data/info.py": "fleetlab data info options (not yet moved)",
+    "toolchain/data/simulator/cli.py": "fleetlab simulate (not yet moved)",
+    "toolchain/demo.py": "fleetlab demo (not yet moved)",
+    "toolchain/fusion/bench.py": "fleetlab bench fusion options (not yet moved)",
+}
+
+
+def test_argparse_stays_in_the_cli_package():
+    config = tomllib.loads((REPO / "pyproject.toml").read_text())
+    folders = config["tool"]["setuptools"]["package-dir"].values()
+    users = {str(p.relative_to(REPO)) for f in folders for p in (REPO / f).rglob("*.py")
+             if "__pycache__" not in p.parts and "argparse" in p.read_text()}
+    outside = {u for u in users if not u.startswith("toolchain/cli/")}
+    assert outside <= ARGPARSE_OUTSIDE_CLI.keys(), f"argparse outside toolchain/cli/: {sorted(outside - ARGPARSE_OUTSIDE_CLI.keys())}"
+    assert not any(u.startswith("toolchain/assurance/") for u in users)

@@ -7,13 +7,11 @@ in the call graph would make that unbounded, so the graph is checked for cycles 
 recursion proof); a frame GCC marks dynamic, or a call to a function with no frame size
 (a libc routine), is listed, not silently counted as zero.
 
-    python -m fleetlab.assurance.stack [--bundle DIR] [--full]
+    fleetlab assure stack [--bundle DIR] [--full]
 """
 from __future__ import annotations
 
-import argparse
 import re
-import sys
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -170,21 +168,3 @@ def table(rows: list[StackRow]) -> str:
         out.append(f"| {r.function} | {r.bytes}{' (dynamic frame)' if r.dynamic else ''} | "
                    f"{' → '.join(r.chain)} | {', '.join(sorted(r.unknown)) or '—'} |")
     return "\n".join(out)
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fleetlab.assurance.stack", description=__doc__.split("\n")[0])
-    ap.add_argument("--bundle", type=Path, default=EXAMPLE_BUNDLE)
-    ap.add_argument("--full", action="store_true", help="the full library (float path too) instead of slipest_q")
-    args = ap.parse_args(argv)
-    rows, cycles = analyse(args.bundle, q_only=not args.full)
-    if cycles:
-        print("RECURSION: " + "; ".join(" → ".join(c) for c in cycles))
-        return 1
-    print("call graph acyclic: no recursion")
-    print(table(rows))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from fleetlab.host_tools.firmware import targets as target_registry
-from fleetlab.host_tools.firmware.bench import target_costs
+from fleetlab.host_tools.firmware.measure import target_costs
 from fleetlab.host_tools.firmware.build import cmake_build
 from . import analysers, coverage, misra, stack, wcet
 from .sources import REPO, run, tool_version

@@ -121,7 +121,7 @@ def compile_graph(bundle: Path = EXAMPLE_BUNDLE, q_only: bool = True, with_bench
 
 def bench_bounds(bundle: Path = EXAMPLE_BUNDLE) -> dict[str, int]:
     """Stack bound of each measured wrapper of the cost image (its frame plus the library call),
-    keyed like fleetlab.host_tools.firmware.bench.target_costs, so bound and measurement compare 1:1."""
+    keyed like fleetlab.host_tools.firmware.measure.target_costs, so bound and measurement compare 1:1."""
     graph = compile_graph(bundle, q_only=True, with_bench=True)
     out = {}
     for key, fn in BENCH_WRAPPERS.items():

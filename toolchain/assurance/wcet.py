@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fleetlab.host_tools.firmware import targets as target_registry
-from fleetlab.host_tools.firmware.bench import parse_kv
+from fleetlab.host_tools.firmware.measure import parse_kv
 from fleetlab.host_tools.firmware.build import cmake_build, run_image
 from .sources import EXAMPLE_BUNDLE
 

@@ -101,9 +101,11 @@ def _targets(node: ast.ImportFrom, target: str, dirs: dict[str, str]) -> set[str
 
 
 def scan_file(path: Path, folder: str, name: str, dirs: dict[str, str], root: Path = ROOT) -> list[Finding]:
-    module, package = _module_of(path.relative_to(root), folder, name)
-    del module
-    tree = ast.parse(path.read_text(), filename=str(path))
+    _, package = _module_of(path.relative_to(root), folder, name)
+    try:
+        tree = ast.parse(path.read_text(), filename=str(path))
+    except SyntaxError as e:
+        raise SystemExit(f"{path.relative_to(root)}:{e.lineno}: cannot parse ({e.msg}); fix it, then re-run") from None
     found = []
     for node in ast.walk(tree):
         if not isinstance(node, ast.ImportFrom):

@@ -27,6 +27,10 @@ from .timebase import NS, Stream
 BAG_SUFFIXES = (".mcap", ".db3")
 
 
+class _NoMessages(ValueError):
+    """A bag without a single message on the profile's topics."""
+
+
 def quaternion_roll_pitch(q: np.ndarray) -> np.ndarray:
     """(n, 4) quaternions x, y, z, w -> (n, 2) roll, pitch (REP-103 Z-Y-X Euler angles, rad)."""
     x, y, z, w = (q[:, k] for k in range(4))
@@ -99,8 +103,7 @@ class _Wheels:
 
 def read_bag(source: Path, profile: RoverProfile, progress: bool = True) -> tuple[dict[str, Stream], Counter]:
     """One stream per profile section from a rosbag2 folder or a bare .mcap/.db3 file."""
-    from rosbags.highlevel import AnyReader, AnyReaderError
-    from rosbags.rosbag2 import ReaderError
+    from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
     drops: Counter = Counter()
@@ -108,8 +111,8 @@ def read_bag(source: Path, profile: RoverProfile, progress: bool = True) -> tupl
     try:
         reader = AnyReader([source], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         reader.open()
-    except (AnyReaderError, ReaderError, OSError, KeyError, ValueError) as e:
-        raise ValueError(f"{source}: cannot open as a rosbag2 (truncated or not a bag?): {e}") from None
+    except Exception as e:  # noqa: BLE001 - any failure of the storage libraries on a foreign file is bad input
+        raise ValueError(f"{source}: cannot open as a rosbag2 (truncated or not a bag?): {type(e).__name__}: {e}") from None
     try:
         topics = {c.topic: c.msgtype for c in reader.connections}
         for section, spec in specs.items():
@@ -133,7 +136,7 @@ def read_bag(source: Path, profile: RoverProfile, progress: bool = True) -> tupl
         stamps: dict[str, list] = {s: [] for s in specs}
         total = sum(c.msgcount for c in conns)
         if total == 0:
-            raise ValueError(f"{source}: the bag holds no messages on {', '.join(sorted(by_topic))}")
+            raise _NoMessages(f"{source}: the bag holds no messages on {', '.join(sorted(by_topic))}")
         with tqdm(total=total, desc=f"reading {source.name}", unit="msg", unit_scale=True, disable=not progress) as bar:
             for i, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
                 msg = reader.deserialize(raw, conn.msgtype)
@@ -147,10 +150,11 @@ def read_bag(source: Path, profile: RoverProfile, progress: bool = True) -> tupl
                 if i % 4096 == 4095:
                     bar.update(4096)
             bar.update(total - bar.n)
-    except ProfileError:
+    except (ProfileError, _NoMessages):
         raise
-    except (ReaderError, AnyReaderError, EOFError, IndexError, KeyError, ValueError, OSError) as e:
-        raise ValueError(f"{source}: cannot read the bag to its end (truncated or corrupt?): {e}") from None
+    except Exception as e:  # noqa: BLE001 - as above: a corrupt chunk or message is bad input, not a bug
+        raise ValueError(f"{source}: cannot read the bag to its end (truncated or corrupt?): "
+                         f"{type(e).__name__}: {e}") from None
     finally:
         reader.close()
     streams = {}

@@ -94,11 +94,16 @@ class _Wheels:
                 raise ProfileError(self.profile.path, key, f"joint {missing[0]!r} is not in {self.topic} "
                                    f"(its joints: {', '.join(names) or 'none'})")
             idx = self.index[names] = np.array([names.index(j) for j in self.profile.joints])
-        vel, eff = np.asarray(msg.velocity), np.asarray(msg.effort)
-        if len(vel) != len(names) or len(eff) != len(names):
+        if len(msg.velocity) != len(names) or len(msg.effort) != len(names):
             return None
-        return (float(np.mean(np.abs(vel[idx]))) * self.profile.velocity_scale,
-                float(np.mean(np.abs(eff[idx]))) * self.profile.current_per_effort)
+        return np.concatenate([msg.velocity[idx], msg.effort[idx]])  # channels: `wheel_channels`, once per stream
+
+
+def wheel_channels(per_joint: np.ndarray, profile: RoverProfile) -> np.ndarray:
+    """(n, 2 k) velocities then efforts of k wheels -> (n, 2) wheel_speed (rad/s), motor_current (A)."""
+    k = per_joint.shape[1] // 2
+    return np.column_stack([np.abs(per_joint[:, :k]).mean(axis=1) * profile.velocity_scale,
+                            np.abs(per_joint[:, k:]).mean(axis=1) * profile.current_per_effort])
 
 
 def read_bag(source: Path, profile: RoverProfile, progress: bool = True) -> tuple[dict[str, Stream], Counter]:
@@ -159,9 +164,11 @@ def read_bag(source: Path, profile: RoverProfile, progress: bool = True) -> tupl
         reader.close()
     streams = {}
     for section in specs:
-        width = {"wheels": 2, "imu": 3, "attitude": 4, "ground_truth": 3}[section]
+        width = {"wheels": 2 * len(profile.joints), "imu": 3, "attitude": 4, "ground_truth": 3}[section]
         values = np.array(rows[section], dtype=np.float64).reshape(-1, width)
-        if section == "attitude":
+        if section == "wheels":
+            values = wheel_channels(values, profile)
+        elif section == "attitude":
             values = quaternion_roll_pitch(values)
         streams[section] = Stream(section, np.array(stamps[section], dtype=np.int64), values)
     return streams, drops
@@ -223,9 +230,7 @@ def read_timeseries_csv(source: Path, profile: RoverProfile, progress: bool = Tr
         t = np.concatenate([p[0] for p in parts])
         v = np.concatenate([p[1] for p in parts])
         if section == "wheels":
-            k = len(spec.columns["velocity_columns"])
-            v = np.column_stack([np.abs(v[:, :k]).mean(axis=1) * profile.velocity_scale,
-                                 np.abs(v[:, k:]).mean(axis=1) * profile.current_per_effort])
+            v = wheel_channels(v, profile)
         elif section == "attitude":
             v = v * profile.angle_scale
         streams[section] = Stream(section, t, v)

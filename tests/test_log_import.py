@@ -277,28 +277,26 @@ def test_good_small_bag_imports_without_drops(small_bag):
     assert res.windows_kept == 16 and not +res.drops
 
 
-def test_missing_topic(small_bag, tmp_path, capsys):
-    p = _profile(tmp_path, **{'topic = "/ground_truth/pose"': 'topic = "/vicon/rover"'})
+@pytest.mark.parametrize("old, new, needles", [
+    # a missing topic: names the key and lists what the bag has
+    ('topic = "/ground_truth/pose"', 'topic = "/vicon/rover"', ("ground_truth.topic", "/vicon/rover",
+                                                                "/ground_truth/pose (PoseStamped)")),
+    # a wrong message type
+    ('topic = "/imu/data"', 'topic = "/joint_states"', ("imu.topic", "sensor_msgs/msg/JointState", "sensor_msgs/msg/Imu")),
+    # an unknown wheel joint: lists the joints the log has
+    ('"wheel_left_1_joint"', '"front_left_wheel"', ("wheels.left_joints", "front_left_wheel", "wheel_left_1_joint")),
+    # a typo'd key
+    ("includes_gravity = true", "include_gravity = true", ("imu.include_gravity", "unknown key",
+                                                           "did you mean 'includes_gravity'")),
+], ids=["missing-topic", "wrong-type", "unknown-joint", "typo-key"])
+def test_profile_mistakes_are_one_line_errors(small_bag, tmp_path, capsys, old, new, needles):
+    p = _profile(tmp_path, **{old: new})
     rc, _, err = _import(capsys, str(small_bag / "good"), "--rover", str(p), "--out", str(tmp_path / "o"))
-    _one_line_error(rc, err, "ground_truth.topic", "/vicon/rover", "/ground_truth/pose (PoseStamped)")
+    _one_line_error(rc, err, *needles)
+    assert not (tmp_path / "o").exists()
 
 
-def test_wrong_message_type(small_bag, tmp_path, capsys):
-    p = _profile(tmp_path, **{'topic = "/imu/data"': 'topic = "/joint_states"'})
-    rc, _, err = _import(capsys, str(small_bag / "good"), "--rover", str(p), "--out", str(tmp_path / "o"))
-    _one_line_error(rc, err, "imu.topic", "sensor_msgs/msg/JointState", "sensor_msgs/msg/Imu")
-
-
-def test_unknown_wheel_joint(small_bag, tmp_path, capsys):
-    p = _profile(tmp_path, **{'"wheel_left_1_joint"': '"front_left_wheel"'})
-    rc, _, err = _import(capsys, str(small_bag / "good"), "--rover", str(p), "--out", str(tmp_path / "o"))
-    _one_line_error(rc, err, "wheels.left_joints", "front_left_wheel", "wheel_left_1_joint")
-
-
-def test_profile_with_a_typod_key(small_bag, tmp_path, capsys):
-    p = _profile(tmp_path, **{"includes_gravity = true": "include_gravity = true"})
-    rc, _, err = _import(capsys, str(small_bag / "good"), "--rover", str(p), "--out", str(tmp_path / "o"))
-    _one_line_error(rc, err, "imu.include_gravity", "unknown key", "did you mean 'includes_gravity'")
+def test_profile_with_a_typod_section(tmp_path):
     with pytest.raises(ProfileError, match=r"\[improt\] unknown section \(did you mean \[import\]"):
         load_profile(_profile(tmp_path, **{"[import]": "[improt]"}))
 

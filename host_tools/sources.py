@@ -85,17 +85,17 @@ def csv_dir_source(path: Path | str) -> FeatureSource:
 
 
 def imported_source(path: Path | str) -> TelemetrySource:
-    """The raw samples of a `fleetlab data import` folder (`*.raw.npz`, sorted by name), back to back.
+    """The raw samples of a `fleetlab data import` folder (its `*.raw.npz`, in import order), back to back.
 
     Each file holds whole windows only (the windows of its CSV, in order), so the estimator's
     own windowing of the stream gives exactly the imported windows.
     """
     from fleetlab.data.contracts import DEFAULT_RATE_HZ
-    from fleetlab.data.log_import import RAW_SUFFIX, read_raw
+    from fleetlab.data.log_import import RAW_SUFFIX, raw_files, read_raw
 
     root = Path(path)
     parts, traces = [], []
-    for f in sorted(root.glob("*" + RAW_SUFFIX)):
+    for f in raw_files(root):
         samples, rate = read_raw(f)
         if rate != DEFAULT_RATE_HZ or len(samples) % SAMPLES_PER_WINDOW:
             raise ValueError(f"{f}: {len(samples)} samples at {rate:g} Hz are not whole windows of the estimator "
@@ -134,8 +134,8 @@ def resolve(spec: str, seed: int, scale: float, bundle: Path | str | None) -> Te
         return vectors_source(bundle)
     p = Path(spec)
     if p.is_dir():
-        from fleetlab.data.log_import import RAW_SUFFIX
+        from fleetlab.data.log_import import REPORT_NAME
 
-        return imported_source(p) if any(p.glob("*" + RAW_SUFFIX)) else csv_dir_source(p)
+        return imported_source(p) if (p / REPORT_NAME).exists() else csv_dir_source(p)
     raise ValueError(f"--source {spec!r}: expected 'sim', 'vectors', a 'fleetlab data import' folder (raw samples "
                      "replayed) or a folder of window CSV files")

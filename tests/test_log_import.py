@@ -322,7 +322,8 @@ def test_ten_second_gap_cuts_the_log(small_bag, tmp_path, capsys):
     assert rc == 0, err
     report = json.loads((tmp_path / "o" / "import_report.json").read_text())["logs"][0]
     assert report["drops"]["gaps"] == 4  # one per stream
-    assert report["drops"]["gap_s"] == pytest.approx(4 * 10.02, abs=0.01)
+    # between the segments: from message 498 (the ground truth must reach one sample past a segment) to 1000
+    assert report["drops"]["gap_s"] == pytest.approx(10.04, abs=0.001)
     assert report["files"] == ["gap_seg01", "gap_seg02"]
     assert report["windows_kept"] == 5 + 5  # 10 s then 12 s (11.98 s of windows: 5)
     assert "gaps 4" in out
@@ -450,3 +451,14 @@ def test_emulate_source_replays_an_imported_bag_bit_exact(mcap_import, tmp_path,
     s = json.loads((tmp_path / "e.json").read_text())
     assert s["windows"] == s["bit_exact"] == windows
     assert s["mismatches"] == 0 and s["rejected_frames"] == 0
+
+
+def test_stream_can_source_sends_an_imported_bags_windows(mcap_import, capsys):
+    from fleetlab.host_tools.emulator import build, default_bundle
+
+    folder = mcap_import[0] / "imp" / "leo_earth.rover.toml"
+    build(default_bundle())
+    windows = sum(len(read_windows_csv(f)) for f in folder.glob("*.csv"))
+    capsys.readouterr()
+    assert fleetlab_main(["stream", "can", "--interface", "virtual", "--source", str(folder), "--quiet"]) == 0
+    assert f"received {windows} estimates" in capsys.readouterr().out

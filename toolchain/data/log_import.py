@@ -118,8 +118,9 @@ def import_log(source: Path | str, profile: RoverProfile, rate_hz: float = DEFAU
     streams = {name: clean(s, drops, limit.get(name)) for name, s in raw.items()}
     for name, s in streams.items():
         if len(s) < 2:
-            raise ValueError(f"{source}: the {name} stream ({profile.streams[name].topic or profile.streams[name].csv.file}) "
-                             f"has {len(s)} usable message(s) after {sum(drops.values()):g} drop(s); nothing to import")
+            where = profile.streams[name].topic or profile.streams[name].csv.file
+            raise ValueError(f"{source}: the {name} stream ({where}) has {len(s)} usable message(s) "
+                             f"(dropped: {drop_summary(drops)}); nothing to import")
     step_ns = int(np.ceil(NS / rate_hz))
     spans = segments(list(streams.values()), profile.max_gap_s, drops, {"ground_truth": step_ns})
     stem = source.stem if source.is_file() else source.name
@@ -147,6 +148,10 @@ def drop_summary(drops: Counter) -> str:
 def write_import(out: Path | str, results: list[ImportResult], profile: RoverProfile, role: str,
                  rate_hz: float = DEFAULT_RATE_HZ) -> Path:
     """Window CSVs, raw samples, dataset.json (labelled files with `role`) and import_report.json."""
+    stems = [seg.stem for res in results for seg in res.segments]
+    twice = sorted({s for s in stems if stems.count(s) > 1})
+    if twice:
+        raise ValueError(f"two logs would both write {twice[0]}.csv; import them into different folders or rename one")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     files, report = {}, []
@@ -168,6 +173,17 @@ def write_import(out: Path | str, results: list[ImportResult], profile: RoverPro
     (out / REPORT_NAME).write_text(json.dumps({"rate_hz": rate_hz, "profile": str(profile.path), "logs": report},
                                               indent=2) + "\n")
     return out
+
+
+def raw_files(folder: Path | str) -> list[Path]:
+    """The raw-sample files of an import folder, in import order (from import_report.json, so files
+    left over from an earlier import into the same folder are never replayed)."""
+    folder = Path(folder)
+    try:
+        logs = json.loads((folder / REPORT_NAME).read_text())["logs"]
+    except (OSError, ValueError, KeyError) as e:
+        raise ValueError(f"{folder}: not a 'fleetlab data import' folder ({REPORT_NAME}: {e})") from None
+    return [folder / f"{stem}{RAW_SUFFIX}" for log in logs for stem in log["files"]]
 
 
 def read_raw(path: Path | str) -> tuple[np.ndarray, float]:

@@ -6,7 +6,8 @@ docs/your_rover.md:
    dropped (counted `backwards_stamps`); one holding NaN/Inf is dropped
    (`nonfinite`); one beyond the sensor's range is dropped (`saturated_messages`).
 2. A pause longer than `max_gap_s` between two kept messages of any stream is a gap
-   (`gaps`, `gap_s`): nothing is interpolated across it and the log is cut there.
+   (`gaps`, counted per stream): nothing is interpolated across it and the log is cut there
+   (`gap_s`: the time between the segments left).
 3. Segments are the times every stream covers; within one, grid times are
    start + k / rate (no extrapolation past the segment's end) and each stream's
    values at a grid time are the linear interpolation between its two kept
@@ -60,7 +61,6 @@ def coverage(t_ns: np.ndarray, max_gap_ns: int, drops: Counter) -> list[tuple[in
         return []
     cut = np.flatnonzero(np.diff(t_ns) > max_gap_ns)
     drops["gaps"] += len(cut)
-    drops["gap_s"] += float(np.sum(t_ns[cut + 1] - t_ns[cut])) / NS
     starts = np.concatenate([[0], cut + 1])
     ends = np.concatenate([cut, [len(t_ns) - 1]])
     return [(int(t_ns[a]), int(t_ns[b])) for a, b in zip(starts, ends)]
@@ -92,7 +92,9 @@ def segments(streams: list[Stream], max_gap_s: float, drops: Counter,
     for s in streams:
         runs = [(a, b - margin.get(s.section, 0)) for a, b in coverage(s.t_ns, gap_ns, drops)]
         spans = runs if spans is None else intersect(spans, runs)
-    return spans or []
+    spans = spans or []
+    drops["gap_s"] += sum(b[0] - a[1] for a, b in zip(spans, spans[1:])) / NS  # time between segments
+    return spans
 
 
 def grid(start_ns: int, end_ns: int, rate_hz: float, extra: int = 0) -> np.ndarray:

@@ -217,9 +217,9 @@ def load_profile(path: Path | str) -> RoverProfile:
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise ProfileError(path, "file", "no such profile file") from None
+        raise FileNotFoundError(f"{path}: no such rover profile (docs/your_rover.md describes one)") from None
     except tomllib.TOMLDecodeError as e:
-        raise ProfileError(path, "file", f"not valid TOML ({e})") from None
+        raise ValueError(f"{path}: not valid TOML ({e})") from None
     _check_keys(path, data)
     rover = _Reader(path, "rover", data["rover"])
     wheels = _Reader(path, "wheels", data["wheels"])

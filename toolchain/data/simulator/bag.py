@@ -4,7 +4,9 @@ Topics (message types of the Fleet-To-Lab collector), all stamped on the sample 
   /joint_states       sensor_msgs/JointState  one joint per wheel; velocity = that side's measured
                                               speed (rad/s), effort = the motor current (A)
   /imu/data           sensor_msgs/Imu         specific force: linear acceleration WITH gravity
-  /odometry/filtered  nav_msgs/Odometry       orientation (roll, pitch, heading) = the attitude channels
+  /odometry/filtered  nav_msgs/Odometry       orientation: the roll and pitch channels taken as REP-103
+                                              Z-Y-X angles, heading from the track; position: wheel
+                                              odometry (commanded distance), not ground truth
   /ground_truth/pose  geometry_msgs/PoseStamped  true position (motion-capture-like), one sample longer
                                               than the sensors so the last sample's distance is known
 Beside the bags, one rover profile per (rover, gravity): `<rover>_<earth|moon>.rover.toml`.

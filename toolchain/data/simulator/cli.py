@@ -51,6 +51,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--rate must be a positive number of Hz, got {args.rate}")
     if not np.isfinite(args.scale) or not 0 < args.scale <= 10:
         raise ValueError(f"--scale must be in (0, 10], got {args.scale}")
+    if args.bag and args.accel != ACCEL_LINEAR:
+        raise ValueError("--bag writes the IMU as a raw accelerometer (gravity added from the attitude) itself; "
+                         f"keep the default --accel {ACCEL_LINEAR}")
     fleet = tuple(r.strip() for r in args.fleet.split(",") if r.strip())
     t0 = time.perf_counter()
     out = write_scenario(args.out, args.seed, args.scale, args.rate, raw=args.raw, progress=True, fleet=fleet,

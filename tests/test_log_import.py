@@ -462,3 +462,15 @@ def test_stream_can_source_sends_an_imported_bags_windows(mcap_import, capsys):
     capsys.readouterr()
     assert fleetlab_main(["stream", "can", "--interface", "virtual", "--source", str(folder), "--quiet"]) == 0
     assert f"received {windows} estimates" in capsys.readouterr().out
+
+
+def test_roles_file_mixes_an_import_with_the_fleet_to_lab_csvs(mcap_import, real_data_dir, tmp_path):
+    imp = mcap_import[0] / "imp" / "leo_earth.rover.toml"
+    (tmp_path / "roles.toml").write_text(f'[[folder]]\npath = "{imp}"\nrole = "earth"\n\n'
+                                         f'[[folder]]\npath = "{real_data_dir}"\n')
+    ds = load_dataset(tmp_path / "roles.toml")
+    f2l = load_dataset(real_data_dir)
+    ds.check_roles()
+    assert ds.roles == f2l.roles and ds.source == "roles file"
+    assert len(ds.table("earth")) == len(f2l.table("earth")) + sum(len(read_windows_csv(f)) for f in imp.glob("*.csv"))
+    assert len(ds.table("target")) == len(f2l.table("target"))

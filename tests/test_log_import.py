@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -299,6 +300,17 @@ def test_profile_mistakes_are_one_line_errors(small_bag, tmp_path, capsys, old, 
 def test_profile_with_a_typod_section(tmp_path):
     with pytest.raises(ProfileError, match=r"\[improt\] unknown section \(did you mean \[import\]"):
         load_profile(_profile(tmp_path, **{"[import]": "[improt]"}))
+
+
+def test_gravity_of_the_wrong_place_is_warned_about(small_bag, tmp_path, capsys):
+    p = _profile(tmp_path, **{"gravity_m_s2 = 9.81": "gravity_m_s2 = 1.62"})  # an Earth log with the Moon's g
+    rc, out, err = _import(capsys, str(small_bag / "good"), "--rover", str(p), "--out", str(tmp_path / "o"))
+    assert rc == 0, err
+    warning = re.search(r"warning: .*mean acc_z is \+(\d+\.\d+) m/s\^2 .*imu\.gravity_m_s2", out)
+    assert warning and 6.0 < float(warning[1]) < 8.2  # 9.81 - 1.62 = 8.19, times cos(pitch) cos(roll)
+    rc, _, err = _import(capsys, str(small_bag / "good"), "--rover", str(small_bag / "leo.toml"), "--out",
+                         str(tmp_path / "o2"), "--role", "moon")
+    _one_line_error(rc, err, "--role 'moon'")
 
 
 def test_backwards_stamp_is_dropped_and_counted(small_bag, tmp_path):

@@ -14,7 +14,7 @@ from pathlib import Path
 from ..data import info
 from ..data.compare import compare_statistics
 from ..data.contracts import CLASS_NAMES, FEATURE_NAMES
-from ..data.dataset import load_dataset
+from ..data.dataset import ROLE_PATTERN, load_dataset
 from ..data.log_import import UNASSIGNED, drop_summary, import_log, write_import
 from ..data.rover_profile import load_profile
 
@@ -63,6 +63,8 @@ def add_import_arguments(sub) -> None:
 def run_import(args: argparse.Namespace) -> int:
     import time
 
+    if args.role != UNASSIGNED and not ROLE_PATTERN.match(args.role):
+        raise ValueError(f"--role {args.role!r}: expected earth, target or fleet_<rover>")
     profile = load_profile(args.rover)
     t0 = time.perf_counter()
     results = [import_log(src, profile, progress=not args.no_progress) for src in args.sources]
@@ -76,6 +78,9 @@ def run_import(args: argparse.Namespace) -> int:
     for r in results:
         print(f"{str(r.source)[-40:]:40s} {len(r.segments):5d} {r.windows_total:8d} {r.windows_kept:6d}  "
               f"{drop_summary(r.drops)}")
+    for r in results:
+        for warning in r.warnings():
+            print(f"warning: {warning}")
     if profile.ground_truth is None:
         print(f"{profile.path}: no [ground_truth]: the windows are UNLABELLED (*.unlabelled.csv, not in dataset.json); "
               "they replay through 'fleetlab emulate --source' but cannot train or evaluate a model")

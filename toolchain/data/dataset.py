@@ -100,7 +100,7 @@ class Dataset:
 
 
 ROLES_KEYS = ("path", "role")
-_ROLE_PATTERN = re.compile(rf"^({EARTH}|{TARGET}|{FLEET_PREFIX}[A-Za-z0-9_-]+)$")
+ROLE_PATTERN = re.compile(rf"^({EARTH}|{TARGET}|{FLEET_PREFIX}[A-Za-z0-9_-]+)$")
 
 
 def load_roles_file(path: Path) -> Dataset:
@@ -129,7 +129,7 @@ def load_roles_file(path: Path) -> Dataset:
             raise ValueError(f"{path}: folder {k}: " + (f"unknown key {bad[0]!r} (keys: path, role)" if bad
                                                          else "needs path = \"FOLDER\""))
         role = entry.get("role")
-        if role is not None and not (isinstance(role, str) and _ROLE_PATTERN.match(role)):
+        if role is not None and not (isinstance(role, str) and ROLE_PATTERN.match(role)):
             raise ValueError(f"{path}: folder {k}: role {role!r} is not {EARTH}, {TARGET} or {FLEET_PREFIX}<rover>")
         folder = load_dataset(path.parent / entry["path"], roles_file=False)
         files += [DataFile(f.path, role or f.role, f.table) for f in folder.files]

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .contracts import CH, DEFAULT_RATE_HZ, MIN_SAMPLES_PER_WINDOW, N_CHANNELS, RAW_CHANNELS
+from .contracts import CH, DEFAULT_RATE_HZ, FEATURE_NAMES, MIN_SAMPLES_PER_WINDOW, N_CHANNELS, RAW_CHANNELS
 from .csvio import WindowTable, write_windows_csv
 from .dataset import write_manifest
 from .features import LabelledWindows, WindowSpec, featurise_trace
@@ -33,6 +33,7 @@ from .rover_profile import RoverProfile
 from .timebase import NS, Stream, clean, grid, messages_per_window, resample, segments
 
 RAW_SUFFIX = ".raw.npz"
+GRAVITY_LEFT_M_S2 = 0.5  # |mean acc_z| above this after the import: gravity left in (or taken out twice)
 REPORT_NAME = "import_report.json"
 UNASSIGNED = "unassigned"
 
@@ -63,6 +64,16 @@ class ImportResult:
     @property
     def windows_kept(self) -> int:
         return sum(len(s.windows.label) for s in self.segments)
+
+    def warnings(self) -> list[str]:
+        """Signs of a profile that does not fit the log (the import itself went through)."""
+        if not self.segments:
+            return []
+        acc_z = np.concatenate([s.windows.features[:, FEATURE_NAMES.index("feat_acc_z_mean")] for s in self.segments])
+        if abs(acc_z.mean()) > GRAVITY_LEFT_M_S2:
+            return [f"{self.source}: mean acc_z is {acc_z.mean():+.2f} m/s^2 after the import; gravity-free "
+                    "acceleration averages about 0: check imu.includes_gravity and imu.gravity_m_s2"]
+        return []
 
 
 def _subset(w: LabelledWindows, keep: np.ndarray) -> LabelledWindows:

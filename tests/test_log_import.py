@@ -234,15 +234,18 @@ def small_bag(tmp_path_factory):
     return root
 
 
-def _rewrite(src: Path, dst: Path, edit=None, drop_all: bool = False) -> Path:
-    """Copy a bag message by message; `edit(topic, index, msg)` may change a message or return None to drop it."""
+def _rewrite(src: Path, dst: Path, edit=None, drop_all: bool = False, retype: dict | None = None) -> Path:
+    """Copy a bag message by message; `edit(topic, index, msg)` may change a message or return None to drop it;
+    `retype` maps a topic to (new message type, function(typestore, msg) -> message of that type)."""
     from rosbags.highlevel import AnyReader
     from rosbags.rosbag2 import Writer
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
+    retype = retype or {}
     with AnyReader([src], default_typestore=ts) as r, Writer(dst, version=9) as w:
-        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=ts) for c in r.connections}
+        types = {c.id: retype.get(c.topic, (c.msgtype,))[0] for c in r.connections}
+        conns = {c.id: w.add_connection(c.topic, types[c.id], typestore=ts) for c in r.connections}
         count: dict[str, int] = {}
         for c, stamp, raw in r.messages():
             if drop_all:
@@ -250,9 +253,34 @@ def _rewrite(src: Path, dst: Path, edit=None, drop_all: bool = False) -> Path:
             msg = r.deserialize(raw, c.msgtype)
             i = count[c.topic] = count.get(c.topic, -1) + 1
             msg = edit(c.topic, i, msg) if edit else msg
+            if c.topic in retype:
+                msg = retype[c.topic][1](ts, msg)
             if msg is not None:
-                w.write(conns[c.id], stamp, ts.serialize_cdr(msg, c.msgtype))
+                w.write(conns[c.id], stamp, ts.serialize_cdr(msg, types[c.id]))
     return dst
+
+
+def _as_pose_array(ts, msg):
+    return ts.types["geometry_msgs/msg/PoseArray"](msg.header, [msg.pose])
+
+
+def _as_odometry(ts, msg):
+    T = ts.types
+    cov = T["geometry_msgs/msg/PoseWithCovariance"](msg.pose, np.zeros(36))
+    v = T["geometry_msgs/msg/Vector3"](0.0, 0.0, 0.0)
+    twist = T["geometry_msgs/msg/TwistWithCovariance"](T["geometry_msgs/msg/Twist"](v, v), np.zeros(36))
+    return T["nav_msgs/msg/Odometry"](msg.header, "base_link", cov, twist)
+
+
+@pytest.mark.parametrize("convert", [_as_pose_array, _as_odometry], ids=["PoseArray", "Odometry"])
+def test_ground_truth_as_pose_array_or_odometry(small_bag, tmp_path, convert):
+    mtype = "geometry_msgs/msg/PoseArray" if convert is _as_pose_array else "nav_msgs/msg/Odometry"
+    bag = _rewrite(small_bag / "good", tmp_path / "gt", retype={"/ground_truth/pose": (mtype, convert)})
+    profile = load_profile(small_bag / "leo.toml")
+    got, ref = import_log(bag, profile, progress=False), import_log(small_bag / "good", profile, progress=False)
+    assert got.windows_kept == ref.windows_kept == 16 and not +got.drops
+    np.testing.assert_array_equal(got.segments[0].windows.d_actual, ref.segments[0].windows.d_actual)
+    np.testing.assert_array_equal(got.segments[0].windows.label, ref.segments[0].windows.label)
 
 
 def _profile(root: Path, **replace: str) -> Path:
@@ -486,3 +514,11 @@ def test_roles_file_mixes_an_import_with_the_fleet_to_lab_csvs(mcap_import, real
     assert ds.roles == f2l.roles and ds.source == "roles file"
     assert len(ds.table("earth")) == len(f2l.table("earth")) + sum(len(read_windows_csv(f)) for f in imp.glob("*.csv"))
     assert len(ds.table("target")) == len(f2l.table("target"))
+
+
+def test_attitude_from_the_imu_orientation(small_bag, tmp_path):
+    """The simulator's Imu carries the same orientation as its Odometry: either source gives the same windows."""
+    p = _profile(tmp_path, **{'topic = "/odometry/filtered"': 'topic = "/imu/data"'})
+    got = import_log(small_bag / "good", load_profile(p), progress=False)
+    ref = import_log(small_bag / "good", load_profile(small_bag / "leo.toml"), progress=False)
+    np.testing.assert_array_equal(got.segments[0].windows.features, ref.segments[0].windows.features)

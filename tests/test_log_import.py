@@ -427,7 +427,9 @@ def test_no_ground_truth_gives_unlabelled_windows_and_says_so(small_bag, tmp_pat
                            "--out", str(tmp_path / "o"))
     assert rc == 0, err
     assert "UNLABELLED" in out
-    assert (tmp_path / "o" / "good.unlabelled.csv").exists() and (tmp_path / "o" / "good.raw.npz").exists()
+    assert (tmp_path / "o" / "good.raw.npz").exists()
+    header, *rows = (tmp_path / "o" / "good.unlabelled.csv").read_text().splitlines()
+    assert "slip_class" not in header and header.startswith("feat_w_vel_mean,") and len(rows) == 16
     assert json.loads((tmp_path / "o" / "dataset.json").read_text())["files"] == {}
 
 

@@ -150,6 +150,15 @@ def import_log(source: Path | str, profile: RoverProfile, rate_hz: float = DEFAU
     return ImportResult(source, segs, drops, total)
 
 
+UNLABELLED_COLUMNS = FEATURE_NAMES + ("total_dist_cmd", "n_samples", "win_duration_s")
+
+
+def _write_unlabelled_csv(path: Path, w: LabelledWindows) -> None:
+    """Features of windows without ground truth: no label columns at all, so no reader takes them for labels."""
+    cols = np.column_stack([w.features, w.d_commanded, w.n_samples, w.duration_s])
+    np.savetxt(path, cols, delimiter=",", header=",".join(UNLABELLED_COLUMNS), comments="", fmt="%.17g")
+
+
 def drop_summary(drops: Counter) -> str:
     """`name count, ...` of every non-zero drop counter (seconds with one decimal)."""
     items = [f"{k} {v:.1f}" if k.endswith("_s") else f"{k} {v}" for k, v in sorted(drops.items()) if v]
@@ -170,7 +179,10 @@ def write_import(out: Path | str, results: list[ImportResult], profile: RoverPro
         for seg in res.segments:
             table = WindowTable.from_windows(seg.windows)
             name = f"{seg.stem}.csv" if seg.labelled else f"{seg.stem}.unlabelled.csv"
-            write_windows_csv(out / name, table)
+            if seg.labelled:
+                write_windows_csv(out / name, table)
+            else:
+                _write_unlabelled_csv(out / name, seg.windows)
             np.savez_compressed(out / f"{seg.stem}{RAW_SUFFIX}", samples=seg.samples, window_start_ns=seg.window_start_ns,
                                 rate_hz=rate_hz, channels=np.array(RAW_CHANNELS), labelled=seg.labelled)
             if seg.labelled:

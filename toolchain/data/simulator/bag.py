@@ -21,14 +21,15 @@ import numpy as np
 
 from ..contracts import CH
 from ..log_import import gravity_body
+from ..rover_profile import IMU, JOINT_STATE, ODOMETRY, POSE_STAMPED
 from .engine import Trace
 from .rovers import GRAVITY_EARTH, ROVERS
 
 TOPICS = {
-    "wheels": ("/joint_states", "sensor_msgs/msg/JointState"),
-    "imu": ("/imu/data", "sensor_msgs/msg/Imu"),
-    "attitude": ("/odometry/filtered", "nav_msgs/msg/Odometry"),
-    "ground_truth": ("/ground_truth/pose", "geometry_msgs/msg/PoseStamped"),
+    "wheels": ("/joint_states", JOINT_STATE),
+    "imu": ("/imu/data", IMU),
+    "attitude": ("/odometry/filtered", ODOMETRY),
+    "ground_truth": ("/ground_truth/pose", POSE_STAMPED),
 }
 STORAGES = ("mcap", "sqlite3")
 EPOCH_NS = 1_700_000_000 * 1_000_000_000  # stamp of a traverse's first sample
@@ -150,16 +151,16 @@ def write_traverse_bag(path: Path, trace: Trace, rover: str, gravity: float, sto
         names = list(left + right)
         for i in range(n):
             vel = np.array([trace.truth["wheel_left"][i]] * len(left) + [trace.truth["wheel_right"][i]] * len(right))
-            put("wheels", i, T["sensor_msgs/msg/JointState"](header(i, "base_link"), names, np.zeros(len(names)), vel,
+            put("wheels", i, T[JOINT_STATE](header(i, "base_link"), names, np.zeros(len(names)), vel,
                                                              np.full(len(names), s[i, CH["motor_current"]])))
             q = Quat(*quat[i])
-            put("imu", i, T["sensor_msgs/msg/Imu"](header(i, "imu_link"), q, zeros9, Vec(0.0, 0.0, 0.0), zeros9,
+            put("imu", i, T[IMU](header(i, "imu_link"), q, zeros9, Vec(0.0, 0.0, 0.0), zeros9,
                                                    Vec(*acc[i]), zeros9))
             odom_pose = T["geometry_msgs/msg/PoseWithCovariance"](Pose(Point(*odom[i]), q), zeros36)
             twist = T["geometry_msgs/msg/TwistWithCovariance"](
                 T["geometry_msgs/msg/Twist"](Vec(0.0, 0.0, 0.0), Vec(0.0, 0.0, 0.0)), zeros36)
-            put("attitude", i, T["nav_msgs/msg/Odometry"](header(i, "odom"), "base_link", odom_pose, twist))
+            put("attitude", i, T[ODOMETRY](header(i, "odom"), "base_link", odom_pose, twist))
         for i in range(n + 1):
-            put("ground_truth", i, T["geometry_msgs/msg/PoseStamped"](
+            put("ground_truth", i, T[POSE_STAMPED](
                 header(i, "map"), Pose(Point(*pos[i]), Quat(0.0, 0.0, 0.0, 1.0))))
     return path

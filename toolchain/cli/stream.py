@@ -34,7 +34,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     s.add_argument("--baudrate", type=int, default=921600, help="baud rate of a real port (default 921600)")
     for q in (c, s):
         q.add_argument("--source", default="sim",
-                       help="sim | vectors | folder of window CSVs | python-can log file (default sim)")
+                       help="sim | vectors | 'fleetlab data import' folder (its raw samples) | folder of window CSVs | "
+                       "python-can log file (default sim)")
         q.add_argument("--bundle", type=Path, default=None,
                        help="export bundle (for --source vectors and for a started emulator)")
         q.add_argument("--realtime", action="store_true",

@@ -124,6 +124,9 @@ class AcoMergeConfig:
     chunk: int = 150  # ants per batched forward chunk (bounds the activations' memory)
     # torch intra-op threads during the run; the result is deterministic for a seed and a thread count
     threads: int = 1
+    # 'cpu' runs `search` (the reference); a GPU ('cuda', 'cuda:N') runs the lockstep engine
+    # (lockstep.py), whose results differ from the CPU's in float rounding and random stream
+    device: str = "cpu"
 
     def validate(self) -> None:
         bad = [p for p in self.phases if p not in PHASES]
@@ -145,6 +148,8 @@ class AcoMergeConfig:
             raise ValueError("iwoa_every ≥ 1, gb_every ≥ 0, deposit > 0 and tau_init > 0 are required")
         if self.chunk < 1 or self.threads < 1:
             raise ValueError("chunk and threads must be at least 1")
+        if self.device != "cpu" and not self.device.startswith("cuda"):
+            raise ValueError(f"device must be 'cpu' or 'cuda[:N]', got {self.device!r}")
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -223,13 +228,14 @@ def whale_update(
     p and λ are drawn per whale, r1 and r2 per coordinate; the leader keeps its position.
     """
     s, m, d = pos.shape
-    rows = torch.arange(s)
+    dev = pos.device
+    rows = torch.arange(s, device=dev)
     best = pos[rows, leader].unsqueeze(1)  # (S, 1, D)
-    p = torch.rand(s, m, 1, generator=gen)
-    lam = torch.rand(s, m, 1, generator=gen).mul_(2).sub_(1)
-    big_a = a * (2 * torch.rand(s, m, d, generator=gen) - 1)
-    big_c = 2 * torch.rand(s, m, d, generator=gen)
-    partner = torch.randint(0, m, (s, m), generator=gen)
+    p = torch.rand(s, m, 1, generator=gen, device=dev)
+    lam = torch.rand(s, m, 1, generator=gen, device=dev).mul_(2).sub_(1)
+    big_a = a * (2 * torch.rand(s, m, d, generator=gen, device=dev) - 1)
+    big_c = 2 * torch.rand(s, m, d, generator=gen, device=dev)
+    partner = torch.randint(0, m, (s, m), generator=gen, device=dev)
     other = pos[rows.unsqueeze(1), partner]  # (S, M, D) random swarm members
     encircle = best - inertia * big_a * (big_c * best - pos).abs()
     explore = other - inertia * big_a * (big_c * other - pos).abs()
@@ -309,6 +315,15 @@ def acomerge(
     pheromone actually held after the update), iwoa (whether an IWOA update followed).
     The whole-model IWOA ablation records only the first three.
     """
+    cfg, experts, cand = checked_inputs(experts_flat, arch, config, seed, buffer)
+    fitness = CalibrationFitness(arch, x_cal, y_cal, chunk=cfg.chunk)
+    return search(experts, cand, fitness, cfg, seed=seed, progress=progress)
+
+
+def checked_inputs(
+    experts_flat: torch.Tensor, arch: str, config: AcoMergeConfig | None, seed: int, buffer: torch.Tensor | None,
+) -> tuple[AcoMergeConfig, torch.Tensor, torch.Tensor]:
+    """(config, experts (K, T), buffer (M, T)) after the checks every AcoMerge run needs."""
     cfg = config or AcoMergeConfig()
     cfg.validate()
     experts = torch.as_tensor(experts_flat).detach().to(torch.float32)
@@ -326,8 +341,7 @@ def acomerge(
     cand = torch.as_tensor(cand).detach().to(torch.float32).clone()
     if cand.dim() != 2 or cand.shape[1] != n_t or not torch.isfinite(cand).all():
         raise ValueError(f"buffer must be a finite (M, {n_t}) tensor, got shape {tuple(cand.shape)}")
-    fitness = CalibrationFitness(arch, x_cal, y_cal, chunk=cfg.chunk)
-    return search(experts, cand, fitness, cfg, seed=seed, progress=progress)
+    return cfg, experts, cand
 
 
 def search(

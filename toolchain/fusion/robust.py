@@ -33,10 +33,11 @@ from __future__ import annotations
 import torch
 
 from ..models import flatten
-from .acomerge import AcoMergeConfig, acomerge
+from .acomerge import AcoMergeConfig
 from .baselines.common import model_from_flat
 from .buffer import make_buffer
 from .finetune import finetune
+from .lockstep import run_acomerge
 from .registry import FusedModel, FusionInputs
 
 NAME = "acomerge-robust"
@@ -60,7 +61,7 @@ def fit_acomerge_robust(inp: FusionInputs, config: AcoMergeConfig) -> FusedModel
     """Fine-tune the aligned experts on D_Cal, then AcoMerge over a buffer around them."""
     tuned = finetuned_experts(inp)
     buffer = make_buffer(tuned, copies=config.copies, sigma=config.sigma, seed=inp.buffer_seed)
-    res = acomerge(tuned, inp.arch, inp.x_cal, inp.y_cal, config=config, seed=inp.seed, buffer=buffer)
+    res = run_acomerge(tuned, inp.arch, inp.x_cal, inp.y_cal, config, seed=inp.seed, buffer=buffer)
     details = {"config": config.to_dict(), "best_fitness": res.best_fitness, "best_origin": res.best_origin.replace("expert", "fine-tuned expert"),
                "evaluations": res.evaluations, "finetuned_expert_fitness": res.expert_fitness,
                "finetune_steps_per_expert": inp.budget.steps, "history": res.history}

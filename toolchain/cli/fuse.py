@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 import time
 from pathlib import Path
 
@@ -50,6 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--finetune-steps", type=int, default=FINETUNE_STEPS,
                    help=f"Adam steps of the Earth fine-tune reference (default: {FINETUNE_STEPS})")
     options.threads(p)
+    options.device(p)
     options.no_progress(p)
 
 
@@ -65,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _fuse(args: argparse.Namespace) -> int:
     progress = not args.no_progress
+    device = options.resolved_device(args)  # a missing GPU fails before any training
     label = registry.get(args.method).label
     seconds: dict[str, float] = {}
     dataset = load_dataset(args.data)
@@ -76,7 +79,10 @@ def _fuse(args: argparse.Namespace) -> int:
     seconds["experts"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    budget = Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, copies=args.copies, threads=args.threads)
+    budget = Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, copies=args.copies, threads=args.threads,
+                    device=device)
+    if device != "cpu" and progress:
+        print(f"{label}: searching on {options.device_label(device)}", file=sys.stderr)
     fused = fuse(args.method, src, cal.x_cal, cal.y_cal, seed=args.seed, buffer_seed=args.seed, budget=budget)
     seconds[args.method] = time.perf_counter() - t0
 

@@ -17,6 +17,7 @@ from ..data.calibration import calibration_set
 from ..data.dataset import load_dataset
 from ..evaluation.fuse_report import Row, scores, write_run
 from ..fusion import registry
+from ..fusion.acomerge import run_threads
 from ..fusion.baselines import model_from_flat
 from ..fusion.finetune import FINETUNE_STEPS, finetune
 from ..fusion.fitness import CalibrationFitness
@@ -56,9 +57,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    options.at_least_one(args, "cal_size", "epochs", "generations", "ants", "finetune_steps", "threads")
+    options.at_least_one(args, "cal_size", "epochs", "generations", "ants", "finetune_steps")
+    if args.threads < 0:
+        raise ValueError(f"--threads must be 0 (chosen from the free cores) or more, got {args.threads}")
     previous_threads = torch.get_num_threads()
-    torch.set_num_threads(args.threads)
+    torch.set_num_threads(run_threads(args.threads))
     try:
         return _fuse(args)
     finally:

@@ -9,7 +9,7 @@ from pathlib import Path
 import torch
 
 from ..data.splits import PROTOCOLS
-from ..fusion.acomerge import AcoMergeConfig, default_threads
+from ..fusion.acomerge import AUTO_THREADS, MAX_THREADS, AcoMergeConfig
 from ..models import ARCHS
 from ..models.train import EXPERT_EPOCHS
 
@@ -54,9 +54,9 @@ def search_budget(p: argparse.ArgumentParser, generations_help: str, copies: boo
 
 
 def threads(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--threads", type=int, default=default_threads(),
-                   help=f"threads for training and for batched search evaluation (default: {default_threads()}, "
-                        "this machine's cores up to 4)")
+    p.add_argument("--threads", type=int, default=AUTO_THREADS,
+                   help=f"threads for training and for batched search evaluation (default: {AUTO_THREADS} = chosen "
+                        f"when the work starts: the cores no other process keeps busy then, up to {MAX_THREADS})")
 
 
 def device(p: argparse.ArgumentParser) -> None:

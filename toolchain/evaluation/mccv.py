@@ -31,11 +31,13 @@ same whichever run produced them, so a resumed table equals an uninterrupted one
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
 import json
 import os
 import sys
 import tempfile
+import threading
 import time
 import zlib
 from dataclasses import asdict, dataclass, field
@@ -367,19 +369,31 @@ def run_mccv(
             done[(job["cal_size"], job["run"], job["method"])] = job
 
     t1 = time.perf_counter()
+    on_gpu = device != "cpu"
+    batched = [m for m in settings.all_methods if on_gpu and registry.get(m).fit_many is not None]
+    call = joblib.delayed(run_job)
+    tasks = [call(c, r, m, src, target, _on_cpu(settings) if on_gpu else settings)
+             for c, r, m in todo if m not in batched]
     try:
-        on_gpu = device != "cpu"
-        batched = {m for m in settings.all_methods if on_gpu and registry.get(m).fit_many is not None}
-        # one GPU: the batched methods run here, all runs of a calibration size in one search
-        for c in settings.cal_sizes:
-            for m in sorted(batched, key=settings.all_methods.index):
-                runs = [r for (cc, r, mm) in todo if cc == c and mm == m]
-                if runs:
-                    finished(run_jobs(c, runs, m, src, target, settings))
-        cpu_settings = _on_cpu(settings) if on_gpu else settings
-        call = joblib.delayed(run_job)
-        tasks = [call(c, r, m, src, target, cpu_settings) for c, r, m in todo if m not in batched]
-        execute(tasks, n_jobs, backend, scheduler, progress=False, on_result=finished)
+        if not batched:
+            execute(tasks, n_jobs, backend, scheduler, progress=False, on_result=finished)
+        else:
+            # One GPU: the batched methods run in this process, all runs of a calibration size in one
+            # search, while the other methods' jobs run on the CPU workers beside them.
+            lock = threading.Lock()
+
+            def locked(results):
+                with lock:
+                    finished(results)
+
+            with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
+                cpu_part = pool.submit(execute, tasks, n_jobs, backend, scheduler, False, False, locked)
+                for c in settings.cal_sizes:
+                    for m in batched:
+                        runs = [r for (cc, r, mm) in todo if cc == c and mm == m]
+                        if runs:
+                            locked(run_jobs(c, runs, m, src, target, settings))
+                cpu_part.result()
     finally:
         bars.close()
     order = {m: i for i, m in enumerate(settings.all_methods)}

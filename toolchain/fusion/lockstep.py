@@ -70,14 +70,6 @@ def device_label(device: torch.device) -> str:
     return "cpu"
 
 
-def run_acomerge(
-    experts_flat: torch.Tensor, arch: str, x_cal: np.ndarray, y_cal: np.ndarray, config: AcoMergeConfig,
-    seed: int = 0, progress: bool = False, buffer: torch.Tensor | None = None,
-) -> AcoMergeResult:
-    """One AcoMerge run on `config.device`: `acomerge.acomerge` on the CPU, the lockstep engine on a GPU."""
-    return run_acomerge_many([(experts_flat, x_cal, y_cal, seed, buffer)], arch, config, progress)[0]
-
-
 def run_acomerge_many(
     runs: Sequence[tuple[torch.Tensor, np.ndarray, np.ndarray, int, torch.Tensor | None]], arch: str,
     config: AcoMergeConfig, progress: bool = False, desc: str = "AcoMerge",

@@ -16,7 +16,7 @@ from .acomerge import AcoMergeConfig
 from .buffer import make_buffer
 from .lockstep import run_acomerge_many
 from .registry import Budget, FusedModel, FusionInputs, register
-from .robust import fit_acomerge_robust
+from .robust import fit_acomerge_robust_many
 
 
 def make_run_buffer(aligned: torch.Tensor, kind: str, seed: int, sigma: float = Budget.sigma,
@@ -123,8 +123,8 @@ def _aco_on_buffer(name: str, kind: str = "experts", phases: tuple[str, ...] | N
     return fit_many
 
 
-def _acomerge_robust(inp: FusionInputs) -> FusedModel:
-    return fit_acomerge_robust(inp, aco_config(inp.budget))
+def _acomerge_robust_many(inps: list[FusionInputs]) -> list[FusedModel]:
+    return fit_acomerge_robust_many(inps, aco_config(inps[0].budget))
 
 
 def _aco_fleet_ablation(name: str):
@@ -149,7 +149,7 @@ register("evomerge", _evomerge, "Evolutionary Merge", "Merging")
 register("modelswarm", _modelswarm, "ModelSwarm", "Merging")
 _register_many("acomerge", _aco_on_buffer("acomerge"), "AcoMerge", "Merging")
 # not in the paper: AcoMerge over experts fine-tuned on D_Cal first (issue 17, fusion/robust.py)
-register("acomerge-robust", _acomerge_robust, "AcoMerge-robust", "Merging")
+_register_many("acomerge-robust", _acomerge_robust_many, "AcoMerge-robust", "Merging")
 register("distill", _distill, "Ensemble distillation", "Distillation")
 _register_many("mmas-only", _aco_on_buffer("mmas-only", phases=("mmas",)), "MMAS only", "Ablation")
 # whole-model IWOA over the buffer (ModelSwarm's search, PSO replaced)

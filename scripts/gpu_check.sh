@@ -27,7 +27,8 @@ SHIM=$(mktemp -d /tmp/fleetlab_shim.XXXXXX)
 mkdir -p "$SHIM/fleetlab"
 for entry in "$ROOT"/toolchain/*; do ln -s "$entry" "$SHIM/fleetlab/$(basename "$entry")"; done
 for pkg in export host_tools dbc canopen_od; do ln -s "$ROOT/$pkg" "$SHIM/fleetlab/$pkg"; done
-export PYTHONPATH="$SHIM${PYTHONPATH:+:$PYTHONPATH}"
+ORIGINAL_PYTHONPATH=${PYTHONPATH:-}
+export PYTHONPATH="$SHIM${ORIGINAL_PYTHONPATH:+:$ORIGINAL_PYTHONPATH}"
 if ! "$PY" -c "import cma" 2>/dev/null; then
   wheel=$(ls "$ROOT"/.whl/cma-*.whl 2>/dev/null | head -1 || true)
   if [ -z "$wheel" ]; then
@@ -35,13 +36,15 @@ if ! "$PY" -c "import cma" 2>/dev/null; then
     exit 2
   fi
   "$PY" -m pip install -q --no-index --no-deps --no-compile --target "$SHIM/site" "$wheel"
-  export PYTHONPATH="$SHIM:$SHIM/site${PYTHONPATH:+:${PYTHONPATH#$SHIM}}"
+  export PYTHONPATH="$SHIM:$SHIM/site${ORIGINAL_PYTHONPATH:+:$ORIGINAL_PYTHONPATH}"
 fi
 export PYTHONUNBUFFERED=1 OPENBLAS_NUM_THREADS=1
 FL=("$PY" -m fleetlab.cli)
 "$PY" - <<'EOF'
-import torch
-assert torch.cuda.is_available(), "gpu_check: torch sees no CUDA GPU"
+import sys, torch, fleetlab
+print(f"gpu_check: fleetlab from {fleetlab.__path__[0]}")
+if not torch.cuda.is_available():
+    sys.exit("gpu_check: torch sees no CUDA GPU here")
 print(f"gpu_check: torch {torch.__version__}, {torch.cuda.get_device_name(0)}, {torch.get_num_threads()} CPU threads")
 EOF
 t_start=$(date +%s)

@@ -6,6 +6,8 @@ refused in one line where no GPU exists."""
 from __future__ import annotations
 
 import dataclasses
+import json
+import os
 
 import pytest
 import torch
@@ -111,3 +113,27 @@ def test_device_cuda_is_a_one_line_error_without_a_gpu(capsys, tmp_path):
     rc = main(["bench", "fusion", "--device", "cuda", "--json"])
     err = capsys.readouterr().err.strip()
     assert rc != 0 and len(err.splitlines()) == 1 and "no CUDA GPU" in err and "Traceback" not in err
+
+
+# --- a busy machine (issue 30, item 2) ----------------------------------------------------
+
+def test_threads_follow_the_free_cores():
+    """With every core taken by a spinning process, a run gets one thread (not a barrier per core)."""
+    from fleetlab.fusion.acomerge import busy_cores, default_threads
+    from fleetlab.fusion.bench import busy_processes
+
+    cores = os.cpu_count() or 1
+    with busy_processes(cores):
+        assert busy_cores(0.2) >= cores - 0.5
+        assert default_threads() == 1
+
+
+def test_bench_reports_idle_and_loaded_runs(capsys):
+    rc = main(["bench", "fusion", "--json", "--ants", "20", "--generations", "3", "--repeats", "1",
+               "--full-runs", "1", "--load", "1"])
+    assert rc == 0
+    busy = json.loads(capsys.readouterr().out)["busy"]
+    assert busy["load"] == 1 and busy["run_s_idle"] > 0 and busy["run_s_loaded"] > 0
+    assert busy["run_s_loaded_all_cores"] > 0 and 1 <= busy["threads_loaded"] <= busy["threads_all_cores"]
+    assert busy["goals"] == {"run_s_idle": 0.35, "run_s_loaded": 0.6,
+                             "met": busy["run_s_idle"] <= 0.35 and busy["run_s_loaded"] <= 0.6}

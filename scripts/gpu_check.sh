@@ -48,56 +48,56 @@ if not torch.cuda.is_available():
 print(f"gpu_check: torch {torch.__version__}, {torch.cuda.get_device_name(0)}, {torch.get_num_threads()} CPU threads")
 EOF
 t_start=$(date +%s)
-echo "== bench fusion --device cuda (SN-S, SN-D)"
-"${FL[@]}" bench fusion --device cuda --arch sn-s --full-runs 3 --repeats 50 --json | tee "$OUT_DIR/bench_gpu_sn-s.json"
-"${FL[@]}" bench fusion --device cuda --arch sn-d --full-runs 2 --repeats 20 --json | tee "$OUT_DIR/bench_gpu_sn-d.json"
-echo "== bench fusion, CPU path on this host (SN-S with --load 1; SN-D one full run)"
-"${FL[@]}" bench fusion --arch sn-s --repeats 10 --full-runs 3 --json | tee "$OUT_DIR/bench_cpu_sn-s.json"
-"${FL[@]}" bench fusion --arch sn-d --repeats 2 --full-runs 1 --load 0 --json | tee "$OUT_DIR/bench_cpu_sn-d.json"
-
+failed=()
+step() {  # step NAME SECONDS CMD...: run with a time limit; a failure is reported at the end, not fatal
+  local name=$1 limit=$2
+  shift 2
+  echo "== $name"
+  if ! timeout "$limit" "$@"; then
+    failed+=("$name")
+    echo "gpu_check: step '$name' failed or ran over ${limit} s" >&2
+  fi
+}
+TO_FILE=(bash -c '"$@" > "$0" && cat "$0"')  # TO_FILE FILE CMD...: the command's stdout into FILE, and shown
 DATA=${1:-${FLEETLAB_REAL_DATA:-}}
 for d in "$DATA" "$ROOT/../shared/data/fleet_to_lab" "$ROOT/data/fleet_to_lab"; do
   if [ -n "$d" ] && ls "$d"/*.csv >/dev/null 2>&1; then DATA=$d; break; else DATA=""; fi
 done
+NPROC=$(nproc)
+CPU_JOBS=$(( NPROC > 6 ? NPROC - 4 : 2 ))
+GPU_SIDE_JOBS=$(( NPROC > 6 ? 3 : 1 ))
+SNS=(--runs 30 --methods acomerge --no-progress)
+cpu_table=""
+if [ -n "$DATA" ]; then
+  # the CPU side of the SN-S comparison runs on most cores while the GPU benchmarks run
+  timeout 280 "${FL[@]}" evaluate --data "$DATA" "${SNS[@]}" --device cpu --jobs "$CPU_JOBS" \
+    --json "$OUT_DIR/table_sn-s_cpu.json" > /dev/null 2> "$OUT_DIR/table_sn-s_cpu.err" &
+  cpu_table=$!
+fi
+step "bench fusion --device cuda --arch sn-s" 60 "${TO_FILE[@]}" "$OUT_DIR/bench_gpu_sn-s.json" \
+  "${FL[@]}" bench fusion --device cuda --arch sn-s --full-runs 3 --repeats 50 --json
+step "bench fusion --device cuda --arch sn-d" 90 "${TO_FILE[@]}" "$OUT_DIR/bench_gpu_sn-d.json" \
+  "${FL[@]}" bench fusion --device cuda --arch sn-d --full-runs 2 --repeats 20 --json
 if [ -z "$DATA" ]; then
   echo "gpu_check: no Fleet-To-Lab CSVs found (give DATA_DIR or FLEETLAB_REAL_DATA): table steps skipped" >&2
-  exit 0
+else
+  step "SN-S table, 30 runs x 2 budgets, AcoMerge on the GPU" 150 "${FL[@]}" evaluate --data "$DATA" "${SNS[@]}" \
+    --device cuda --jobs "$GPU_SIDE_JOBS" --json "$OUT_DIR/table_sn-s_gpu.json"
+  wait "$cpu_table" || { failed+=("SN-S table on the CPU"); tail -3 "$OUT_DIR/table_sn-s_cpu.err" >&2; }
+  t0=$(date +%s.%N)
+  step "SN-D paper table on the GPU (30 runs x 2 budgets, every method; the others on $NPROC CPU jobs)" 240 \
+    "${FL[@]}" evaluate --data "$DATA" --arch sn-d --runs 30 --device cuda --jobs "$NPROC" --no-progress \
+    --out "$OUT_DIR/table_sn-d_gpu"
+  t1=$(date +%s.%N)
+  "$PY" -c "import sys; print(f'{float(sys.argv[2]) - float(sys.argv[1]):.1f}')" "$t0" "$t1" > "$OUT_DIR/table_sn-d_seconds.txt"
 fi
-JOBS=$(nproc)
-echo "== SN-D paper table on the GPU (30 runs x 2 budgets, every method; others on $JOBS CPU jobs)"
-t0=$(date +%s.%N)
-"${FL[@]}" evaluate --data "$DATA" --arch sn-d --runs 30 --device cuda --jobs "$JOBS" --no-progress \
-  --json "$OUT_DIR/table_sn-d_gpu.json" > "$OUT_DIR/table_sn-d_gpu.md"
-t1=$(date +%s.%N)
-echo "== SN-S table, 30 runs, AcoMerge family on the GPU and on the CPU"
-"${FL[@]}" evaluate --data "$DATA" --runs 30 --methods acomerge,mmas-only --device cuda --jobs "$JOBS" --no-progress \
-  --json "$OUT_DIR/table_sn-s_gpu.json" > /dev/null
-"${FL[@]}" evaluate --data "$DATA" --runs 30 --methods acomerge,mmas-only --device cpu --jobs "$JOBS" --no-progress \
-  --json "$OUT_DIR/table_sn-s_cpu.json" > /dev/null
-"$PY" - "$OUT_DIR" "$t0" "$t1" <<'EOF'
-import json, sys
-out, t0, t1 = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
-s = {k: json.load(open(f"{out}/bench_gpu_{k}.json")) for k in ("sn-s", "sn-d")}
-c = {k: json.load(open(f"{out}/bench_cpu_{k}.json")) for k in ("sn-s", "sn-d")}
-d = json.load(open(f"{out}/table_sn-d_gpu.json"))["timing"]
-print("\n== goal figures (issue 30)")
-print(f"device: {s['sn-s']['device']}")
-print(f"SN-S generation, one run:      {s['sn-s']['generation_ms']:.4f} ms   (goal <= 0.15 ms; "
-      f"fitness call alone {s['sn-s']['fitness_ms']:.4f} ms; 30 runs batched: {s['sn-s']['per_run_generation_ms']:.4f} ms per run)")
-print(f"SN-D AcoMerge run:             {s['sn-d']['full_run_s']:.3f} s    (goal <= 0.5 s; "
-      f"30 runs batched: {s['sn-d']['batched_full_runs_s']:.3f} s for all)")
-print(f"SN-D paper table:              {t1 - t0:.1f} s    (goal <= 180 s; MCCV {d['mccv_wall_s']:.1f} s, sources {sum(d['sources_s'].values()):.1f} s)")
-print(f"CPU on this host: SN-S run {c['sn-s']['full_run_s']:.3f} s ({c['sn-s']['threads']} threads), "
-      f"SN-S generation {c['sn-s']['full_generation_ms']:.3f} ms, SN-D run {c['sn-d']['full_run_s']:.3f} s")
-g = json.load(open(f"{out}/table_sn-s_gpu.json"))["results"]
-p = json.load(open(f"{out}/table_sn-s_cpu.json"))["results"]
-worst = 0.0
-for m in g:
-    for size in g[m]:
-        for metric in ("balanced_accuracy", "macro_f1"):
-            a, b = g[m][size][metric]["mean"], p[m][size][metric]["mean"]
-            worst = max(worst, abs(a - b))
-            print(f"SN-S 30-run table {m:10s} |D_Cal|={size} {metric:17s} GPU {a:.4f} CPU {b:.4f} diff {a - b:+.4f}")
-print(f"largest |GPU - CPU| of the table's means: {worst:.4f} ({'within' if worst <= 0.01 else 'OUTSIDE'} +-0.01)")
-EOF
+step "bench fusion, CPU path on this host (SN-S, with --load 1)" 60 "${TO_FILE[@]}" "$OUT_DIR/bench_cpu_sn-s.json" \
+  "${FL[@]}" bench fusion --arch sn-s --repeats 10 --full-runs 3 --json
+step "bench fusion, CPU path on this host (SN-D, one full run)" 90 "${TO_FILE[@]}" "$OUT_DIR/bench_cpu_sn-d.json" \
+  "${FL[@]}" bench fusion --arch sn-d --repeats 2 --full-runs 1 --load 0 --json
+"$PY" "$ROOT/scripts/gpu_check_report.py" "$OUT_DIR" | tee "$OUT_DIR/summary.txt"
 echo "gpu_check: done in $(( $(date +%s) - t_start )) s; files in $OUT_DIR"
+if [ ${#failed[@]} -gt 0 ]; then
+  printf 'gpu_check: failed: %s\n' "${failed[@]}" >&2
+  exit 1
+fi

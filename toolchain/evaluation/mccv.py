@@ -333,11 +333,14 @@ def _execute_dask(tasks: list, scheduler: str, ordered: bool, finished) -> list:
 def run_mccv(
     dataset: Dataset, settings: EvalSettings, n_jobs: int = 1, backend: str = "loky",
     scheduler: str | None = None, progress: bool = True, results_dir: Path | None = None, resume: bool = False,
+    batch_runs: bool | None = None,
 ) -> dict:
     """The whole evaluation; returns the JSON-ready result (see `summarise`).
 
     With `results_dir`, every finished job is written there as it finishes (see the module
-    docstring); with `resume`, the jobs already there are read back instead of run again."""
+    docstring); with `resume`, the jobs already there are read back instead of run again.
+    `batch_runs` (default: on a GPU) runs the methods that batch their runs in this process,
+    beside the other jobs."""
     dataset.check_roles()
     x, y = dataset.xy(TARGET)
     target = Target(x=x, y=y, groups=dataset.groups(TARGET))
@@ -370,7 +373,8 @@ def run_mccv(
 
     t1 = time.perf_counter()
     on_gpu = device != "cpu"
-    batched = [m for m in settings.all_methods if on_gpu and registry.get(m).fit_many is not None]
+    batch = on_gpu if batch_runs is None else batch_runs
+    batched = [m for m in settings.all_methods if batch and registry.get(m).fit_many is not None]
     call = joblib.delayed(run_job)
     tasks = [call(c, r, m, src, target, _on_cpu(settings) if on_gpu else settings)
              for c, r, m in todo if m not in batched]

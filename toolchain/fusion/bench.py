@@ -29,7 +29,8 @@ Figures (one JSON object with --json):
 
 With `--device cuda` it measures the accelerator path instead (fusion/lockstep.py):
 generation_ms (one run's generation: construction, fitness of every ant, updates, IWOA
-amortised), fitness_ms (one generation's fitness call alone), full_run_s, and the same with
+amortised; _eager: without the CUDA graph of the fitness), fitness_ms (one generation's fitness
+call alone; _cuda_graph: replayed, with cuda_graph_max_abs_diff against the call), full_run_s, and the same with
 `--batch-runs` runs in lockstep (batched_generation_ms for all of them, per_run_generation_ms),
 against the goals of issue 30 (SN-S generation ≤ 0.15 ms, SN-D run ≤ 0.5 s on an H100-class GPU).
 
@@ -73,7 +74,7 @@ from .acomerge import (
 from .buffer import make_buffer
 from .finetune import finetune
 from .fitness import CalibrationFitness
-from .lockstep import StackedFitness, device_label, resolve_device, search_lockstep
+from .lockstep import StackedFitness, device_label, graphed, resolve_device, search_lockstep
 
 TARGET_SPEEDUP = 50.0
 TARGET_FULL_RUN_S = 2.0
@@ -286,12 +287,12 @@ def measure_device(args) -> dict:
     config = AcoMergeConfig(n_ants=args.ants, generations=args.generations, device=str(device))
     sync = torch.cuda.synchronize if device.type == "cuda" else (lambda: None)
 
-    def timed_runs(n_runs: int, generations: int) -> float:
-        """Best wall seconds of a lockstep search of n_runs runs (different draws of the buffer seed)."""
+    def timed_runs(n_runs: int, generations: int, cuda_graph: bool = True) -> float:
+        """Best wall seconds of a lockstep search of n_runs runs (different seeds)."""
         cfg = replace(config, generations=generations)
         fitness = StackedFitness(args.arch, [(x, y)] * n_runs, device)
         go = lambda: search_lockstep([experts] * n_runs, [buffer] * n_runs, fitness, cfg,  # noqa: E731
-                                     [args.seed + r for r in range(n_runs)], device)
+                                     [args.seed + r for r in range(n_runs)], device, cuda_graph=cuda_graph)
         go()  # warm-up: kernels loaded, allocator primed
         sync()
         best = math.inf
@@ -303,24 +304,35 @@ def measure_device(args) -> dict:
         return best
 
     run_s = timed_runs(1, args.generations)
+    run_s_eager = timed_runs(1, args.generations, cuda_graph=False)
     batched_s = timed_runs(args.batch_runs, args.generations)
     fitness = StackedFitness(args.arch, [(x, y)], device)
     gen = torch.Generator(device=device).manual_seed(args.seed)
     ants = buffer.to(device)[torch.randint(0, buffer.shape[0], (1, args.ants), generator=gen, device=device)]
     ants = ants + 0.01 * torch.randn(ants.shape, generator=gen, device=device)
-    fitness(ants)
-    sync()
-    fit_best = math.inf
-    for _ in range(args.repeats):
-        t0 = time.perf_counter()
-        fitness(ants)
+    replayed = graphed(fitness, ants)
+    graph_diff = float((replayed(ants) - fitness(ants)).abs().max())
+
+    def best_call_s(fn) -> float:
+        fn(ants)
         sync()
-        fit_best = min(fit_best, time.perf_counter() - t0)
+        best = math.inf
+        for _ in range(args.repeats):
+            t0 = time.perf_counter()
+            fn(ants)
+            sync()
+            best = min(best, time.perf_counter() - t0)
+        return best
+
+    fit_best, fit_graph = best_call_s(fitness), best_call_s(replayed)
     gen_ms = 1e3 * run_s / args.generations
     out = {
         "arch": args.arch, "ants": args.ants, "generations": args.generations, "cal_size": int(len(y)),
         "calibration": source, "device": device_label(device),
-        "fitness_ms": round(1e3 * fit_best, 4), "generation_ms": round(gen_ms, 4), "full_run_s": round(run_s, 3),
+        "fitness_ms": round(1e3 * fit_best, 4), "fitness_ms_cuda_graph": round(1e3 * fit_graph, 4),
+        "cuda_graph_max_abs_diff": graph_diff,
+        "generation_ms": round(gen_ms, 4), "generation_ms_eager": round(1e3 * run_s_eager / args.generations, 4),
+        "full_run_s": round(run_s, 3), "full_run_s_eager": round(run_s_eager, 3),
         "batch_runs": args.batch_runs, "batched_generation_ms": round(1e3 * batched_s / args.generations, 4),
         "per_run_generation_ms": round(1e3 * batched_s / args.generations / args.batch_runs, 4),
         "batched_full_runs_s": round(batched_s, 3),
@@ -353,7 +365,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if device.type != "cpu":
         print(f"AcoMerge on {result['device']}: {result['arch']}, {result['ants']} ants, |D_Cal| = {result['cal_size']}")
-        for key, unit in (("fitness_ms", "ms"), ("generation_ms", "ms"), ("full_run_s", "s"),
+        for key, unit in (("fitness_ms", "ms"), ("fitness_ms_cuda_graph", "ms"), ("generation_ms", "ms"),
+                          ("generation_ms_eager", "ms"), ("full_run_s", "s"), ("full_run_s_eager", "s"),
                           ("batched_generation_ms", "ms"), ("per_run_generation_ms", "ms"), ("batched_full_runs_s", "s")):
             print(f"  {key:40s} {result[key]:10.4f} {unit}")
         print(f"  goals: {result['goals']}")

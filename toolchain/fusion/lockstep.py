@@ -30,6 +30,7 @@ from the same distributions; scores agree within the spread over MCCV runs (docs
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -136,8 +137,53 @@ class StackedFitness:
         r, p, t = flats.shape
         x = self.x.unsqueeze(1).expand(r, p, *self.x.shape[1:]).reshape(r * p, *self.x.shape[1:])
         logp = F.log_softmax(batched_logits(self.arch, flats.reshape(r * p, t), x), dim=-1)  # (R·P, N, C)
-        picked = logp.gather(-1, self.y.repeat_interleave(p, dim=0).unsqueeze(-1)).squeeze(-1)  # (R·P, N)
+        y = self.y.unsqueeze(1).expand(r, p, -1).reshape(r * p, -1, 1)
+        picked = logp.gather(-1, y).squeeze(-1)  # (R·P, N)
         return -(picked.view(r, p, -1) * self.w.unsqueeze(1)).sum(dim=-1)
+
+
+class GraphedFitness:
+    """A fitness replayed from one CUDA graph for inputs of one shape (every generation's ants).
+
+    Why: an SN-S fitness call is about twenty small kernels, and on a GPU launching them one by
+    one from Python costs more than running them. The graph launches all of them at once. The
+    fitness draws no random numbers, so a replay computes exactly what a call would (bench
+    fusion --device cuda reports the difference, 0 expected). Other shapes fall back to the call.
+    """
+
+    def __init__(self, fitness: Callable[[torch.Tensor], torch.Tensor], example: torch.Tensor):
+        self.fitness = fitness
+        self.static_in = example.clone()
+        side = torch.cuda.Stream(device=example.device)
+        side.wait_stream(torch.cuda.current_stream(example.device))
+        with torch.cuda.stream(side):
+            for _ in range(2):  # warm-up outside the graph: kernels chosen, workspaces allocated
+                fitness(self.static_in)
+        torch.cuda.current_stream(example.device).wait_stream(side)
+        self.graph = torch.cuda.CUDAGraph()
+        with torch.cuda.graph(self.graph):
+            self.static_out = fitness(self.static_in)
+
+    def __call__(self, flats: torch.Tensor) -> torch.Tensor:
+        if flats.shape != self.static_in.shape:
+            return self.fitness(flats)
+        self.static_in.copy_(flats)
+        self.graph.replay()
+        return self.static_out.clone()
+
+
+def graphed(fitness: Callable[[torch.Tensor], torch.Tensor], example: torch.Tensor
+            ) -> Callable[[torch.Tensor], torch.Tensor]:
+    """`fitness` as a CUDA graph on a GPU (see GraphedFitness); as it is elsewhere, or where the
+    capture fails (then with one warning on stderr)."""
+    if example.device.type != "cuda":
+        return fitness
+    try:
+        return GraphedFitness(fitness, example)
+    except RuntimeError as e:
+        print(f"warning: CUDA graph capture of the fitness failed ({str(e).splitlines()[0]}); running it eagerly",
+              file=sys.stderr)
+        return fitness
 
 
 def construct_ants_dense(
@@ -185,13 +231,15 @@ def search_lockstep(
     device: torch.device | str = "cpu",
     progress: bool = False,
     desc: str = "AcoMerge",
+    cuda_graph: bool = True,
 ) -> list[AcoMergeResult]:
     """R AcoMerge runs (MMAS + IWOA, or MMAS only) in lockstep on `device`.
 
     experts[r] (K, T) and cands[r] (M, T) are run r's experts and buffer (the same K, M and
     T for every run); `fitness` maps (R, P, T) to (R, P); run r's draws come from its own
     generator seeded with seeds[r] as in `acomerge.search`. The whole-model IWOA ablation is
-    not batched: it runs through `acomerge.search`.
+    not batched: it runs through `acomerge.search`. On a GPU the ants' fitness is replayed from
+    a CUDA graph (`cuda_graph`, see GraphedFitness).
     """
     config.validate()
     if "mmas" not in config.phases:
@@ -217,6 +265,8 @@ def search_lockstep(
     has_path = same.any(dim=1)
     best_path = same.to(torch.int8).argmax(dim=1, keepdim=True).expand(n_runs, n_t).clone()  # (R, T)
 
+    if cuda_graph:
+        fitness = graphed(fitness, torch.zeros(n_runs, cfg.n_ants, n_t, device=dev))
     pdec_factor = mmas_bounds(1.0, 1.0, m, n_t, cfg.p_best)[0]  # τ_min / τ_max, a constant of (M, T, p_best)
 
     def bounds(bf: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

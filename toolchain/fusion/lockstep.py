@@ -161,7 +161,7 @@ class GraphedFitness:
                 fitness(self.static_in)
         torch.cuda.current_stream(example.device).wait_stream(side)
         self.graph = torch.cuda.CUDAGraph()
-        with torch.cuda.graph(self.graph):
+        with torch.cuda.graph(self.graph, capture_error_mode="thread_local"):  # CPU jobs may run beside it
             self.static_out = fitness(self.static_in)
 
     def __call__(self, flats: torch.Tensor) -> torch.Tensor:

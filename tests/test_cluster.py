@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 
+from fleetlab.cli import main
 from fleetlab.data.dataset import load_dataset
 from fleetlab.evaluation.mccv import RUNS_DIR, EvalSettings, job_file, run_mccv, write_atomic
 from fleetlab.fusion.registry import Budget
@@ -91,7 +92,7 @@ def cluster(tmp_path):
                 p.send_signal(signal.SIGTERM)
         for p in procs:
             try:
-                p.wait(timeout=20)
+                p.wait(timeout=5)
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
@@ -143,11 +144,11 @@ def test_resume_after_a_kill_equals_an_uninterrupted_run(data, local, tmp_path):
     assert scores(result) == scores(local)
 
 
-def test_resume_refuses_other_settings_and_foreign_folders(data, tmp_path):
+def test_resume_refuses_other_settings_and_foreign_folders(data, tmp_path, capsys):
     (tmp_path / "empty").mkdir()
-    proc = _evaluate(data, "--resume", str(tmp_path / "empty"))
-    assert proc.wait(timeout=120) != 0 and "settings.json" in proc.stderr.read()
+    assert main(["evaluate", "--data", str(data), *CLI_ARGS, "--resume", str(tmp_path / "empty")]) != 0
+    assert "settings.json" in capsys.readouterr().err
     write_atomic(job_file(tmp_path / "other", 150, 0, "acomerge").parent / "settings.json", json.dumps({"runs": 99}))
-    proc = _evaluate(data, "--resume", str(tmp_path / "other"))
-    err = proc.stderr.read()
-    assert proc.wait(timeout=120) != 0 and "other settings" in err and "Traceback" not in err
+    assert main(["evaluate", "--data", str(data), *CLI_ARGS, "--resume", str(tmp_path / "other")]) != 0
+    err = capsys.readouterr().err
+    assert "other settings" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1

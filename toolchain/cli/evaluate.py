@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from ..evaluation.mccv import BACKENDS, EvalSettings, run_mccv
+from ..evaluation.mccv import BACKENDS, EvalSettings, run_mccv, write_atomic
 from ..evaluation.methods import parse_methods, selectable
 from ..fusion.registry import Budget
 from ..models.train import EXPERT_LR
@@ -93,12 +93,10 @@ def run(args: argparse.Namespace) -> int:
     table = markdown_table(result)
     text = json.dumps(result, indent=1)
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text)
+        write_atomic(args.json, text)
     if args.out:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "results.json").write_text(text)
-        (args.out / "table.md").write_text(table)
+        write_atomic(args.out / "results.json", text)
+        write_atomic(args.out / "table.md", table)
         written = write_plots(result, args.out)
         print(f"wrote {args.out / 'table.md'}, results.json and {len(written)} plots", file=sys.stderr)
     sys.stdout.write(table)

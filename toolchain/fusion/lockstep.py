@@ -281,8 +281,8 @@ def search_lockstep(
     with_iwoa = "iwoa" in cfg.phases
     n_outer = max(1, cfg.generations // cfg.iwoa_every)
     n_calls = 0
-    keys = ("best_so_far", "iteration_best", "iteration_mean", "tau_min", "tau_max", "tau_lowest", "tau_highest")
-    hist: dict[str, list[torch.Tensor]] = {k: [] for k in keys}
+    hist: dict[str, list[torch.Tensor]] = {k: [] for k in ("best_so_far", "iteration_best", "ants", "tau_lowest",
+                                                           "tau_highest")}
     q0s, iwoa_flags = [], []
     bar = tqdm(range(cfg.generations), desc=desc, disable=not progress, leave=False, unit="gen")
     for g in bar:
@@ -322,22 +322,25 @@ def search_lockstep(
             n_calls += 1
             if cfg.heuristic != "constant":
                 eta = _heuristic(cfg, cand_t, best_flat)
-        finite = torch.isfinite(j)
-        mean = torch.where(finite, j, torch.zeros_like(j)).sum(dim=1) / finite.sum(dim=1)
-        for key, value in (("best_so_far", best_fit), ("iteration_best", jb),
-                           ("iteration_mean", torch.where(finite.any(dim=1), mean, torch.full_like(mean, math.inf))),
-                           ("tau_min", tmin), ("tau_max", tmax), ("tau_lowest", tau.amin(dim=(1, 2))),
-                           ("tau_highest", tau.amax(dim=(1, 2)))):
+        # per generation only what is needed later; the statistics are computed once, after the run
+        for key, value in (("best_so_far", best_fit), ("iteration_best", jb), ("ants", j),
+                           ("tau_lowest", tau.amin(dim=(1, 2))), ("tau_highest", tau.amax(dim=(1, 2)))):
             hist[key].append(value)
         q0s.append(q0)
         iwoa_flags.append(did_iwoa)
     bar.close()
-    return _results(hist, q0s, iwoa_flags, best_flat, best_fit, best_gen, best_k, j_ex, cfg)
+    stacked = {k: torch.stack(v, dim=1) for k, v in hist.items()}  # (R, G), "ants" (R, G, P)
+    ants = stacked.pop("ants")
+    finite = torch.isfinite(ants)
+    mean = torch.where(finite, ants, torch.zeros_like(ants)).sum(dim=2) / finite.sum(dim=2)
+    stacked["iteration_mean"] = torch.where(finite.any(dim=2), mean, torch.full_like(mean, math.inf))
+    stacked["tau_min"], stacked["tau_max"] = bounds(stacked["best_so_far"])
+    return _results(stacked, q0s, iwoa_flags, best_flat, best_fit, best_gen, best_k, j_ex, cfg)
 
 
 def _results(hist, q0s, iwoa_flags, best_flat, best_fit, best_gen, best_k, j_ex, cfg) -> list[AcoMergeResult]:
     """Read everything back from the device once and split it per run."""
-    per_key = {k: torch.stack(v, dim=1).double().cpu().tolist() for k, v in hist.items()}  # (R, G) each
+    per_key = {k: v.double().cpu().tolist() for k, v in hist.items()}  # (R, G) each
     flat, fit = best_flat.cpu(), best_fit.double().cpu().tolist()
     gens, ks, jx = best_gen.cpu().tolist(), best_k.cpu().tolist(), j_ex.double().cpu().tolist()
     out = []

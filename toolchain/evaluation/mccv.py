@@ -317,7 +317,7 @@ def _execute_dask(tasks: list, scheduler: str, ordered: bool, finished) -> list:
         shared: dict[int, object] = {}
         for _, args, _ in tasks:
             for a in args:
-                if not isinstance(a, (int, float, str)) and id(a) not in shared:
+                if not isinstance(a, (int, float, str, type(None))) and id(a) not in shared:
                     shared[id(a)] = client.scatter(a, broadcast=True, hash=False)
         futures = [client.submit(fn, *[shared.get(id(a), a) for a in args], pure=False, retries=TASK_RETRIES, **kw)
                    for fn, args, kw in tasks]

@@ -158,10 +158,11 @@ static uint32_t segmented(const uint8_t *data, size_t len, int toggle_error)
 
 static void put_version(uint8_t *im, uint32_t v)
 {
-    im[34] = (uint8_t)v;
-    im[35] = (uint8_t)(v >> 8);
-    im[36] = (uint8_t)(v >> 16);
-    im[37] = (uint8_t)(v >> 24);
+    uint8_t *p = im + SLIPEST_IMAGE_OFF_MODEL_VERSION;
+    p[0] = (uint8_t)v;
+    p[1] = (uint8_t)(v >> 8);
+    p[2] = (uint8_t)(v >> 16);
+    p[3] = (uint8_t)(v >> 24);
 }
 
 static void fix_crc(uint8_t *im, size_t len)

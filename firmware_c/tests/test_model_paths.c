@@ -195,7 +195,7 @@ static void image_rejects(void)
 {
     slipest_image_q_storage_t qs;
     slipest_model_q_t mq;
-    uint16_t flags = (uint16_t)(img0[10] | (img0[11] << 8));
+    uint16_t flags = (uint16_t)(img0[SLIPEST_IMAGE_OFF_FLAGS] | (img0[SLIPEST_IMAGE_OFF_FLAGS + 1u] << 8));
     size_t f32_size = 4u + 4u * (NH * NI + 3u * NH + NO * NH + NO); /* ln_eps, w1, b1, gamma, beta, w2, b2 */
     CHECK(slipest_crc32(NULL, 4) == 0u);
     FRESH();
@@ -211,17 +211,17 @@ static void image_rejects(void)
     CHECK(read_img(SLIPEST_IMAGE_HEADER_SIZE, 0, 0) == SLIPEST_E_LENGTH);
     FRESH(); img[0] = 'X'; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT);
     FRESH(); img[4] = 2; CHECK(read_img(len0, 0, 0) == SLIPEST_E_VERSION);
-    FRESH(); img[6] = 2; CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH);
+    FRESH(); img[SLIPEST_IMAGE_OFF_ARCH] = 2; CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH);
     FRESH(); img[8] = 65; CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH);
-    FRESH(); img[10] |= 0x04u; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT); /* undefined flag */
-    FRESH(); img[10] |= 0x02u; CHECK(read_img(len0, 0, 0) == SLIPEST_E_LENGTH); /* HMAC flag, no tag */
+    FRESH(); img[SLIPEST_IMAGE_OFF_FLAGS] |= 0x04u; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT); /* undefined flag */
+    FRESH(); img[SLIPEST_IMAGE_OFF_FLAGS] |= SLIPEST_IMAGE_FLAG_HMAC; CHECK(read_img(len0, 0, 0) == SLIPEST_E_LENGTH); /* HMAC flag, no tag */
     FRESH(); img[50] = 1; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT);
     FRESH(); put_le32(img + 42, le32(img0 + 42) + 2u); CHECK(read_img(len0, 0, 0) == SLIPEST_E_LENGTH);
     FRESH(); CHECK(read_img(len0 - 1u, 0, 0) == SLIPEST_E_LENGTH);
     FRESH(); img[100] ^= 1u; CHECK(read_img(len0, 0, 0) == SLIPEST_E_CRC);
     FRESH(); CHECK(read_img(len0, le32(img0 + 38) ^ 1u, 0) == SLIPEST_E_HASH);
-    FRESH(); img[38] ^= 1u; reseal(img, len0); CHECK(read_img(len0, 0, 0) == SLIPEST_E_HASH); /* header vs trailer */
-    FRESH(); img[12] = NI - 1; reseal(img, len0); CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH); /* model check */
+    FRESH(); img[SLIPEST_IMAGE_OFF_HASH32] ^= 1u; reseal(img, len0); CHECK(read_img(len0, 0, 0) == SLIPEST_E_HASH); /* header vs trailer */
+    FRESH(); img[SLIPEST_IMAGE_OFF_N_IN] = NI - 1; reseal(img, len0); CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH); /* model check */
     if (flags & SLIPEST_IMAGE_FLAG_F32) {
 #ifndef SLIPEST_Q_ONLY
         size_t body = len0 - SLIPEST_IMAGE_TRAILER_SIZE, qlen = len0 - f32_size;
@@ -233,7 +233,7 @@ static void image_rejects(void)
         CHECK(read_img(len0, 0, 0) == SLIPEST_OK); /* the fixed-point model alone is fine */
         /* the same image without its float part: asking for the float model is a state error */
         FRESH();
-        img[10] = (uint8_t)(flags & ~SLIPEST_IMAGE_FLAG_F32);
+        img[SLIPEST_IMAGE_OFF_FLAGS] = (uint8_t)(flags & ~SLIPEST_IMAGE_FLAG_F32);
         put_le32(img + 42, le32(img0 + 42) - (uint32_t)f32_size);
         memmove(img + body - f32_size, img0 + body, SLIPEST_IMAGE_TRAILER_SIZE);
         reseal(img, qlen);

@@ -88,10 +88,10 @@ static size_t make_image(uint8_t *out, uint32_t v, const uint8_t *k)
 {
     size_t body = body_of(base_len), len = base_len;
     memcpy(out, base_img, base_len);
-    put_le32(out + 34, v);
+    put_le32(out + SLIPEST_IMAGE_OFF_MODEL_VERSION, v);
     if (k != NULL) {
         slipest_hmac_sha256_t h;
-        out[10] = (uint8_t)(out[10] | SLIPEST_IMAGE_FLAG_HMAC);
+        out[SLIPEST_IMAGE_OFF_FLAGS] = (uint8_t)(out[SLIPEST_IMAGE_OFF_FLAGS] | SLIPEST_IMAGE_FLAG_HMAC);
         recrc(out, len, body);
         slipest_hmac_sha256_init(&h, k, 32);
         slipest_hmac_sha256_update(&h, out, body);
@@ -223,7 +223,7 @@ static void test_version_rule_and_refusals(void)
     CHECK(upload(img, n) == SLIPEST_E_CRC && c->refused_crc == 1u);
 
     n = make_image(img, 11u, NULL);
-    img[6] = 2u; /* architecture id */
+    img[SLIPEST_IMAGE_OFF_ARCH] = 2u;
     recrc(img, n, body);
     CHECK(upload(img, n) == SLIPEST_E_ARCH && c->refused_arch == 1u);
 
@@ -233,7 +233,7 @@ static void test_version_rule_and_refusals(void)
     CHECK(upload(img, n) == SLIPEST_E_FORMAT && c->refused_format == 1u);
 
     n = make_image(img, 11u, NULL);
-    img[38] ^= 0xFFu; /* hash32 no longer the trailer's */
+    img[SLIPEST_IMAGE_OFF_HASH32] ^= 0xFFu; /* no longer the trailer's */
     recrc(img, n, body);
     CHECK(upload(img, n) == SLIPEST_E_HASH && c->refused_hash == 1u);
 
@@ -243,7 +243,7 @@ static void test_version_rule_and_refusals(void)
     CHECK(upload(img, n) == SLIPEST_E_RANGE && c->refused_range == 1u);
 
     n = make_image(img, 11u, NULL);
-    img[21] = 40u; /* fy: shift out of range */
+    img[SLIPEST_IMAGE_OFF_FY] = 40u; /* shift out of range */
     recrc(img, n, body);
     CHECK(upload(img, n) == SLIPEST_E_RANGE && c->refused_range == 2u);
 

@@ -54,6 +54,13 @@ def c_header() -> str:
         f"#define SLIPEST_CO_IDX_MODEL_IMAGE 0x{od.IDX_MODEL_IMAGE:04X}u",
         f"#define SLIPEST_CO_IDX_HEARTBEAT 0x1017u",
         "",
+        "/* EMCY error codes (CiA 301) the node sends */",
+    ]
+    lines += [f"#define SLIPEST_CO_EMCY_{n} 0x{c:04X}u /**< {doc} */" for n, c, doc in od.EMCY_CODES]
+    lines += ["/* SDO abort codes (CiA 301) the server sends */"]
+    lines += [f"#define SLIPEST_CO_ABORT_{n} 0x{c:08X}u /**< {doc} */" for n, c, doc in od.ABORT_CODES]
+    lines += [
+        "",
         "/* where a value lives (see canopen_od/objects.py) */",
     ]
     lines += [f"#define SLIPEST_CO_KIND_{k.upper()} {i}u" for i, k in enumerate(KINDS)]

@@ -47,6 +47,40 @@ IDX_SLOTS = 0x2004
 IDX_STORE_COUNTERS = 0x2005
 IDX_UPLOAD = 0x2006
 
+# SDO abort codes (CiA 301) the node's server sends or its master side names: (C name, code, meaning).
+# The one source of slipest_co_od.h's SLIPEST_CO_ABORT_* and of the host's names for them.
+ABORT_CODES = (
+    ("TOGGLE", 0x05030000, "toggle bit not alternated"),
+    ("TIMEOUT", 0x05040000, "SDO protocol timed out"),
+    ("COMMAND", 0x05040001, "command specifier not valid or unknown"),
+    ("SEQUENCE", 0x05040003, "invalid sequence number (block mode)"),
+    ("CRC", 0x05040004, "CRC error (block mode)"),
+    ("UNSUPPORTED", 0x06010000, "unsupported access to an object"),
+    ("WRITE_ONLY", 0x06010001, "attempt to read a write-only object"),
+    ("READ_ONLY", 0x06010002, "attempt to write a read-only object"),
+    ("NO_OBJECT", 0x06020000, "object does not exist"),
+    ("HARDWARE", 0x06060000, "access failed: hardware (NVM) error"),
+    ("LENGTH", 0x06070010, "length of the service parameter does not match"),
+    ("TOO_HIGH", 0x06070012, "length too high"),
+    ("TOO_LOW", 0x06070013, "length too low"),
+    ("NO_SUB", 0x06090011, "sub-index does not exist"),
+    ("VALUE", 0x06090030, "invalid value (a command other than 1)"),
+    ("GENERAL", 0x08000000, "general error"),
+    ("STORE", 0x08000020, "data cannot be stored: the image was refused"),
+    ("STATE", 0x08000022, "not in the present device state (no store, nothing to activate)"),
+    ("NO_DATA", 0x08000024, "no data available (the built-in model's sha256, no store)"),
+)
+# EMCY error codes (CiA 301) the node sends: (C name, code, meaning), the source of SLIPEST_CO_EMCY_*.
+EMCY_CODES = (
+    ("RESET", 0x0000, "error reset: the error register is clear again"),
+    ("HARDWARE", 0x5000, "an NVM callback failed"),
+    ("DATA_SET", 0x6300, "a model image was refused (byte 3: slipest status)"),
+    ("PDO_LENGTH", 0x8210, "an RPDO had the wrong length"),
+    ("NO_MODEL", 0xFF00, "device specific: no model to run (none built in, no valid slot)"),
+)
+ABORT = {name: code for name, code, _ in ABORT_CODES}
+EMCY = {name: code for name, code, _ in EMCY_CODES}
+
 COUNTERS = ("frames_received", "frames_rejected", "samples_dropped", "windows_flagged", "windows_done",
             "saturations", "rpdo_received", "sdo_aborts_sent", "sdo_aborts_received", "emcy_sent",
             "block_sequence_errors", "nmt_commands", "frames_ignored", "rpdo_no_model")

@@ -11,7 +11,7 @@ import pytest
 
 from fleetlab.cli import main
 from fleetlab.export.bundle import load_bundle
-from fleetlab.host_tools.verify.faults import faulty_image
+from fleetlab.host_tools.verify.upload_faults import faulty_image
 
 from test_canopen_node import EXAMPLE, bdir, new_bundle  # noqa: F401
 

@@ -12,11 +12,13 @@
 #include "slipest_dbc.h"
 #include "slipest_store.h"
 
+#include "ram_nvm.h"
+
 #define ID 5u
 #define SECTOR 256u
 
 static uint8_t mem[SLIPEST_STORE_NVM_SECTORS(SECTOR) * SECTOR];
-static int nvm_fail;
+static ram_nvm_t ram;
 static slipest_store_t store;
 static slipest_co_t co;
 static slipest_frame_t out[SLIPEST_CO_MAX_OUT];
@@ -24,27 +26,6 @@ static int n;
 static uint32_t now;
 static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
 static size_t img_len;
-
-static slipest_status_t m_read(void *c, uint32_t a, uint8_t *b, uint32_t l)
-{
-    (void)c;
-    memcpy(b, &mem[a], l);
-    return SLIPEST_OK;
-}
-static slipest_status_t m_write(void *c, uint32_t a, const uint8_t *b, uint32_t l)
-{
-    (void)c;
-    if (nvm_fail) return SLIPEST_E_NVM;
-    memcpy(&mem[a], b, l);
-    return SLIPEST_OK;
-}
-static slipest_status_t m_erase(void *c, uint32_t a)
-{
-    (void)c;
-    if (nvm_fail) return SLIPEST_E_NVM;
-    memset(&mem[a], 0xFF, SECTOR);
-    return SLIPEST_OK;
-}
 
 static void send(uint32_t id, uint8_t dlc, const uint8_t *d)
 {
@@ -315,7 +296,8 @@ static void test_telemetry_matches_handle(const slipest_model_q_t *mq)
 
 int main(void)
 {
-    slipest_nvm_t nvm = {m_read, m_write, m_erase, SECTOR, SLIPEST_STORE_NVM_SECTORS(SECTOR), NULL};
+    slipest_nvm_t nvm;
+    ram_nvm_init(&ram, mem, SECTOR, SLIPEST_STORE_NVM_SECTORS(SECTOR), &nvm);
     uint32_t code, v;
     uint8_t bad[SLIPEST_IMAGE_MAX_SIZE];
     FILE *fp = fopen(SLIPEST_TEST_IMAGE, "rb");
@@ -463,10 +445,10 @@ int main(void)
     CHECK(slipest_co_tick(&co, now + SLIPEST_CO_SDO_TIMEOUT_MS, out, 2u) >= 1);
     CHECK(out[0].data[0] == 0x80u || out[1].data[0] == 0x80u);
     /* NVM failure while opening an upload */
-    nvm_fail = 1;
+    ram.fail_all = 1;
     CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == SLIPEST_CO_ABORT_HARDWARE);
     CHECK(emcy_in_out(SLIPEST_CO_EMCY_HARDWARE));
-    nvm_fail = 0;
+    ram.fail_all = 0;
     /* a good version 4: block download, activate (error register cleared, EMCY reset), rollback, abort */
     CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == 0u);
     CHECK(wr(0x2002u, 1u, 1u, 1u) == 0u && emcy_in_out(SLIPEST_CO_EMCY_RESET));
@@ -520,7 +502,7 @@ int main(void)
         size_t off = 0;
         unsigned t = 0;
         sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
-        nvm_fail = 1;
+        ram.fail_all = 1;
         while (off < img_len && aborted() == 0u) {
             uint8_t d[8] = {0};
             d[0] = (uint8_t)(t << 4);
@@ -529,7 +511,7 @@ int main(void)
             t ^= 1u;
             off += 7u;
         }
-        nvm_fail = 0;
+        ram.fail_all = 0;
         CHECK(aborted() == SLIPEST_CO_ABORT_HARDWARE && off <= 2u * SECTOR);
     }
 

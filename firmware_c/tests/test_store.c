@@ -7,56 +7,13 @@
 #include "check.h"
 #include "slipest_image.h"
 #include "slipest_sha256.h"
+#include "ram_nvm.h"
 #include "slipest_store.h"
 
 #define SECTOR 128u
 #define N_SECT (SLIPEST_STORE_NVM_SECTORS(SECTOR))
 
-typedef struct {
-    uint8_t mem[N_SECT * SECTOR];
-    int fail_at;  /* fail the fail_at-th write/erase from now (1 = next); 0 = never */
-    int fail_reads;
-    int ops;
-} ram_nvm_t;
-
-static slipest_status_t r_read(void *ctx, uint32_t addr, uint8_t *buf, uint32_t len)
-{
-    ram_nvm_t *r = ctx;
-    if (r->fail_reads) return SLIPEST_E_NVM;
-    if (addr > sizeof r->mem || len > sizeof r->mem - addr) return SLIPEST_E_RANGE;
-    memcpy(buf, r->mem + addr, len);
-    return SLIPEST_OK;
-}
-
-static int r_fail(ram_nvm_t *r)
-{
-    r->ops++;
-    if (r->fail_at > 0 && --r->fail_at == 0) return 1;
-    return 0;
-}
-
-static slipest_status_t r_write(void *ctx, uint32_t addr, const uint8_t *buf, uint32_t len)
-{
-    ram_nvm_t *r = ctx;
-    uint32_t i;
-    if (len != SECTOR || addr % SECTOR != 0u || addr + len > sizeof r->mem) return SLIPEST_E_RANGE;
-    if (r_fail(r)) return SLIPEST_E_NVM;
-    for (i = 0; i < len; ++i) {
-        if (r->mem[addr + i] != 0xFFu) return SLIPEST_E_STATE; /* programming needs an erased sector */
-        r->mem[addr + i] = buf[i];
-    }
-    return SLIPEST_OK;
-}
-
-static slipest_status_t r_erase(void *ctx, uint32_t addr)
-{
-    ram_nvm_t *r = ctx;
-    if (addr % SECTOR != 0u || addr + SECTOR > sizeof r->mem) return SLIPEST_E_RANGE;
-    if (r_fail(r)) return SLIPEST_E_NVM;
-    memset(r->mem + addr, 0xFF, SECTOR);
-    return SLIPEST_OK;
-}
-
+static uint8_t mem[N_SECT * SECTOR];
 static ram_nvm_t ram;
 static slipest_nvm_t nvm;
 static slipest_store_t st;
@@ -133,9 +90,7 @@ static int reboot(const uint8_t *k)
 
 static void fresh(void)
 {
-    memset(&ram, 0xFF, sizeof ram.mem);
-    ram.fail_at = 0;
-    ram.fail_reads = 0;
+    ram_nvm_init(&ram, mem, SECTOR, N_SECT, &nvm);
 }
 
 static void test_boot_upload_activate_rollback(void)
@@ -309,6 +264,25 @@ static void test_hmac(void)
     }
 }
 
+/* the common strict RAM NVM refuses, as flash does, every write but one whole erased aligned sector */
+static void test_strict_nvm(void)
+{
+    static uint8_t sec[SECTOR];
+    slipest_nvm_t n;
+    ram_nvm_t r;
+    memset(sec, 0x5A, sizeof sec);
+    ram_nvm_init(&r, mem, SECTOR, N_SECT, &n);
+    CHECK(n.write(n.ctx, SECTOR, sec, SECTOR) == SLIPEST_OK);
+    CHECK(n.write(n.ctx, SECTOR, sec, SECTOR) == SLIPEST_E_STATE);           /* not erased */
+    CHECK(n.write(n.ctx, SECTOR + 1u, sec, SECTOR) == SLIPEST_E_RANGE);      /* unaligned */
+    CHECK(n.write(n.ctx, 2u * SECTOR, sec, SECTOR - 1u) == SLIPEST_E_RANGE); /* short */
+    CHECK(n.write(n.ctx, N_SECT * SECTOR, sec, SECTOR) == SLIPEST_E_RANGE);  /* out of range */
+    CHECK(n.erase(n.ctx, SECTOR + 1u) == SLIPEST_E_RANGE && n.erase(n.ctx, N_SECT * SECTOR) == SLIPEST_E_RANGE);
+    CHECK(n.read(n.ctx, N_SECT * SECTOR - 1u, sec, 2u) == SLIPEST_E_RANGE);
+    CHECK(r.refused == 7u && mem[SECTOR] == 0x5Au && mem[2u * SECTOR] == 0xFFu); /* nothing changed */
+    CHECK(n.erase(n.ctx, SECTOR) == SLIPEST_OK && n.write(n.ctx, SECTOR, sec, SECTOR) == SLIPEST_OK);
+}
+
 static void test_nvm_errors_and_torn_record(void)
 {
     static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
@@ -335,13 +309,13 @@ static void test_nvm_errors_and_torn_record(void)
     CHECK(slipest_store_active_version(&st) == 2u);
     /* tear the newest record (half of it left erased): the boot falls back to the older one */
     rec_sector = st.rec_sector;
-    memset(ram.mem + rec_sector * SECTOR + SLIPEST_STORE_RECORD_SIZE / 2u, 0xFF, SLIPEST_STORE_RECORD_SIZE / 2u);
+    memset(mem + rec_sector * SECTOR + SLIPEST_STORE_RECORD_SIZE / 2u, 0xFF, SLIPEST_STORE_RECORD_SIZE / 2u);
     CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_active_version(&st) == 1u);
     CHECK(slipest_store_counters(&st)->boot_fallbacks == 1u);
     /* a corrupted active slot: the boot falls back too, never to no model while one is valid */
-    ram.mem[(2u + SLIPEST_STORE_SLOT_SECTORS(SECTOR)) * SECTOR + 300u] ^= 1u; /* not the active slot */
+    mem[(2u + SLIPEST_STORE_SLOT_SECTORS(SECTOR)) * SECTOR + 300u] ^= 1u; /* not the active slot */
     CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_active_version(&st) == 1u);
-    ram.mem[2u * SECTOR + 300u] ^= 1u; /* the active slot 0 */
+    mem[2u * SECTOR + 300u] ^= 1u; /* the active slot 0 */
     CHECK(reboot(NULL) == SLIPEST_E_STATE && slipest_store_model_q(&st) == NULL);
     ram.fail_reads = 1;
     CHECK(reboot(NULL) == SLIPEST_E_NVM && slipest_store_model_q(&st) == NULL);
@@ -403,7 +377,7 @@ static void test_activation_load_failure_and_flush_error(void)
     CHECK(upload(img, n) == SLIPEST_OK && slipest_store_activate(&st) == SLIPEST_OK);
     n = make_image(img, 2u, NULL);
     CHECK(upload(img, n) == SLIPEST_OK);
-    ram.mem[(2u + SLIPEST_STORE_SLOT_SECTORS(SECTOR)) * SECTOR + 500u] ^= 0x01u; /* slot 1 changes */
+    mem[(2u + SLIPEST_STORE_SLOT_SECTORS(SECTOR)) * SECTOR + 500u] ^= 0x01u; /* slot 1 changes */
     CHECK(slipest_store_activate(&st) == SLIPEST_E_CRC);
     CHECK(slipest_store_active_version(&st) == 1u && slipest_store_active_slot(&st) == 0);
     CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_active_version(&st) == 1u);
@@ -467,16 +441,12 @@ int main(void)
     }
     base_len = fread(base_img, 1, sizeof base_img, fp);
     fclose(fp);
-    nvm.read = r_read;
-    nvm.write = r_write;
-    nvm.erase = r_erase;
-    nvm.sector_size = SECTOR;
-    nvm.n_sectors = N_SECT;
-    nvm.ctx = &ram;
+    ram_nvm_init(&ram, mem, SECTOR, N_SECT, &nvm);
     printf("sizeof(slipest_store_t) = %u bytes\n", (unsigned)sizeof(slipest_store_t));
     test_boot_upload_activate_rollback();
     test_version_rule_and_refusals();
     test_hmac();
+    test_strict_nvm();
     test_nvm_errors_and_torn_record();
     test_parameter_refusals();
     test_activation_load_failure_and_flush_error();

@@ -77,3 +77,26 @@ def test_signed_image_verifies_only_under_its_key() -> None:
         model_image.sign_image(unsigned, b"abc")
     with pytest.raises(ValueError, match="disagree"):
         model_image.read_image(signed[:-32])  # flag set, tag cut off
+
+
+def test_c_layout_header_is_generated_from_the_one_description() -> None:
+    """firmware_c/include/slipest_image_layout.h is what export/image_layout.py generates (run
+    `python -m fleetlab.export.image_layout c firmware_c/include/slipest_image_layout.h` after changing the
+    layout), the same text on every run, and its offsets are the Python writer's."""
+    text = image_layout.c_header()
+    assert text == image_layout.c_header()
+    assert image_layout.C_HEADER.read_text(encoding="utf-8") == text, "regenerate slipest_image_layout.h"
+    data = (EXAMPLE / "model.img").read_bytes()
+    off = image_layout.CURRENT.offsets
+    assert f"#define SLIPEST_IMAGE_OFF_FLAGS {off['flags']}u" in text and off["flags"] == 10
+    assert f"#define SLIPEST_IMAGE_TRAILER_SIZE {model_image.TRAILER_SIZE}u" in text
+    assert struct.unpack_from("<I", data, off["model_version"])[0] == model_image.read_image(data).model_version
+
+
+def test_patch_header_names_fields_and_reseals() -> None:
+    data = (EXAMPLE / "model.img").read_bytes()
+    patched = image_layout.patch_header(data, model_version=9)
+    assert model_image.read_image(patched).model_version == 9  # CRC resealed: every check passes
+    assert image_layout.patch_header(patched, model_version=1) == data
+    with pytest.raises(ValueError, match="no header field 'archh'"):
+        image_layout.patch_header(data, archh=2)

@@ -78,10 +78,5 @@ void ram_nvm_init(ram_nvm_t *r, uint8_t *mem, uint32_t sector, uint32_t n_sector
     r->ops = 0u;
     r->refused = 0u;
     memset(mem, 0xFF, r->size);
-    nvm->read = r_read;
-    nvm->write = r_write;
-    nvm->erase = r_erase;
-    nvm->sector_size = sector;
-    nvm->n_sectors = n_sectors;
-    nvm->ctx = r;
+    *nvm = (slipest_nvm_t){r_read, r_write, r_erase, sector, n_sectors, r};
 }

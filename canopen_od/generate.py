@@ -65,6 +65,15 @@ def c_header() -> str:
     ]
     lines += [f"#define SLIPEST_CO_KIND_{k.upper()} {i}u" for i, k in enumerate(KINDS)]
     lines += [f"#define SLIPEST_CO_CNT_{n.upper()} {i}u" for i, n in enumerate(od.COUNTERS)]
+    lines += ["/* the kinds' arguments (canopen_od/objects.py) */"]
+    lines += [f"#define SLIPEST_CO_MODEL_{n.upper()} {i}u" for i, n in enumerate(od.MODEL_ARGS)]
+    lines += [f"#define SLIPEST_CO_CMD_{n.upper()} {od.command_arg(n)}u" for n in od.COMMAND_ARGS]
+    lines += [f"#define SLIPEST_CO_UPLOAD_{n.upper()} {i}u" for i, n in enumerate(od.UPLOAD_ARGS)]
+    lines += [f"#define SLIPEST_CO_SLOT_{n.upper()} {i}u" for i, (n, _) in enumerate(od.SLOT_FIELDS)]
+    lines += [f"#define SLIPEST_CO_SLOT_SHIFT {od.SLOT_SHIFT}u",
+              f"#define SLIPEST_CO_SLOT_FIELD_MASK 0x{(1 << od.SLOT_SHIFT) - 1:X}u",
+              f"#define SLIPEST_CO_PDO_SHIFT {od.PDO_SHIFT}u",
+              f"#define SLIPEST_CO_PDO_OFFSET_MASK 0x{(1 << od.PDO_SHIFT) - 1:X}u"]
     lines += [
         "#define SLIPEST_CO_ACC_R 1u",
         "#define SLIPEST_CO_ACC_W 2u",

@@ -226,6 +226,7 @@ endif()
 # size matters more than speed outside the inference kernels (per-frame code, run at 150 Hz; the model
 # store, the image reader and the model checks run at boot and once per upload or activation)
 set_source_files_properties(${FW}/src/slipest_co.c ${FW}/src/slipest_co_sdo.c ${FW}/src/slipest_co_od_access.c
+    ${FW}/src/slipest_co_model.c
                             "${GEN}/slipest_co_od.c" PROPERTIES COMPILE_OPTIONS -Os)
 set_source_files_properties(${FW}/src/slipest_node.c ${FW}/src/slipest_slcan.c ${FW}/src/slipest_cobs.c
                             ${FW}/src/slipest_crc.c ${FW}/src/slipest_status.c ${FW}/src/slipest_features.c

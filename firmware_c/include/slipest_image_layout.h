@@ -8,6 +8,10 @@
 #ifndef SLIPEST_IMAGE_LAYOUT_H
 #define SLIPEST_IMAGE_LAYOUT_H
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /** Magic of a model image ("SLPM"). */
 #define SLIPEST_IMAGE_MAGIC "SLPM"
 /** Image format version this reader understands. */
@@ -91,5 +95,9 @@
 #define SLIPEST_IMAGE_Q_PAYLOAD 1566u
 /** Bytes of the float32 payload (flag F32): eps and the arrays. */
 #define SLIPEST_IMAGE_F32_PAYLOAD 2176u
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* SLIPEST_IMAGE_LAYOUT_H */

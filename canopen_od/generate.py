@@ -65,6 +65,14 @@ def c_header() -> str:
     ]
     lines += [f"#define SLIPEST_CO_KIND_{k.upper()} {i}u" for i, k in enumerate(KINDS)]
     lines += [f"#define SLIPEST_CO_CNT_{n.upper()} {i}u" for i, n in enumerate(od.COUNTERS)]
+    lines += [
+        "/* byte offsets of the counters the node reads out of the estimator's slipest_counters_t and the",
+        " * store's slipest_store_counters_t, in sub-index order (expanded where those types are known) */",
+        "#define SLIPEST_CO_ESTIMATOR_COUNTER_OFFSETS \\",
+        "    {" + ", ".join(f"offsetof(slipest_counters_t, {n})" for n in od.ESTIMATOR_COUNTERS) + "}",
+        "#define SLIPEST_CO_STORE_COUNTER_OFFSETS \\",
+        "    {" + ", ".join(f"offsetof(slipest_store_counters_t, {n})" for n in od.STORE_COUNTERS) + "}",
+    ]
     lines += ["/* the kinds' arguments (canopen_od/objects.py) */"]
     lines += [f"#define SLIPEST_CO_MODEL_{n.upper()} {i}u" for i, n in enumerate(od.MODEL_ARGS)]
     lines += [f"#define SLIPEST_CO_CMD_{n.upper()} {od.command_arg(n)}u" for n in od.COMMAND_ARGS]

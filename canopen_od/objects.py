@@ -94,9 +94,13 @@ def command_arg(name: str) -> int:
     return 1 + COMMAND_ARGS.index(name)
 
 
-COUNTERS = ("frames_received", "frames_rejected", "samples_dropped", "windows_flagged", "windows_done",
-            "saturations", "rpdo_received", "sdo_aborts_sent", "sdo_aborts_received", "emcy_sent",
+# the estimator's own counters (slipest_counters_t, in its field order: the C build checks the names
+# through offsetof, tests/test_canopen_od.py the order), then the CANopen node's
+ESTIMATOR_COUNTERS = ("frames_received", "frames_rejected", "samples_dropped", "windows_flagged", "windows_done",
+                      "saturations")
+COUNTERS = ESTIMATOR_COUNTERS + ("rpdo_received", "sdo_aborts_sent", "sdo_aborts_received", "emcy_sent",
             "block_sequence_errors", "nmt_commands", "frames_ignored", "rpdo_no_model")
+# slipest_store_counters_t's fields in the order 0x2005 lists them (any order: read through offsetof)
 STORE_COUNTERS = ("uploads_started", "uploads_aborted", "images_accepted", "refused_length", "refused_format",
                   "refused_arch", "refused_crc", "refused_hash", "refused_range", "refused_hmac", "refused_version",
                   "activations", "rollbacks", "nvm_errors", "boot_fallbacks")

@@ -18,6 +18,7 @@ from fleetlab.export import image_layout
 
 from .wire.dbc import Frame
 from .binding import CFrame
+from .status_codes import STATUS
 
 # slipest_nvm_t callbacks
 _READ = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32, ctypes.POINTER(ctypes.c_uint8), ctypes.c_uint32)
@@ -25,9 +26,7 @@ _WRITE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32, ctypes
                           ctypes.c_uint32)
 _ERASE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32)
 
-SLIPEST_OK = 0
-SLIPEST_E_NVM = -14
-SLIPEST_E_STATE = -10
+SLIPEST_OK, SLIPEST_E_NVM, SLIPEST_E_STATE = STATUS["SLIPEST_OK"], STATUS["SLIPEST_E_NVM"], STATUS["SLIPEST_E_STATE"]
 
 
 class CNvm(ctypes.Structure):

@@ -33,14 +33,8 @@ const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32
 /* 0x2005 sub n + 1: store counter n, in slipest_store_counters_t's field order (every field a uint32_t) */
 uint32_t slipest_co_counter(const slipest_co_t *co, unsigned n)
 {
-    /* counters 0..5 are the estimator's slipest_counters_t fields (every one a uint32_t) */
-    static const uint8_t at[SLIPEST_CO_CNT_SATURATIONS + 1u] = {
-        [SLIPEST_CO_CNT_FRAMES_RECEIVED] = offsetof(slipest_counters_t, frames_received),
-        [SLIPEST_CO_CNT_FRAMES_REJECTED] = offsetof(slipest_counters_t, frames_rejected),
-        [SLIPEST_CO_CNT_SAMPLES_DROPPED] = offsetof(slipest_counters_t, samples_dropped),
-        [SLIPEST_CO_CNT_WINDOWS_FLAGGED] = offsetof(slipest_counters_t, windows_flagged),
-        [SLIPEST_CO_CNT_WINDOWS_DONE] = offsetof(slipest_counters_t, windows_done),
-        [SLIPEST_CO_CNT_SATURATIONS] = offsetof(slipest_counters_t, saturations)};
+    /* the first counters are the estimator's slipest_counters_t fields (every one a uint32_t) */
+    static const uint8_t at[] = SLIPEST_CO_ESTIMATOR_COUNTER_OFFSETS;
     slipest_counters_t c;
     const uint8_t *bytes = (const uint8_t *)&c;
     uint32_t v;
@@ -53,15 +47,7 @@ uint32_t slipest_co_counter(const slipest_co_t *co, unsigned n)
 
 static uint32_t store_counter(const slipest_store_counters_t *c, unsigned n)
 {
-    static const uint8_t at[] = {
-        offsetof(slipest_store_counters_t, uploads_started), offsetof(slipest_store_counters_t, uploads_aborted),
-        offsetof(slipest_store_counters_t, images_accepted), offsetof(slipest_store_counters_t, refused_length),
-        offsetof(slipest_store_counters_t, refused_format),  offsetof(slipest_store_counters_t, refused_arch),
-        offsetof(slipest_store_counters_t, refused_crc),     offsetof(slipest_store_counters_t, refused_hash),
-        offsetof(slipest_store_counters_t, refused_range),   offsetof(slipest_store_counters_t, refused_hmac),
-        offsetof(slipest_store_counters_t, refused_version), offsetof(slipest_store_counters_t, activations),
-        offsetof(slipest_store_counters_t, rollbacks),       offsetof(slipest_store_counters_t, nvm_errors),
-        offsetof(slipest_store_counters_t, boot_fallbacks)};
+    static const uint8_t at[] = SLIPEST_CO_STORE_COUNTER_OFFSETS;
     const uint8_t *bytes = (const uint8_t *)c;
     uint32_t v = 0u;
     if (n < sizeof at) {

@@ -200,7 +200,7 @@ static void image_rejects(void)
     CHECK(slipest_crc32(NULL, 4) == 0u);
     FRESH();
     CHECK(read_img(len0, 0, 0) == SLIPEST_OK);
-    CHECK(read_img(len0, le32(img0 + 38), 0) == SLIPEST_OK);
+    CHECK(read_img(len0, le32(img0 + SLIPEST_IMAGE_OFF_HASH32), 0) == SLIPEST_OK);
     CHECK(slipest_image_read(NULL, len0, 0, &mq, &qs, NULL, NULL) == SLIPEST_E_NULL);
     CHECK(slipest_image_read(img, len0, 0, NULL, &qs, NULL, NULL) == SLIPEST_E_NULL);
     CHECK(slipest_image_read(img, len0, 0, &mq, NULL, NULL, NULL) == SLIPEST_E_NULL);
@@ -210,16 +210,16 @@ static void image_rejects(void)
     }
     CHECK(read_img(SLIPEST_IMAGE_HEADER_SIZE, 0, 0) == SLIPEST_E_LENGTH);
     FRESH(); img[0] = 'X'; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT);
-    FRESH(); img[4] = 2; CHECK(read_img(len0, 0, 0) == SLIPEST_E_VERSION);
+    FRESH(); img[SLIPEST_IMAGE_OFF_FORMAT] = 2; CHECK(read_img(len0, 0, 0) == SLIPEST_E_VERSION);
     FRESH(); img[SLIPEST_IMAGE_OFF_ARCH] = 2; CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH);
-    FRESH(); img[8] = 65; CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH);
+    FRESH(); img[SLIPEST_IMAGE_OFF_HEADER_SIZE] = 65; CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH);
     FRESH(); img[SLIPEST_IMAGE_OFF_FLAGS] |= 0x04u; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT); /* undefined flag */
     FRESH(); img[SLIPEST_IMAGE_OFF_FLAGS] |= SLIPEST_IMAGE_FLAG_HMAC; CHECK(read_img(len0, 0, 0) == SLIPEST_E_LENGTH); /* HMAC flag, no tag */
-    FRESH(); img[50] = 1; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT);
-    FRESH(); put_le32(img + 42, le32(img0 + 42) + 2u); CHECK(read_img(len0, 0, 0) == SLIPEST_E_LENGTH);
+    FRESH(); img[SLIPEST_IMAGE_OFF_RESERVED + 4u] = 1; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT);
+    FRESH(); put_le32(img + SLIPEST_IMAGE_OFF_PAYLOAD_SIZE, le32(img0 + SLIPEST_IMAGE_OFF_PAYLOAD_SIZE) + 2u); CHECK(read_img(len0, 0, 0) == SLIPEST_E_LENGTH);
     FRESH(); CHECK(read_img(len0 - 1u, 0, 0) == SLIPEST_E_LENGTH);
     FRESH(); img[100] ^= 1u; CHECK(read_img(len0, 0, 0) == SLIPEST_E_CRC);
-    FRESH(); CHECK(read_img(len0, le32(img0 + 38) ^ 1u, 0) == SLIPEST_E_HASH);
+    FRESH(); CHECK(read_img(len0, le32(img0 + SLIPEST_IMAGE_OFF_HASH32) ^ 1u, 0) == SLIPEST_E_HASH);
     FRESH(); img[SLIPEST_IMAGE_OFF_HASH32] ^= 1u; reseal(img, len0); CHECK(read_img(len0, 0, 0) == SLIPEST_E_HASH); /* header vs trailer */
     FRESH(); img[SLIPEST_IMAGE_OFF_N_IN] = NI - 1; reseal(img, len0); CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH); /* model check */
     if (flags & SLIPEST_IMAGE_FLAG_F32) {
@@ -234,7 +234,7 @@ static void image_rejects(void)
         /* the same image without its float part: asking for the float model is a state error */
         FRESH();
         img[SLIPEST_IMAGE_OFF_FLAGS] = (uint8_t)(flags & ~SLIPEST_IMAGE_FLAG_F32);
-        put_le32(img + 42, le32(img0 + 42) - (uint32_t)f32_size);
+        put_le32(img + SLIPEST_IMAGE_OFF_PAYLOAD_SIZE, le32(img0 + SLIPEST_IMAGE_OFF_PAYLOAD_SIZE) - (uint32_t)f32_size);
         memmove(img + body - f32_size, img0 + body, SLIPEST_IMAGE_TRAILER_SIZE);
         reseal(img, qlen);
         CHECK(read_img(qlen, 0, 0) == SLIPEST_OK);

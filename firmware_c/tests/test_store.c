@@ -358,7 +358,7 @@ static void test_parameter_refusals(void)
     recrc(img, n, body);
     CHECK(upload(img, n) == SLIPEST_E_NONFINITE && c->refused_range == 6u);
     n = make_image(img, 1u, NULL);
-    img[4] = 2u; /* image format version */
+    img[SLIPEST_IMAGE_OFF_FORMAT] = 2u;
     recrc(img, n, body);
     CHECK(upload(img, n) == SLIPEST_E_VERSION && c->refused_format == 1u);
     CHECK(slipest_store_model_q(&st) == NULL && c->images_accepted == 0u);

@@ -245,8 +245,9 @@ def c_header(layout: Layout = CURRENT) -> str:
     for prefix, arrays in (("Q", layout.q_arrays), ("F32", layout.f32_arrays)):
         for a in arrays:
             name = _C_NAMES.get(a.name, a.name).upper()
+            width = int(a.dtype[2:])
             lines.append(f"#define SLIPEST_IMAGE_{prefix}_{name}_N {a.count}u /**< {a.name}: elements */")
-            lines.append(f"#define SLIPEST_IMAGE_{prefix}_{name}_BYTES {int(a.dtype[2:])}u /**< {a.name}: bytes each */")
+            lines.append(f"#define SLIPEST_IMAGE_{prefix}_{name}_BYTES {width}u /**< {a.name}: bytes each */")
     lines += [
         "/** Bytes of the fixed-point payload. */",
         f"#define SLIPEST_IMAGE_Q_PAYLOAD {layout.q_payload_size}u",

@@ -15,7 +15,8 @@ import sys
 from fleetlab.assurance.sources import FW
 from fleetlab.assurance.stack import StackGraph, compile_graph
 
-CO_FILES = {p.name for p in (FW / "src").glob("slipest_co*.c") if p.stem == "slipest_co" or p.stem.startswith("slipest_co_")}
+CO_FILES = {p.name for p in (FW / "src").glob("slipest_co*.c")
+            if p.stem == "slipest_co" or p.stem.startswith("slipest_co_")}  # not slipest_cobs.c
 
 
 def co_file_cycles(graph: StackGraph) -> tuple[dict[str, set[str]], list[list[str]]]:

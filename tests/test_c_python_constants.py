@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import shutil
 import subprocess
-from pathlib import Path
 
 import pytest
 
@@ -52,8 +51,11 @@ def test_status_codes_are_the_headers(c_side) -> None:
 
 
 def test_abort_and_emcy_codes_agree(c_side) -> None:
-    assert {f"ABORT_{n}": c for n, c, _ in od.ABORT_CODES} == {k: v for k, v in c_side.items() if k.startswith("ABORT_")}
-    assert {f"EMCY_{n}": c for n, c, _ in od.EMCY_CODES} == {k: v for k, v in c_side.items() if k.startswith("EMCY_")}
+    def c_codes(prefix: str) -> dict[str, int]:
+        return {k: v for k, v in c_side.items() if k.startswith(prefix)}
+
+    assert {f"ABORT_{n}": c for n, c, _ in od.ABORT_CODES} == c_codes("ABORT_")
+    assert {f"EMCY_{n}": c for n, c, _ in od.EMCY_CODES} == c_codes("EMCY_")
 
 
 def test_counter_names_and_order_agree(c_side) -> None:

@@ -148,7 +148,7 @@ def test_nmt_heartbeat_and_sdo_reads(bdir, tmp_path, link):
         assert e.value.code == 0x06010002
         with pytest.raises(canopen.SdoAbortedError) as e:
             node.sdo[od.IDX_COMMAND][1].raw = 1  # nothing uploaded: nothing to activate
-        assert e.value.code == 0x08000022
+        assert e.value.code == od.ABORT["STATE"]
 
 
 @pytest.mark.parametrize("link", LINKS)
@@ -185,7 +185,7 @@ def test_block_download_activate_then_new_model_bit_exact(bdir, tmp_path, link, 
         # the same image again is not newer than the active one: refused, counted, EMCY
         with pytest.raises(canopen.SdoAbortedError) as e:
             m.upload(img, block=True)
-        assert e.value.code == 0x08000020
+        assert e.value.code == od.ABORT["STORE"]
         assert m.store_counters()["refused_version"] == 1
         assert wait_emcy(m.node, 0x6300)
 

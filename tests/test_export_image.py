@@ -26,8 +26,8 @@ def test_writer_reader_roundtrip() -> None:
     for name in ("w1", "b1", "gamma", "beta", "w2", "b2"):
         assert np.array_equal(getattr(img.fparams, name), getattr(b.fparams, name)), name
     assert img.scalars["fy"] == b.qparams.fy and img.scalars["eps_m"] == b.qparams.eps_m
-    # explicit little-endian: w1[0][0] sits at byte 64 low byte first, whatever the host's order
-    assert struct.unpack_from("<h", data, 64)[0] == int(b.qparams.w1[0, 0])
+    # explicit little-endian: w1[0][0] sits right after the header, low byte first, whatever the host's order
+    assert struct.unpack_from("<h", data, image_layout.CURRENT.header_size)[0] == int(b.qparams.w1[0, 0])
 
 
 def test_bundle_image_is_the_bundles_model() -> None:

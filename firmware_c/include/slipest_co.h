@@ -38,7 +38,7 @@ extern "C" {
 /** Output frames per call at most: 2 windows x 3 TPDOs, the model status TPDO, an EMCY, and
  *  one SDO response / heartbeat. */
 #define SLIPEST_CO_MAX_OUT 9u
-/** An SDO transfer with no frame for this long is aborted (0x05040000) by slipest_co_tick(). */
+/** An SDO transfer with no frame for this long is aborted (SLIPEST_CO_ABORT_TIMEOUT) by slipest_co_tick(). */
 #define SLIPEST_CO_SDO_TIMEOUT_MS 1000u
 /** Block size the SDO server asks for in a block download (segments per block, 1..127). */
 #define SLIPEST_CO_BLKSIZE 127u

@@ -242,12 +242,18 @@ def c_header(layout: Layout = CURRENT) -> str:
               for f in layout.trailer]
     lines += ["", "/* payload: the fixed-point arrays in order (element bytes, count), then with flag F32 the",
               " * float32 LayerNorm eps and the float32 arrays */"]
+    at = layout.header_size
     for prefix, arrays in (("Q", layout.q_arrays), ("F32", layout.f32_arrays)):
+        if prefix == "F32":
+            lines.append(f"#define SLIPEST_IMAGE_F32_AT {at}u /**< the float section (eps first), with flag F32 */")
+            at += 4
         for a in arrays:
             name = _C_NAMES.get(a.name, a.name).upper()
             width = int(a.dtype[2:])
-            lines.append(f"#define SLIPEST_IMAGE_{prefix}_{name}_N {a.count}u /**< {a.name}: elements */")
-            lines.append(f"#define SLIPEST_IMAGE_{prefix}_{name}_BYTES {width}u /**< {a.name}: bytes each */")
+            lines.append(f"#define SLIPEST_IMAGE_{prefix}_{name}_N {a.count}u /**< {name.lower()}: elements */")
+            lines.append(f"#define SLIPEST_IMAGE_{prefix}_{name}_BYTES {width}u /**< {name.lower()}: bytes each */")
+            lines.append(f"#define SLIPEST_IMAGE_{prefix}_{name}_AT {at}u /**< {name.lower()}: offset of element 0 */")
+            at += a.size
     lines += [
         "/** Bytes of the fixed-point payload. */",
         f"#define SLIPEST_IMAGE_Q_PAYLOAD {layout.q_payload_size}u",

@@ -65,32 +65,47 @@ extern "C" {
  * float32 LayerNorm eps and the float32 arrays */
 #define SLIPEST_IMAGE_Q_W1_N 360u /**< w1: elements */
 #define SLIPEST_IMAGE_Q_W1_BYTES 2u /**< w1: bytes each */
+#define SLIPEST_IMAGE_Q_W1_AT 64u /**< w1: offset of element 0 */
 #define SLIPEST_IMAGE_Q_B1_N 30u /**< b1: elements */
 #define SLIPEST_IMAGE_Q_B1_BYTES 4u /**< b1: bytes each */
-#define SLIPEST_IMAGE_Q_GAMMA_N 30u /**< g: elements */
-#define SLIPEST_IMAGE_Q_GAMMA_BYTES 2u /**< g: bytes each */
-#define SLIPEST_IMAGE_Q_BETA_N 30u /**< bb: elements */
-#define SLIPEST_IMAGE_Q_BETA_BYTES 4u /**< bb: bytes each */
+#define SLIPEST_IMAGE_Q_B1_AT 784u /**< b1: offset of element 0 */
+#define SLIPEST_IMAGE_Q_GAMMA_N 30u /**< gamma: elements */
+#define SLIPEST_IMAGE_Q_GAMMA_BYTES 2u /**< gamma: bytes each */
+#define SLIPEST_IMAGE_Q_GAMMA_AT 904u /**< gamma: offset of element 0 */
+#define SLIPEST_IMAGE_Q_BETA_N 30u /**< beta: elements */
+#define SLIPEST_IMAGE_Q_BETA_BYTES 4u /**< beta: bytes each */
+#define SLIPEST_IMAGE_Q_BETA_AT 964u /**< beta: offset of element 0 */
 #define SLIPEST_IMAGE_Q_W2_N 90u /**< w2: elements */
 #define SLIPEST_IMAGE_Q_W2_BYTES 2u /**< w2: bytes each */
+#define SLIPEST_IMAGE_Q_W2_AT 1084u /**< w2: offset of element 0 */
 #define SLIPEST_IMAGE_Q_B2_N 3u /**< b2: elements */
 #define SLIPEST_IMAGE_Q_B2_BYTES 4u /**< b2: bytes each */
+#define SLIPEST_IMAGE_Q_B2_AT 1264u /**< b2: offset of element 0 */
 #define SLIPEST_IMAGE_Q_GELU_N 129u /**< gelu: elements */
 #define SLIPEST_IMAGE_Q_GELU_BYTES 2u /**< gelu: bytes each */
+#define SLIPEST_IMAGE_Q_GELU_AT 1276u /**< gelu: offset of element 0 */
 #define SLIPEST_IMAGE_Q_RSQRT_SEED_N 24u /**< rsqrt_seed: elements */
 #define SLIPEST_IMAGE_Q_RSQRT_SEED_BYTES 4u /**< rsqrt_seed: bytes each */
+#define SLIPEST_IMAGE_Q_RSQRT_SEED_AT 1534u /**< rsqrt_seed: offset of element 0 */
+#define SLIPEST_IMAGE_F32_AT 1630u /**< the float section (eps first), with flag F32 */
 #define SLIPEST_IMAGE_F32_W1_N 360u /**< w1: elements */
 #define SLIPEST_IMAGE_F32_W1_BYTES 4u /**< w1: bytes each */
+#define SLIPEST_IMAGE_F32_W1_AT 1634u /**< w1: offset of element 0 */
 #define SLIPEST_IMAGE_F32_B1_N 30u /**< b1: elements */
 #define SLIPEST_IMAGE_F32_B1_BYTES 4u /**< b1: bytes each */
+#define SLIPEST_IMAGE_F32_B1_AT 3074u /**< b1: offset of element 0 */
 #define SLIPEST_IMAGE_F32_GAMMA_N 30u /**< gamma: elements */
 #define SLIPEST_IMAGE_F32_GAMMA_BYTES 4u /**< gamma: bytes each */
+#define SLIPEST_IMAGE_F32_GAMMA_AT 3194u /**< gamma: offset of element 0 */
 #define SLIPEST_IMAGE_F32_BETA_N 30u /**< beta: elements */
 #define SLIPEST_IMAGE_F32_BETA_BYTES 4u /**< beta: bytes each */
+#define SLIPEST_IMAGE_F32_BETA_AT 3314u /**< beta: offset of element 0 */
 #define SLIPEST_IMAGE_F32_W2_N 90u /**< w2: elements */
 #define SLIPEST_IMAGE_F32_W2_BYTES 4u /**< w2: bytes each */
+#define SLIPEST_IMAGE_F32_W2_AT 3434u /**< w2: offset of element 0 */
 #define SLIPEST_IMAGE_F32_B2_N 3u /**< b2: elements */
 #define SLIPEST_IMAGE_F32_B2_BYTES 4u /**< b2: bytes each */
+#define SLIPEST_IMAGE_F32_B2_AT 3794u /**< b2: offset of element 0 */
 /** Bytes of the fixed-point payload. */
 #define SLIPEST_IMAGE_Q_PAYLOAD 1566u
 /** Bytes of the float32 payload (flag F32): eps and the arrays. */

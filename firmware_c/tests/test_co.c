@@ -12,6 +12,7 @@
 #include "slipest_dbc.h"
 #include "slipest_store.h"
 
+#include "image_edit.h"
 #include "ram_nvm.h"
 
 #define ID 5u
@@ -139,22 +140,9 @@ static uint32_t segmented(const uint8_t *data, size_t len, int toggle_error)
 
 static void put_version(uint8_t *im, uint32_t v)
 {
-    uint8_t *p = im + SLIPEST_IMAGE_OFF_MODEL_VERSION;
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    p[2] = (uint8_t)(v >> 16);
-    p[3] = (uint8_t)(v >> 24);
+    image_edit_put_le32(im + SLIPEST_IMAGE_OFF_MODEL_VERSION, v);
 }
 
-static void fix_crc(uint8_t *im, size_t len)
-{
-    uint32_t c = slipest_crc32(im, len - SLIPEST_IMAGE_TRAILER_SIZE);
-    uint8_t *p = im + len - SLIPEST_IMAGE_TRAILER_SIZE;
-    p[0] = (uint8_t)c;
-    p[1] = (uint8_t)(c >> 8);
-    p[2] = (uint8_t)(c >> 16);
-    p[3] = (uint8_t)(c >> 24);
-}
 
 static int emcy_in_out(uint16_t code)
 {
@@ -306,7 +294,7 @@ int main(void)
     img_len = fread(img, 1, sizeof img, fp);
     fclose(fp);
     put_version(img, 3u); /* newer than the built-in model */
-    fix_crc(img, img_len);
+    image_edit_reseal(img, img_len - SLIPEST_IMAGE_TRAILER_SIZE);
     memset(mem, 0xFF, sizeof mem);
     CHECK(slipest_store_open(&store, &nvm, NULL) == SLIPEST_E_STATE);
 
@@ -435,7 +423,7 @@ int main(void)
     bad[100] ^= 1u; /* after the CRC was computed */
     CHECK(segmented(bad, img_len, 0) == SLIPEST_CO_ABORT_STORE);
     CHECK(slipest_store_counters(&store)->refused_crc == 1u);
-    fix_crc(bad, img_len);
+    image_edit_reseal(bad, img_len - SLIPEST_IMAGE_TRAILER_SIZE);
     CHECK(segmented(bad, img_len, 1) == SLIPEST_CO_ABORT_TOGGLE);
     sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
     sdo8(0x80u, 0x2000u, 0u, 0x08000000u); /* the client aborts */
@@ -456,7 +444,7 @@ int main(void)
     CHECK(wr(0x2002u, 2u, 1u, 1u) == 0u && rd(0x2001u, 1u, &code) == 3u);
     CHECK(block(img, img_len, (uint32_t)img_len, 0u, 0) == SLIPEST_CO_ABORT_STORE); /* 3 is active: stale */
     put_version(bad, 5u);
-    fix_crc(bad, img_len);
+    image_edit_reseal(bad, img_len - SLIPEST_IMAGE_TRAILER_SIZE);
     CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == 0u);
     CHECK(wr(0x2002u, 3u, 1u, 1u) == 0u); /* abandon the validated upload */
     CHECK((rd(0x2006u, 1u, &code) & 0xFFu) == 0u && wr(0x2002u, 1u, 1u, 1u) == SLIPEST_CO_ABORT_STATE);
@@ -478,7 +466,7 @@ int main(void)
         CHECK(aborted() == SLIPEST_CO_ABORT_TOO_HIGH && k == 16u);
     }
     put_version(bad, 6u);
-    fix_crc(bad, img_len);
+    image_edit_reseal(bad, img_len - SLIPEST_IMAGE_TRAILER_SIZE);
     {
         /* a whole image, then an end request with the wrong count of unused bytes, then a bad command */
         size_t off = 0;

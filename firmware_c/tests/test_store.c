@@ -7,6 +7,7 @@
 #include "check.h"
 #include "slipest_image.h"
 #include "slipest_sha256.h"
+#include "image_edit.h"
 #include "ram_nvm.h"
 #include "slipest_store.h"
 
@@ -23,39 +24,25 @@ static const uint8_t key[32] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 1
                                 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32};
 static const uint8_t other_key[32] = {9};
 
-static void put_le32(uint8_t *p, uint32_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    p[2] = (uint8_t)(v >> 16);
-    p[3] = (uint8_t)(v >> 24);
-}
-
 /* body length of an image without a tag */
 static size_t body_of(size_t len) { return len - SLIPEST_IMAGE_TRAILER_SIZE; }
-
-static void recrc(uint8_t *img, size_t len, size_t body)
-{
-    (void)len;
-    put_le32(img + body, slipest_crc32(img, body));
-}
 
 /* a copy of the base image with model version v (valid CRC), optionally signed with k */
 static size_t make_image(uint8_t *out, uint32_t v, const uint8_t *k)
 {
     size_t body = body_of(base_len), len = base_len;
     memcpy(out, base_img, base_len);
-    put_le32(out + SLIPEST_IMAGE_OFF_MODEL_VERSION, v);
+    image_edit_put_le32(out + SLIPEST_IMAGE_OFF_MODEL_VERSION, v);
     if (k != NULL) {
         slipest_hmac_sha256_t h;
         out[SLIPEST_IMAGE_OFF_FLAGS] = (uint8_t)(out[SLIPEST_IMAGE_OFF_FLAGS] | SLIPEST_IMAGE_FLAG_HMAC);
-        recrc(out, len, body);
+        image_edit_reseal(out, body);
         slipest_hmac_sha256_init(&h, k, 32);
         slipest_hmac_sha256_update(&h, out, body);
         slipest_hmac_sha256_final(&h, out + len);
         return len + SLIPEST_IMAGE_HMAC_SIZE;
     }
-    recrc(out, len, body);
+    image_edit_reseal(out, body);
     return len;
 }
 
@@ -119,7 +106,7 @@ static void test_boot_upload_activate_rollback(void)
     CHECK(memcmp(slipest_store_model_q(&st)->rsqrt_seed, qs.rsqrt_seed, sizeof qs.rsqrt_seed) == 0);
     CHECK(slipest_store_active_hash32(&st) == mq.hash32 && slipest_store_model_q(&st)->c30 == mq.c30);
     CHECK(slipest_model_q_check(slipest_store_model_q(&st)) == SLIPEST_OK);
-    CHECK(memcmp(slipest_store_active_sha256(&st), img + body_of(n) + 4, 32) == 0);
+    CHECK(memcmp(slipest_store_active_sha256(&st), img + body_of(n) + SLIPEST_IMAGE_TRAILER_OFF_SHA256, 32) == 0);
 #ifndef SLIPEST_Q_ONLY
     CHECK(slipest_store_model_f32(&st) != NULL && slipest_model_f32_check(slipest_store_model_f32(&st)) == SLIPEST_OK);
 #endif
@@ -179,27 +166,27 @@ static void test_version_rule_and_refusals(void)
 
     n = make_image(img, 11u, NULL);
     img[SLIPEST_IMAGE_OFF_ARCH] = 2u;
-    recrc(img, n, body);
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_ARCH && c->refused_arch == 1u);
 
     n = make_image(img, 11u, NULL);
     img[0] = 'X';
-    recrc(img, n, body);
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_FORMAT && c->refused_format == 1u);
 
     n = make_image(img, 11u, NULL);
     img[SLIPEST_IMAGE_OFF_HASH32] ^= 0xFFu; /* no longer the trailer's */
-    recrc(img, n, body);
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_HASH && c->refused_hash == 1u);
 
     n = make_image(img, 11u, NULL);
-    put_le32(img + 64 + 720 + 120 + 60 + 120 + 180, 0x7FFFFFFFu); /* b2[0]: head accumulator bound */
-    recrc(img, n, body);
+    image_edit_put_le32(img + SLIPEST_IMAGE_Q_B2_AT, 0x7FFFFFFFu); /* b2[0]: head accumulator bound */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_RANGE && c->refused_range == 1u);
 
     n = make_image(img, 11u, NULL);
     img[SLIPEST_IMAGE_OFF_FY] = 40u; /* shift out of range */
-    recrc(img, n, body);
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_RANGE && c->refused_range == 2u);
 
     n = make_image(img, 11u, NULL);
@@ -328,38 +315,39 @@ static void test_parameter_refusals(void)
     static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
     const slipest_store_counters_t *c;
     size_t n, body;
-    const size_t b1 = 64u + 720u, beta = b1 + 120u + 60u, rsqrt = 64u + 1566u - 96u, f32 = 64u + 1566u;
+    const size_t b1 = SLIPEST_IMAGE_Q_B1_AT, beta = SLIPEST_IMAGE_Q_BETA_AT, rsqrt = SLIPEST_IMAGE_Q_RSQRT_SEED_AT,
+                 f32 = SLIPEST_IMAGE_F32_AT;
     fresh();
     (void)reboot(NULL);
     c = slipest_store_counters(&st);
     n = make_image(img, 1u, NULL);
     body = body_of(n);
-    put_le32(img + b1, 0x7FFFFFFFu); /* b1[0]: layer-1 accumulator bound */
-    recrc(img, n, body);
+    image_edit_put_le32(img + b1, 0x7FFFFFFFu); /* b1[0]: layer-1 accumulator bound */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_RANGE);
     n = make_image(img, 1u, NULL);
-    put_le32(img + beta, 40000u); /* beta[0] outside int16 */
-    recrc(img, n, body);
+    image_edit_put_le32(img + beta, 40000u); /* beta[0] outside int16 */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_RANGE);
     n = make_image(img, 1u, NULL);
-    put_le32(img + rsqrt, 0x80000001u); /* a seed above 2^31 */
-    recrc(img, n, body);
+    image_edit_put_le32(img + rsqrt, 0x80000001u); /* a seed above 2^31 */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_RANGE);
     n = make_image(img, 1u, NULL);
-    put_le32(img + 30, 1u); /* eps_cap */
-    recrc(img, n, body);
+    image_edit_put_le32(img + SLIPEST_IMAGE_OFF_EPS_CAP, 1u);
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_RANGE && c->refused_range == 4u);
     n = make_image(img, 1u, NULL);
-    put_le32(img + f32 + 8u, 0x7FC00000u); /* a NaN float weight */
-    recrc(img, n, body);
+    image_edit_put_le32(img + f32 + 8u, 0x7FC00000u); /* a NaN float weight */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_NONFINITE && c->refused_range == 5u);
     n = make_image(img, 1u, NULL);
-    put_le32(img + f32, 0u); /* ln_eps = 0 */
-    recrc(img, n, body);
+    image_edit_put_le32(img + f32, 0u); /* ln_eps = 0 */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_NONFINITE && c->refused_range == 6u);
     n = make_image(img, 1u, NULL);
     img[SLIPEST_IMAGE_OFF_FORMAT] = 2u;
-    recrc(img, n, body);
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_VERSION && c->refused_format == 1u);
     CHECK(slipest_store_model_q(&st) == NULL && c->images_accepted == 0u);
 }

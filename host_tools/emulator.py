@@ -20,7 +20,7 @@ import threading
 import time
 from pathlib import Path
 
-from ..paths import build_root, default_bundle, repo_root
+from fleetlab.paths import build_root, default_bundle, repo_root
 from .wire.dbc import DBC_PATH, dbc_path
 from .firmware.build import build_command, configure_command
 

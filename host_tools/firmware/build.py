@@ -13,7 +13,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from ...paths import repo_root
+from fleetlab.paths import repo_root
 
 REPO = repo_root()
 from .targets import Target, get

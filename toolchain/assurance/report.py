@@ -6,7 +6,6 @@ findings, a finding of clang-tidy / gcc -fanalyzer / the strict warnings, recurs
 """
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import re
@@ -14,23 +13,13 @@ import sys
 import time
 from pathlib import Path
 
-from ..host_tools.firmware import targets as target_registry
-from ..host_tools.firmware.bench import target_costs
-from ..host_tools.firmware.build import cmake_build
+from fleetlab.host_tools.firmware import targets as target_registry
+from fleetlab.host_tools.firmware.measure import target_costs
+from fleetlab.host_tools.firmware.build import cmake_build
 from . import analysers, coverage, misra, stack, wcet
-from .sources import EXAMPLE_BUNDLE, REPO, run, tool_version
+from .sources import REPO, run, tool_version
 
 DEFAULT_FUZZ_STATS = [REPO / "build" / "fuzz-long" / "fuzz-stats.json", REPO / "build" / "fuzz" / "fuzz-stats.json"]
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--bundle", type=Path, default=EXAMPLE_BUNDLE, help="export bundle (default: the example bundle)")
-    p.add_argument("--out", type=Path, required=True, help="directory for assurance.md / assurance.html")
-    p.add_argument("--fuzz-stats", type=Path, default=None,
-                   help="fuzz-stats.json of the last campaign (default: build/fuzz-long, else build/fuzz)")
-    p.add_argument("--no-eva", action="store_true", help="skip Frama-C EVA")
-    p.add_argument("--no-target", action="store_true",
-                   help="skip the Cortex-M3/M4 builds (float-free archive check, measured stack and cost)")
 
 
 def _section(title: str, body: str) -> str:
@@ -73,10 +62,11 @@ def float_free(build_m3: Path, description: str) -> tuple[bool, str]:
     return ok, body
 
 
-def assure(args: argparse.Namespace) -> int:
-    out: Path = args.out
+def assure(bundle: Path, out: Path, *, fuzz_stats: Path | None = None, eva: bool = True, target: bool = True) -> int:
+    """Run every check on `bundle`, write OUT/assurance.md and .html; 1 when a gating check fails.
+    `eva=False` skips Frama-C EVA, `target=False` the cross builds (float-free archive, measured cost)."""
     out.mkdir(parents=True, exist_ok=True)
-    bundle = args.bundle.resolve()
+    bundle = bundle.resolve()
     t_start = time.perf_counter()
     sections, summary, gating_ok = [], [], True
 
@@ -91,7 +81,7 @@ def assure(args: argparse.Namespace) -> int:
 
     # target builds: float-free archive, measured stack and cost
     measured = {}
-    if not args.no_target:
+    if target:
         work = REPO / "build" / "assure"
         soft = soft_float_target()
         cmake_build(work / soft.name, bundle, target=soft)
@@ -126,7 +116,7 @@ def assure(args: argparse.Namespace) -> int:
         summary_row(r.name, f"{len(r.findings)} findings", r.clean)
         details += [f"- {f}" for f in r.findings]
     eva_text = "Frama-C EVA skipped (--no-eva)."
-    if not args.no_eva:
+    if eva:
         eva = analysers.frama_c_eva(bundle)
         eva_rows = ["| EVA entry (all int16 inputs) | Alarms | Seconds |", "|---|---:|---:|"]
         alarm_rows = [f"- {e.entry}: `{a}`" for e in eva for a in e.alarms]
@@ -174,7 +164,7 @@ def assure(args: argparse.Namespace) -> int:
                                  "Worst case: the maximum MEASURED over the bundle vectors and over inputs built to "
                                  "reach the long paths (cases in `firmware_c/target/wcet_target.c`), each case timed "
                                  "over repeated identical calls; a measured maximum, not a static bound. Command: "
-                                 "`python -m fleetlab.assurance.wcet`.\n\n" + wcet.table(wc) +
+                                 "`fleetlab assure wcet`.\n\n" + wcet.table(wc) +
                                  f"\n\nAverage over the bench loop of the vectors (fleetlab bench c): slipest_infer_q "
                                  f"{measured['q']:.0f} instructions per inference; SLCAN parsing + slipest_node_handle "
                                  f"{measured['node_instructions_per_sample']:.0f} instructions per telemetry sample (3 frames)."))
@@ -189,7 +179,7 @@ def assure(args: argparse.Namespace) -> int:
                              + coverage.table(cov)))
 
     # fuzzing
-    stats_file = args.fuzz_stats or next((p for p in DEFAULT_FUZZ_STATS if p.exists()), None)
+    stats_file = fuzz_stats or next((p for p in DEFAULT_FUZZ_STATS if p.exists()), None)
     if stats_file and stats_file.exists():
         st = json.loads(stats_file.read_text())
         # a long-mode file merges campaigns of several dates: each target carries its own date, clean flag and

@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ..host_tools.firmware.build import Result, execute
+from fleetlab.host_tools.firmware.build import Result, execute
 from ..paths import default_bundle, repo_root
 
 REPO = repo_root()

@@ -465,6 +465,18 @@ class QNet:
     def logit_scale(self) -> float:
         return self.s_out * 2.0 ** self.blocks[-1].fy
 
+    def scalars(self) -> dict:
+        """Every scalar of the scheme of this network (manifest.json `quantization`, the content hash)."""
+        return {
+            "scheme": SCHEME, "n_in": N_FEATURES, "hidden": list(self.hidden), "n_out": N_CLASSES,
+            "blocks": [b.scalars() for b in self.blocks],
+            "head_w_max": int(np.abs(self.w_out).max(initial=0)),
+            "head_acc_bound": int(row_bounds(self.w_out, self.b_out).max(initial=0)),
+            "eps_cap": EPS_CAP, "gelu_step_log2": GELU_STEP_LOG2, "gelu_n": GELU_N, "rsqrt_seed_bits": RSQRT_SEED_BITS,
+            "s_out": float(self.s_out), "logit_scale": float(self.logit_scale),
+            "feature_lsb": [float(v) for v in FEATURE_LSB],
+        }
+
     def check_bounds(self) -> None:
         """The preconditions of the overflow proof of every block; raise ValueError if broken."""
         problems = []

@@ -123,6 +123,7 @@ def export_bundle(
         tqdm.write(f"{arch}: no {model_image.IMAGE_FILE} (model image format {model_image.FORMAT_VERSION} carries "
                    "SN-S only); the C headers build this model into the library (-DSLIPEST_BUNDLE=)")
         steps.update()
+    if not onnx_only:
         v = vectors.make_vectors(model, qp, inputs)
         names += [p.name for p in vectors.write_vectors(out, v)]
         onnx_diff = onnx_export.check_onnx(out / ONNX_FILE, v.inputs, v.torch_logits)

@@ -41,6 +41,11 @@ extern "C" {
 #ifndef SLIPEST_MAX_WIDTH
 #define SLIPEST_MAX_WIDTH 256
 #endif
+/** 1: the kernels serve layer-table models; 0: SN-S only (a table model is refused with SLIPEST_E_ARCH,
+ *  and the library is as small as before the table). CMake sets it from the bundle (SLIPEST_LAYER_TABLE). */
+#ifndef SLIPEST_LAYER_TABLE
+#define SLIPEST_LAYER_TABLE 1
+#endif
 #if SLIPEST_MAX_LAYERS < 1 || SLIPEST_MAX_LAYERS > 4 || SLIPEST_MAX_WIDTH < 2 || SLIPEST_MAX_WIDTH > 256
 #error "SLIPEST_MAX_LAYERS must be 1..4 and SLIPEST_MAX_WIDTH 2..256 (the fixed-point scheme's caps)"
 #endif

@@ -23,6 +23,7 @@ static int all_finite(const float *p, int n)
     return 1;
 }
 
+#if SLIPEST_LAYER_TABLE
 /* the layer table of a float model: pointers, widths within the build's cap, finite parameters */
 static slipest_status_t layers_f32_check(const slipest_model_f32_t *m)
 {
@@ -54,10 +55,16 @@ static slipest_status_t layers_f32_check(const slipest_model_f32_t *m)
     return SLIPEST_OK;
 }
 
+#endif
+
 slipest_status_t slipest_model_f32_check(const slipest_model_f32_t *m)
 {
     if (m != 0 && m->layers != 0) {
+#if SLIPEST_LAYER_TABLE
         return layers_f32_check(m);
+#else
+        return SLIPEST_E_ARCH; /* this build has no layer-table kernel */
+#endif
     }
     if (m == 0 || m->w1 == 0 || m->b1 == 0 || m->gamma == 0 || m->beta == 0 || m->w2 == 0 || m->b2 == 0) {
         return SLIPEST_E_NULL;
@@ -73,6 +80,63 @@ slipest_status_t slipest_model_f32_check(const slipest_model_f32_t *m)
     return SLIPEST_OK;
 }
 
+/* SN-S without a table (w1..beta): the loop as it was measured (docs/fixed_point.md, "Cost"), the head
+ * accumulated inside the hidden loop. */
+static int infer_sn_s_f32(const slipest_model_f32_t *m, const float feat[SLIPEST_N_FEATURES],
+                          float logits[SLIPEST_N_CLASSES])
+{
+    float h[NH];
+    float out[NO];
+    float mean = 0.0f, var = 0.0f, inv;
+    int i, j, c, best;
+
+    for (j = 0; j < NI; ++j) {
+        if (!isfinite(feat[j])) {
+            return SLIPEST_E_NONFINITE;
+        }
+    }
+
+    for (i = 0; i < NH; ++i) {
+        const float *w = &m->w1[i * NI];
+        float a = 0.0f;
+        for (j = 0; j < NI; ++j) {
+            a += w[j] * feat[j];
+        }
+        h[i] = a + m->b1[i];
+        mean += h[i];
+    }
+    mean /= (float)NH;
+    for (i = 0; i < NH; ++i) {
+        float d = h[i] - mean;
+        var += d * d;
+    }
+    var /= (float)NH;
+    if (!isfinite(var)) { /* finite but huge inputs overflowed float32 */
+        return SLIPEST_E_RANGE;
+    }
+    inv = 1.0f / sqrtf(var + m->ln_eps);
+
+    for (c = 0; c < NO; ++c) {
+        out[c] = 0.0f;
+    }
+    for (i = 0; i < NH; ++i) {
+        float y = (h[i] - mean) * inv * m->gamma[i] + m->beta[i];
+        float g = 0.5f * y * (1.0f + slipest_erf_f32(y * 0.707106781f)); /* not libm's erff: see slipest_erf_f32.h */
+        for (c = 0; c < NO; ++c) {
+            out[c] += m->w2[c * NH + i] * g;
+        }
+    }
+    best = 0;
+    for (c = 0; c < NO; ++c) {
+        logits[c] = out[c] + m->b2[c];
+        if (logits[c] > logits[best]) {
+            best = c;
+        }
+    }
+    return best;
+}
+
+#if SLIPEST_LAYER_TABLE
 /* One block: n_in inputs in x -> width outputs written over x (x is dead once h is computed). Two-pass
  * mean and variance, 1/sqrtf, exact GELU with the library's erf. Returns 0, or SLIPEST_E_RANGE when
  * finite inputs overflowed float32. */
@@ -107,8 +171,8 @@ static int block_f32(const float *w, const float *b, const float *gamma, const f
     return 0;
 }
 
-/* The blocks (the table, or SN-S's one block w1..beta), then the head; act holds >= max(12, width)
- * activations and h >= width accumulators. */
+/* The blocks of the table, then the head; act holds >= max(12, width) activations and h >= width
+ * accumulators. */
 static int run_f32(const slipest_model_f32_t *m, const float feat[SLIPEST_N_FEATURES], float logits[SLIPEST_N_CLASSES],
                    float *act, float *h)
 {
@@ -121,15 +185,13 @@ static int run_f32(const slipest_model_f32_t *m, const float feat[SLIPEST_N_FEAT
         }
         act[i] = feat[i];
     }
-    n_layers = m->layers != 0 ? m->n_layers : 1u;
+    n_layers = m->n_layers;
     for (k = 0u; k < n_layers && k < (unsigned)SLIPEST_MAX_LAYERS; ++k) {
-        const slipest_layer_f32_t *l = m->layers != 0 ? &m->layers[k] : 0;
-        int n = l != 0 ? (int)l->width : NH;
-        if (block_f32(l != 0 ? l->w : m->w1, l != 0 ? l->b : m->b1, l != 0 ? l->gamma : m->gamma,
-                      l != 0 ? l->beta : m->beta, n, n_in, m->ln_eps, act, h) != 0) {
+        const slipest_layer_f32_t *l = &m->layers[k];
+        if (block_f32(l->w, l->b, l->gamma, l->beta, (int)l->width, n_in, m->ln_eps, act, h) != 0) {
             return SLIPEST_E_RANGE;
         }
-        n_in = n;
+        n_in = (int)l->width;
     }
     best = 0;
     for (c = 0; c < NO; ++c) {
@@ -146,8 +208,8 @@ static int run_f32(const slipest_model_f32_t *m, const float feat[SLIPEST_N_FEAT
     return best;
 }
 
-/* A model with a layer table: scratch for the build's widest block. Kept out of line so that the SN-S
- * call below does not carry this frame (its measured stack stays that of its own 30-unit buffers). */
+/* A model with a layer table: scratch for the build's widest block, kept out of line so that the SN-S
+ * path does not carry this frame. */
 #if defined(__GNUC__)
 __attribute__((noinline))
 #endif
@@ -159,17 +221,20 @@ static int infer_layers_f32(const slipest_model_f32_t *m, const float feat[SLIPE
     return run_f32(m, feat, logits, act, h);
 }
 
+#endif /* SLIPEST_LAYER_TABLE */
+
 int slipest_infer_f32(const slipest_model_f32_t *m, const float feat[SLIPEST_N_FEATURES],
                       float logits[SLIPEST_N_CLASSES])
 {
-    float act[NH];
-    float h[NH];
-
     if (m == 0 || feat == 0 || logits == 0) {
         return SLIPEST_E_NULL;
     }
     if (m->layers != 0) {
+#if SLIPEST_LAYER_TABLE
         return infer_layers_f32(m, feat, logits);
+#else
+        return SLIPEST_E_ARCH;
+#endif
     }
-    return run_f32(m, feat, logits, act, h);
+    return infer_sn_s_f32(m, feat, logits);
 }

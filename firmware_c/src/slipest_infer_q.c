@@ -377,6 +377,7 @@ static int infer_sn_s(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N
 }
 
 /* --- The general kernel: any stack of blocks from the model's layer table ------------------------- */
+#if SLIPEST_LAYER_TABLE
 
 /* x clamped to [-2^b, 2^b - 1] for a bound b known only at run time (a block's h_bits or e_bits + 1):
  * like SAT, placed where the proof bounds x inside already, so that the analyser sees it. */
@@ -501,11 +502,20 @@ static int infer_layers(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST
     return best;
 }
 
+#endif /* SLIPEST_LAYER_TABLE */
+
 int slipest_infer_q(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_FEATURES],
                     int32_t logits[SLIPEST_N_CLASSES], uint16_t *saturations)
 {
     if (m == 0 || feat_q == 0 || logits == 0) {
         return SLIPEST_E_NULL;
     }
-    return m->layers != 0 ? infer_layers(m, feat_q, logits, saturations) : infer_sn_s(m, feat_q, logits, saturations);
+    if (m->layers != 0) {
+#if SLIPEST_LAYER_TABLE
+        return infer_layers(m, feat_q, logits, saturations);
+#else
+        return SLIPEST_E_ARCH; /* a build without the table kernel (slipest_model_q_check refuses it too) */
+#endif
+    }
+    return infer_sn_s(m, feat_q, logits, saturations);
 }

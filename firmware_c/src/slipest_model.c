@@ -68,6 +68,7 @@ slipest_status_t slipest_model_q_check_scalars(const slipest_model_q_t *m)
     return SLIPEST_OK;
 }
 
+#if SLIPEST_LAYER_TABLE
 /* One block of the table after n_in inputs: pointers, the width-dependent shifts of the overflow proof
  * (docs/fixed_point.md, "A general block"), every row bound and LayerNorm bias. */
 static slipest_status_t layer_q_check(const slipest_layer_q_t *l, unsigned n_in, unsigned gelu_step_log2)
@@ -136,13 +137,19 @@ slipest_status_t slipest_model_q_check_layers(const slipest_model_q_t *m)
     return SLIPEST_OK;
 }
 
+#endif /* SLIPEST_LAYER_TABLE */
+
 slipest_status_t slipest_model_q_check(const slipest_model_q_t *m)
 {
     int i;
     slipest_status_t st;
 
     if (m != NULL && m->layers != NULL) {
+#if SLIPEST_LAYER_TABLE
         st = slipest_model_q_check_layers(m);
+#else
+        st = SLIPEST_E_ARCH; /* this build has no layer-table kernel */
+#endif
         for (i = 0; st == SLIPEST_OK && i < SLIPEST_Q_RSQRT_SEED_N; ++i) {
             if (slipest_model_seed_ok(m->rsqrt_seed[i], i) == 0) {
                 st = SLIPEST_E_RANGE;

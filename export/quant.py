@@ -1,4 +1,9 @@
-"""The fixed-point scheme of the SN-S estimator (integer-only inference for a core without FPU).
+"""The fixed-point scheme of the estimator (integer-only inference for a core without FPU).
+
+Below: the scheme on SN-S (QParams, quantize). Any other stack of Linear -> LayerNorm -> GELU
+blocks (QBlock, QNet, quantize_net further down) uses the same steps per block with shifts that
+depend on the block's width (docs/fixed_point.md, "A general block"); at width 30 they are the
+SN-S constants, and quantize() is quantize_net() seen through the SN-S layout.
 
 Full description with the overflow proofs: docs/fixed_point.md. The integer operations are
 performed identically by `intref.py` (torch) and `firmware_c/src/slipest_infer_q.c` (C).

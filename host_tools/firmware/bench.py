@@ -313,6 +313,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="CPU target (a file under firmware_c/cmake/, see --list-targets) or 'all' "
                              "(default: the reference target, whose figures are the m4_* keys)")
     parser.add_argument("--list-targets", action="store_true", help="list the CPU targets and exit")
+    parser.add_argument("--compare", type=Path, metavar="BUNDLE",
+                        help="a second bundle of another architecture (e.g. an SN-D export): its instructions per "
+                        "inference, flash and stack on the same targets, and host C against onnxruntime, beside "
+                        "the main bundle's (keys compare_*, a second table)")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
 
 
@@ -348,19 +352,18 @@ def run(args: argparse.Namespace) -> int:
         for tool in found[name].tools:
             if shutil.which(tool) is None:
                 raise OSError(f"{tool} not found for target {name} (scripts/setup.sh installs it)")
-    steps = tqdm(total=2 + 2 * len(names), desc="bench c", disable=args.json or not sys.stderr.isatty())
-    host = cmake_build(args.build_dir / "host", bundle)
-    steps.update()
-    builds = {}
-    for name in names:
-        builds[name] = cmake_build(args.build_dir / name, bundle, target=found[name])
-        steps.update()
-    t = host_timings(host, bundle, args.iterations)
-    steps.update()
-    rows = {}
-    for name in names:
-        rows[name] = target_figures(found[name], builds[name])
-        steps.update()
+    compare = Path(args.compare) if args.compare is not None else None
+    if compare is not None and not (compare / "vectors.bin").is_file():
+        raise FileNotFoundError(f"{compare}: no vectors.bin (not an export bundle?)")
+    steps = tqdm(total=(2 + 2 * len(names)) * (2 if compare else 1), desc="bench c",
+                 disable=args.json or not sys.stderr.isatty())
+    host, builds, t, rows = _measure(bundle, args.build_dir, names, found, args.iterations, steps)
+    cmp_result = None
+    if compare is not None:
+        c_host, _, c_t, c_rows = _measure(compare, args.build_dir / "compare", names, found, args.iterations, steps)
+        cmp_result = {"bundle": str(compare), "arch": _arch_of(compare), "host_ns_per_inference_q": c_t["q"],
+                      "host_ns_per_inference_f32": c_t["f32"], "onnxruntime_ns_per_inference": c_t["onnxruntime"],
+                      "speedup_vs_onnxruntime": c_t["onnxruntime"] / c_t["q"], "cpu_targets": c_rows}
     m4 = builds[ref]
     cost = target_costs(ref, m4)
     lib = library_footprint(m4 / "slipest_bench_target_q.elf.map", "libslipest_q.a")
@@ -413,8 +416,11 @@ def run(args: argparse.Namespace) -> int:
         "cpu_targets": rows,
         "targets": {"m4_instructions_q": 3000, "m4_flash_bytes": 6144, "m4_ram_bytes": 1024, "speedup_vs_onnxruntime": 20},
         "bundle": str(bundle),
+        "arch": _arch_of(bundle),
         "host_cpu_count": os.cpu_count(),
     }
+    if cmp_result is not None:
+        result["compare"] = cmp_result
     if args.json:
         print(json.dumps(result))
     else:
@@ -427,7 +433,49 @@ def run(args: argparse.Namespace) -> int:
         print(f"{'m4_canopen_node_goals':42s} {_goal_line(co_node)}")
         print()
         print(format_table(rows))
+        if cmp_result is not None:
+            print()
+            print(f"{'compare_bundle':42s} {cmp_result['bundle']} ({cmp_result['arch']})")
+            for key in ("host_ns_per_inference_q", "host_ns_per_inference_f32", "onnxruntime_ns_per_inference",
+                        "speedup_vs_onnxruntime"):
+                print(f"{'compare_' + key:42s} {cmp_result[key]:.1f}")
+            print()
+            print(format_compare_table(result["arch"], rows, cmp_result["arch"], cmp_result["cpu_targets"]))
     return 0
+
+
+def _arch_of(bundle: Path) -> str:
+    return json.loads((Path(bundle) / "manifest.json").read_text()).get("arch", "?")
+
+
+def _measure(bundle: Path, build_dir: Path, names: list[str], found: dict, iterations: int, steps):
+    """Build one bundle for the host and every target; host timings and one figures row per target."""
+    host = cmake_build(build_dir / "host", bundle)
+    steps.update()
+    builds = {}
+    for name in names:
+        builds[name] = cmake_build(build_dir / name, bundle, target=found[name])
+        steps.update()
+    t = host_timings(host, bundle, iterations)
+    steps.update()
+    rows = {}
+    for name in names:
+        rows[name] = target_figures(found[name], builds[name])
+        steps.update()
+    return host, builds, t, rows
+
+
+def format_compare_table(arch_a: str, rows_a: dict[str, dict], arch_b: str, rows_b: dict[str, dict]) -> str:
+    """Two architectures side by side per target (docs/integrating_slipest.md, "Choosing an architecture")."""
+    head = (f"| target | instr./q inference {arch_a} | {arch_b} | instr./float inference {arch_a} | {arch_b} "
+            f"| flash kernel+model {arch_a} (B) | {arch_b} (B) | peak stack q {arch_a} (B) | {arch_b} (B) |")
+    lines = [head, "|" + "---|" * 9]
+    for name, a in rows_a.items():
+        b = rows_b[name]
+        cells = [(a[k], b[k]) for k in ("instructions_per_inference_q", "instructions_per_inference_f32",
+                                          "flash_bytes_kernel_and_model", "stack_bytes_q")]
+        lines.append(f"| {name} | " + " | ".join(f"{_cell(x)} | {_cell(y)}" for x, y in cells) + " |")
+    return "\n".join(lines)
 
 
 STORE_OBJECTS = ("slipest_store.c.obj", "slipest_sha256.c.obj", "slipest_image.c.obj", "slipest_model.c.obj")

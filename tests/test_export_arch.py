@@ -109,3 +109,43 @@ def test_fixed_point_agrees_with_float_on_real_data(arch, real_data_dir, tmp_pat
     rep = json.loads((tmp_path / "b" / "accuracy.json").read_text())
     assert rep["datasets"][0]["all"]["agreement"] >= 0.995
     assert intref.run(b.qparams, np.zeros((1, 12), np.int16))[1].tolist() == [0]
+
+
+# --- Frama-C EVA on the layer-table kernel -----------------------------------------------------
+
+@pytest.fixture(scope="module")
+def eva_bundle(tmp_path_factory):
+    """A small irregular two-block model (EVA analyses every row with its own weights)."""
+    out = tmp_path_factory.mktemp("eva") / "bundle"
+    export_bundle(quick_model("8,5"), out, inputs=draw_inputs(1000, None, seed=3))
+    return out
+
+
+LAYER_SAT = "int32_t e = sat_var(rsr_h(nh * h[i] - sum, k2_half, k2), l->e_bits + 1u);"
+
+
+def test_frama_c_eva_layer_kernel_over_all_int16_inputs(eva_bundle):
+    """EVA, sound: no alarm in the layer-table kernel (both blocks and the head) for every int16 input."""
+    need("frama-c")
+    from fleetlab.assurance import analysers
+
+    (res,) = analysers.frama_c_eva(eva_bundle, entries=["eva_infer_q"])
+    assert "Frama_C_show_each_class: {0; 1; 2}" in res.log  # the analysis ran through the whole kernel
+    assert res.alarms == [], "\n".join(res.alarms)
+
+
+def test_frama_c_eva_finds_a_removed_saturation_in_the_layer_kernel(eva_bundle, tmp_path):
+    """Without the clamp that states |e| <= 2^(e_bits+1) (a bound that holds only through e's relation to
+    max|d|), EVA reports the possible overflow of e * e in block_q: the zero above is not vacuous."""
+    need("frama-c")
+    from fleetlab.assurance import analysers
+    from fleetlab.assurance.sources import FW
+
+    src = (FW / "src" / "slipest_infer_q.c").read_text()
+    assert LAYER_SAT in src
+    for f in (FW / "src").iterdir():
+        (tmp_path / f.name).write_bytes(f.read_bytes())
+    (tmp_path / "slipest_infer_q.c").write_text(
+        src.replace(LAYER_SAT, "int32_t e = rsr_h(nh * h[i] - sum, k2_half, k2);"))
+    (res,) = analysers.frama_c_eva(eva_bundle, entries=["eva_infer_q"], src_dir=tmp_path)
+    assert any("e * e" in a for a in res.alarms), "\n".join(res.alarms)

@@ -149,3 +149,49 @@ def test_frama_c_eva_finds_a_removed_saturation_in_the_layer_kernel(eva_bundle, 
         src.replace(LAYER_SAT, "int32_t e = rsr_h(nh * h[i] - sum, k2_half, k2);"))
     (res,) = analysers.frama_c_eva(eva_bundle, entries=["eva_infer_q"], src_dir=tmp_path)
     assert any("e * e" in a for a in res.alarms), "\n".join(res.alarms)
+
+
+# --- the SN-D bundle served by the emulator, and on CPU targets under QEMU ------------------------
+
+@pytest.fixture(scope="module")
+def snd_bundle(tmp_path_factory):
+    out = tmp_path_factory.mktemp("snd") / "bundle"
+    export_bundle(quick_model("sn-d"), out, inputs=draw_inputs(1000, None, seed=3))
+    return out
+
+
+def test_emulator_serves_an_sn_d_bundle_bit_exact_over_slcan(snd_bundle):
+    """`fleetlab emulate --bundle SN-D --link slcan`: the emulator process built with the bundle's
+    layer-table headers, simulated telemetry over a real pty, every window bit-exact with intref."""
+    from fleetlab.host_tools.emulate import DEFAULT_SCALE, emulate
+    from fleetlab.host_tools.emulator import build
+    from fleetlab.host_tools.sources import sim_source
+
+    build(snd_bundle)
+    sim = sim_source(seed=0, scale=DEFAULT_SCALE)
+    s = emulate(snd_bundle, sim, "slcan", progress=False).summary()
+    assert s["windows"] == sim.n_windows and s["bit_exact"] == s["windows"], s["first_problems"]
+    assert s["mismatches"] == 0 and s["unexplained_windows"] == 0
+
+
+# integer-only ARMv6-M, the DSP (SMLAD/SMMULR) path, big-endian user mode, big-endian bare metal;
+# the full sweep of every target is the same command with every name of `fleetlab bench c --list-targets`
+TARGETS = ["cortex-m0", "cortex-m4", "powerpc", "sparc-leon3"]
+
+
+@pytest.mark.parametrize("name", TARGETS)
+def test_sn_d_bit_exact_under_qemu(snd_bundle, tmp_path, name):
+    import shutil
+
+    from fleetlab.host_tools.firmware import build, targets
+
+    t = targets.get(name)
+    missing = [tool for tool in t.tools if shutil.which(tool) is None]
+    if missing:
+        pytest.skip(f"{', '.join(missing)} not installed: run scripts/setup.sh (scripts/apt-packages.txt)")
+    out = build.ctest(build.cmake_build(tmp_path / name, snd_bundle, target=t))
+    assert "100% tests passed" in out
+    passes = re.findall(r"vectors=\d+ q_fail=0 f32_fail=0 extractor_fail=0 model=\w+ PASS", out)
+    assert len(passes) == (1 if t.integer_only else 2), out[-3000:]
+    for what in ("slipest_test_q.elf", "libslipest_q.a"):
+        assert f"{what}: 0 soft-float helper symbols (expected absent)" in out

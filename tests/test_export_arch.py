@@ -174,22 +174,36 @@ def test_emulator_serves_an_sn_d_bundle_bit_exact_over_slcan(snd_bundle):
     assert s["mismatches"] == 0 and s["unexplained_windows"] == 0
 
 
-# integer-only ARMv6-M, the DSP (SMLAD/SMMULR) path, big-endian user mode, big-endian bare metal;
-# the full sweep of every target is the same command with every name of `fleetlab bench c --list-targets`
-TARGETS = ["cortex-m0", "cortex-m4", "powerpc", "sparc-leon3"]
+def _runnable_targets() -> list[str]:
+    from fleetlab.host_tools.firmware import targets
+
+    return [name for name, t in targets.discover().items() if t.runs]
 
 
-@pytest.mark.parametrize("name", TARGETS)
-def test_sn_d_bit_exact_under_qemu(snd_bundle, tmp_path, name):
+@pytest.fixture(scope="module")
+def irregular_bundle(tmp_path_factory):
+    out = tmp_path_factory.mktemp("irr") / "bundle"
+    export_bundle(quick_model("24,9"), out, inputs=draw_inputs(1000, None, seed=3))
+    return out
+
+
+# SN-D on every target with an emulator; the irregular 24,9 (odd widths: the SMLAD loop's tail) on the
+# DSP core and the integer-only ARMv6-M
+CASES = [("sn-d", name) for name in _runnable_targets()] + [("24,9", "cortex-m4"), ("24,9", "cortex-m0")]
+
+
+@pytest.mark.parametrize("arch,name", CASES)
+def test_bit_exact_under_qemu(snd_bundle, irregular_bundle, tmp_path, arch, name):
     import shutil
 
     from fleetlab.host_tools.firmware import build, targets
 
+    bundle = snd_bundle if arch == "sn-d" else irregular_bundle
     t = targets.get(name)
     missing = [tool for tool in t.tools if shutil.which(tool) is None]
     if missing:
         pytest.skip(f"{', '.join(missing)} not installed: run scripts/setup.sh (scripts/apt-packages.txt)")
-    out = build.ctest(build.cmake_build(tmp_path / name, snd_bundle, target=t))
+    out = build.ctest(build.cmake_build(tmp_path / name, bundle, target=t))
     assert "100% tests passed" in out
     passes = re.findall(r"vectors=\d+ q_fail=0 f32_fail=0 extractor_fail=0 model=\w+ PASS", out)
     assert len(passes) == (1 if t.integer_only else 2), out[-3000:]

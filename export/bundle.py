@@ -220,13 +220,17 @@ def load_bundle(path: Path | str) -> Bundle:
         eps_e=qsc["eps_e"], s1=float(msc["s1"]), s2=float(msc["s2"]),
     )
     qp.check_bounds()
-    content = manifest.content_hash(qp, fp)
-    for where, h, h32 in ((qfile, qhash, qhash32), (ffile, fhash, fhash32)):
+    _check_hashes(path, m, manifest.content_hash(qp, fp), ((qfile, qhash, qhash32), (ffile, fhash, fhash32)))
+    return Bundle(path, m, fp, qp)
+
+
+def _check_hashes(path: Path, m: dict, content: str, named: tuple) -> None:
+    """Both headers name the manifest's content hash, and their parameters hash to it."""
+    for where, h, h32 in named:
         if h != m["content_hash"] or h32 != manifest.hash32(h):
             raise ValueError(f"{where}: model hash {h[:16]}... disagrees with manifest.json {m['content_hash'][:16]}...")
     if content != m["content_hash"]:
         raise ValueError(f"{path}: parameters in the headers hash to {content[:16]}..., manifest.json says {m['content_hash'][:16]}...")
-    return Bundle(path, m, fp, qp)
 
 
 def _load_net_bundle(path: Path, m: dict) -> Bundle:
@@ -247,12 +251,7 @@ def _load_net_bundle(path: Path, m: dict) -> Bundle:
     for key, value in net.scalars().items():
         if msc.get(key) != value:
             raise ValueError(f"{qfile}: {key} = {value}, manifest.json says {msc.get(key)}")
-    content = manifest.content_hash_net(net, fn)
-    for where, h, h32 in ((qfile, qhash, qhash32), (ffile, fhash, fhash32)):
-        if h != m["content_hash"] or h32 != manifest.hash32(h):
-            raise ValueError(f"{where}: model hash {h[:16]}... disagrees with manifest.json {m['content_hash'][:16]}...")
-    if content != m["content_hash"]:
-        raise ValueError(f"{path}: parameters in the headers hash to {content[:16]}..., manifest.json says {m['content_hash'][:16]}...")
+    _check_hashes(path, m, manifest.content_hash_net(net, fn), ((qfile, qhash, qhash32), (ffile, fhash, fhash32)))
     return Bundle(path, m, fn, net)
 
 

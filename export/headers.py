@@ -151,8 +151,6 @@ LAYER_Q_ARRAYS = (("w", "w", "int16_t", np.int16), ("b", "b", "int32_t", np.int3
 # per-block scalars (QBlock attribute = slipest_layer_q_t member)
 LAYER_Q_SCALARS = ("c", "width", "eps_m", "eps_e", "h_bits", "e_bits", "fz", "fg", "fy")
 LAYER_F32_ARRAYS = ("w", "b", "gamma", "beta")
-# model scalars of a table model (the rest of slipest_model_q_t is not used with a table)
-NET_Q_SCALARS = ("n_in", "n_out", "eps_cap", "gelu_step_log2", "gelu_n", "rsqrt_seed_n")
 
 
 def _struct_members(items: list[tuple[str, str]], indent: str = "    ") -> str:

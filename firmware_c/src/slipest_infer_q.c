@@ -190,6 +190,16 @@ HOT int32_t gelu_q(const int16_t *table, unsigned to_q15, int32_t u)
     return (u > 0 ? u : 0) + tneg;
 }
 
+/* The LayerNorm block shift k1 = max(0, bitlen(max|h|) - bits), max|h| from the row maximum and minimum
+ * (negated in unsigned arithmetic: defined for INT32_MIN). */
+HOT unsigned block_shift(int32_t hmax, int32_t hmin, unsigned bits)
+{
+    uint32_t mx = hmax < 0 ? 0u - (uint32_t)hmax : (uint32_t)hmax;
+    uint32_t mn = hmin < 0 ? 0u - (uint32_t)hmin : (uint32_t)hmin;
+    unsigned nb = bitlen32(mn > mx ? mn : mx);
+    return nb > bits ? nb - bits : 0u;
+}
+
 /* eps in the units of s = sum e^2: eps_m 2^(eps_e - 2(k1 + k2)), capped at 2^30 (a saturation, counted). */
 HOT uint32_t eps_scaled(int16_t eps_m, int8_t eps_e, int32_t eps_cap, unsigned k12, uint16_t *sat)
 {
@@ -281,7 +291,7 @@ static int infer_sn_s(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N
     int32_t h[NH];
     int32_t hmax = INT32_MIN, hmin = INT32_MAX, sum, dmax, t, r, acc0, acc1, acc2;
     const int16_t *w2;
-    uint32_t mx, s, v, usum = 0u;
+    uint32_t s, v, usum = 0u;
     unsigned nb, k1, k2;
     uint16_t sat = 0u;
     unsigned u_shift, to_q15;
@@ -304,11 +314,7 @@ static int infer_sn_s(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N
     }
 
     /* LayerNorm. Block shift k1 so that |h'| <= 2^h_bits <= 2^24 (max|h| = max(|hmax|, |hmin|)). */
-    mx = hmax < 0 ? 0u - (uint32_t)hmax : (uint32_t)hmax;
-    s = hmin < 0 ? 0u - (uint32_t)hmin : (uint32_t)hmin;
-    mx = s > mx ? s : mx;
-    nb = bitlen32(mx);
-    k1 = nb > m->h_bits ? nb - m->h_bits : 0u;          /* <= 31 - 23 */
+    k1 = block_shift(hmax, hmin, m->h_bits);            /* <= 31 - 23 */
     if (k1 != 0u) {
         usum = 0u;
         for (i = 0; i < NH; ++i) {
@@ -419,7 +425,7 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     const unsigned n = l->width;
     const int32_t nh = (int32_t)n;
     int32_t hmax = INT32_MIN, hmin = INT32_MAX, sum, dmax, t, mult, u_half, k2_half;
-    uint32_t mx, s = 0u, usum = 0u, v;
+    uint32_t s = 0u, usum = 0u, v;
     unsigned i, nb, k1, k2, u_shift, to_q15;
 
     for (i = 0u; i < n; ++i) {
@@ -428,11 +434,7 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
         hmax = a > hmax ? a : hmax;
         hmin = a < hmin ? a : hmin;
     }
-    mx = hmax < 0 ? 0u - (uint32_t)hmax : (uint32_t)hmax;
-    s = hmin < 0 ? 0u - (uint32_t)hmin : (uint32_t)hmin;
-    mx = s > mx ? s : mx;
-    nb = bitlen32(mx);
-    k1 = nb > l->h_bits ? nb - l->h_bits : 0u;          /* <= 31 - h_bits: the rounding term fits the margin */
+    k1 = block_shift(hmax, hmin, l->h_bits);            /* <= 31 - h_bits: the rounding term fits the margin */
     for (i = 0u; i < n; ++i) {
         h[i] = sat_var(rsr32(h[i], k1), l->h_bits + 1u); /* |h'| <= 2^h_bits: never acts */
         usum += (uint32_t)h[i];

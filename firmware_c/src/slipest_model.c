@@ -106,7 +106,8 @@ static slipest_status_t layer_q_check(const slipest_layer_q_t *l, unsigned n_in,
     return SLIPEST_OK;
 }
 
-slipest_status_t slipest_model_q_check_layers(const slipest_model_q_t *m)
+/* The checks of slipest_model_q_check() on the layer table (every block's shifts and rows, the head). */
+static slipest_status_t model_q_check_layers(const slipest_model_q_t *m)
 {
     unsigned k, i, n_in = SLIPEST_N_FEATURES;
     slipest_status_t st;
@@ -146,7 +147,7 @@ slipest_status_t slipest_model_q_check(const slipest_model_q_t *m)
 
     if (m != NULL && m->layers != NULL) {
 #if SLIPEST_LAYER_TABLE
-        st = slipest_model_q_check_layers(m);
+        st = model_q_check_layers(m);
 #else
         st = SLIPEST_E_ARCH; /* this build has no layer-table kernel */
 #endif

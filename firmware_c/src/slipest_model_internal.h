@@ -20,10 +20,6 @@
  * 2^31 - 2^15 (docs/fixed_point.md, "A general block"); every width's round(sqrt(H) 2^(fz + 2)) is below it. */
 #define SLIPEST_Q_C_MAX 131066
 
-#if SLIPEST_LAYER_TABLE
-/* The checks of slipest_model_q_check() on the layer table (every block's shifts and rows, the head). */
-slipest_status_t slipest_model_q_check_layers(const slipest_model_q_t *m);
-#endif
 
 /* 1 when seed (entry i of the 1/sqrt seed table) keeps the kernel's Newton step from wrapping. */
 int slipest_model_seed_ok(uint32_t seed, int i);

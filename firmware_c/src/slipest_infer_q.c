@@ -265,14 +265,14 @@ HOT int32_t norm_z(int32_t e, int32_t mult)
 }
 #endif
 
-/* One hidden unit after LayerNorm's centring: z = rsr(e M, 16) (Q12; |e M| <= sqrt(30) 2^28
- * (1 + 1e-5) because |e| <= sqrt(v), so |z| < 22500), u = rsr(gamma z, U_SHIFT) + beta saturated
- * to int16 (counted), then GELU. Returns g with |g| < 2^15. */
-HOT int32_t hidden_out(const slipest_model_q_t *m, unsigned u_shift, int32_t u_half, unsigned to_q15, int32_t e,
-                       int32_t mult, int i, uint16_t *sat)
+/* One hidden unit after LayerNorm's centring: z = rsr(e M, 16) (Q(fz); |e M| <= c 2^14 (1 + 1e-5)
+ * because |e| <= sqrt(v), so |z| < 2^15), u = rsr(gamma z, U_SHIFT) + beta saturated to int16
+ * (counted), then GELU. Returns g in [-2^15, 2^15). Both kernels: gamma, beta, table of the block. */
+HOT int32_t hidden_out(int32_t gamma, int32_t beta, const int16_t *table, unsigned u_shift, int32_t u_half,
+                       unsigned to_q15, int32_t e, int32_t mult, uint16_t *sat)
 {
     int32_t z = norm_z(e, mult);
-    int32_t u = rsr_h((int32_t)m->gamma[i] * z, u_half, u_shift) + m->beta[i];
+    int32_t u = rsr_h(gamma * z, u_half, u_shift) + beta;
     if (u > 32767) {
         u = 32767;
         ++*sat;
@@ -280,7 +280,7 @@ HOT int32_t hidden_out(const slipest_model_q_t *m, unsigned u_shift, int32_t u_h
         u = -32768;
         ++*sat;
     }
-    return gelu_q(m->gelu, to_q15, u);
+    return gelu_q(table, to_q15, u);
 }
 
 /* The SN-S path (a model without a layer table: 12 -> 30 -> 3, the fields w1..fy), unrolled for its
@@ -355,8 +355,8 @@ static int infer_sn_s(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N
      * 2^15 sum_i |w2_ci| + |b2_c| <= 2^31 - 1 because |g| < 2^15 (acc2_bound, checked at export) */
     w2 = m->w2;
     for (i = 0; i < NH; i += 2) {
-        int32_t g0 = hidden_out(m, u_shift, u_half, to_q15, h[i], r, i, &sat);
-        int32_t g1 = hidden_out(m, u_shift, u_half, to_q15, h[i + 1], r, i + 1, &sat);
+        int32_t g0 = hidden_out(m->gamma[i], m->beta[i], m->gelu, u_shift, u_half, to_q15, h[i], r, &sat);
+        int32_t g1 = hidden_out(m->gamma[i + 1], m->beta[i + 1], m->gelu, u_shift, u_half, to_q15, h[i + 1], r, &sat);
 #if SLIPEST_DUAL_MAC
         uint32_t gp = (uint32_t)(uint16_t)g0 | ((uint32_t)(uint16_t)g1 << 16); /* |g| < 2^15 */
         acc0 = __smlad(pair16(&w2[i]), gp, acc0);
@@ -461,18 +461,9 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     to_q15 = 15u - ((unsigned)l->fy - (unsigned)m->gelu_step_log2);
     u_half = (int32_t)(1u << u_shift) >> 1;
     for (i = 0u; i < n; ++i) {
-        /* |z| < 2^15 (|e| <= sqrt(v), c <= SLIPEST_Q_C_MAX), |gamma z| < 2^30 */
-        int32_t z = norm_z(h[i], mult);
-        int32_t u = rsr_h((int32_t)l->gamma[i] * z, u_half, u_shift) + l->beta[i];
-        if (u > 32767) {
-            u = 32767;
-            ++*sat;
-        } else if (u < -32768) {
-            u = -32768;
-            ++*sat;
-        }
-        /* the next block's int16 input as it is: the requantisation is folded into its weights */
-        out[i] = (int16_t)gelu_q(l->gelu, to_q15, u);   /* max(u, 0) + GELU(-|u|) in [-2^15, 2^15) */
+        /* |z| < 2^15 (|e| <= sqrt(v), c <= SLIPEST_Q_C_MAX), |gamma z| < 2^30; the output is the next
+         * block's int16 input as it is: the requantisation is folded into its weights */
+        out[i] = (int16_t)hidden_out(l->gamma[i], l->beta[i], l->gelu, u_shift, u_half, to_q15, h[i], mult, sat);
     }
 }
 

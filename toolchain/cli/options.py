@@ -10,7 +10,7 @@ import torch
 
 from ..data.splits import PROTOCOLS
 from ..fusion.acomerge import AUTO_THREADS, MAX_THREADS, AcoMergeConfig
-from ..models import ARCHS
+from ..models.mlp import add_arch_argument
 from ..models.train import EXPERT_EPOCHS
 
 ACO = AcoMergeConfig()  # the paper's AcoMerge defaults: the one source of every search default below
@@ -23,7 +23,7 @@ def data_dir(p: argparse.ArgumentParser, help: str = "dataset folder: made by 'f
 
 
 def arch(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--arch", default="sn-s", choices=sorted(ARCHS), help="network architecture (default: sn-s)")
+    add_arch_argument(p)
 
 
 def protocol(p: argparse.ArgumentParser) -> None:

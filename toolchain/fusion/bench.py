@@ -59,7 +59,6 @@ from torch.utils.data import DataLoader, TensorDataset
 
 from ..data.contracts import N_CLASSES
 from ..models import build, flatten, load_flat
-from ..models.mlp import add_arch_argument
 from ..models.train import class_weights
 from .acomerge import (
     AUTO_THREADS,
@@ -99,7 +98,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.add_argument("--data", type=Path, help="dataset folder: draw D_Cal from its target rows (default: synthetic)")
-    add_arch_argument(p)
     aco = AcoMergeConfig()
     p.add_argument("--ants", type=int, default=aco.n_ants, help=f"ants per generation (default: {aco.n_ants})")
     p.add_argument("--generations", type=int, default=aco.generations,

@@ -76,22 +76,6 @@ def canonical_arch(arch: str) -> str:
     return arch_name(hidden_sizes(arch))
 
 
-def add_arch_argument(p, default: str = "sn-s") -> None:
-    """The one --arch option (training, fuse, evaluate, export, bench fusion): a name or hidden sizes."""
-    import argparse
-
-    def parse(text: str) -> str:
-        try:
-            return canonical_arch(text)
-        except ValueError as e:
-            raise argparse.ArgumentTypeError(str(e)) from None
-
-    p.add_argument("--arch", default=default, type=parse, metavar="ARCH",
-                   help=f"network architecture: {', '.join(ARCHS)} ({'; '.join(f'{k} = {list(v)}' for k, v in ARCHS.items())}), "
-                   f"or hidden sizes such as 64,32 (1-{MAX_HIDDEN_LAYERS} layers of {MIN_UNITS}-{MAX_UNITS} units; "
-                   f"default: {default})")
-
-
 def arch_of(model: SlipNet) -> str:
     return canonical_arch(arch_name(model.hidden))
 

@@ -153,6 +153,38 @@ def test_frama_c_eva_finds_an_overflow(tmp_path):
     assert any("e * e" in a for a in res.alarms), "\n".join(res.alarms)
 
 
+# planted defects, one scratch file each, put among the library's sources: each analyser must report its own
+# (a configuration that turns every check off, or a changed output format, would read as clean)
+PLANTED = {
+    # bugprone-suspicious-memset-usage: value and size swapped, so nothing is cleared
+    "clang_tidy": ("#include <stdint.h>\n#include <string.h>\nvoid clear(int32_t *v, int n);\n"
+                   "void clear(int32_t *v, int n) { memset(v, n, 0); }\n",
+                   ["bugprone-suspicious-memset-usage"]),
+    # a double fclose and a use after free
+    "gcc_analyzer": ("#include <stdio.h>\n#include <stdlib.h>\nint twice(const char *path);\nint after(int n);\n"
+                     "int twice(const char *path) {\n  FILE *f = fopen(path, \"r\");\n  if (f == NULL) return -1;\n"
+                     "  (void)fclose(f);\n  return fclose(f);\n}\n"
+                     "int after(int n) {\n  int *p = malloc(sizeof *p);\n  if (p == NULL) return -1;\n  *p = n;\n"
+                     "  free(p);\n  return *p;\n}\n",
+                     ["-Wanalyzer-double-fclose", "-Wanalyzer-use-after-free"]),
+}
+
+
+@pytest.mark.parametrize("tool", sorted(PLANTED))
+def test_static_analyser_reports_a_planted_defect(tool, tmp_path, monkeypatch):
+    """Negative control: the same call that finds the library clean reports the planted defect."""
+    from fleetlab.assurance import analysers
+
+    text, expected = PLANTED[tool]
+    bad = tmp_path / "planted.c"
+    bad.write_text(text)
+    monkeypatch.setattr(analysers, "library_sources", lambda: [bad])
+    res = getattr(analysers, tool)(BUNDLE)
+    assert not res.clean
+    for check in expected:
+        assert any("planted.c" in f and check in f for f in res.findings), (check, res.findings)
+
+
 def test_static_analyser_can_fail(tmp_path, monkeypatch):
     """The warning check sees a defect: a file with a sign conversion among the sources fails it."""
     from fleetlab.assurance import analysers

@@ -6,6 +6,7 @@ frama-c-base) and the test extras (gcovr); a missing tool fails the test with it
 """
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -14,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from fleetlab.paths import repo_root
+from doc_figures import assert_near, worst_case_instructions
 
 REPO = repo_root()
 
@@ -131,6 +133,7 @@ def test_frama_c_eva_over_all_int16_inputs():
     res = {e.entry: e for e in analysers.frama_c_eva(BUNDLE)}
     assert set(res) == {"eva_infer_q", "eva_features"}
     assert res["eva_features"].alarms == [], "\n".join(res["eva_features"].alarms)
+    assert window_features_reached(res["eva_features"].log)  # the zero covers the window-closing path
     infer = res["eva_infer_q"]
     assert "Frama_C_show_each_class: {0; 1; 2}" in infer.log  # the analysis ran through the whole kernel
     assert infer.alarms == [], "\n".join(infer.alarms)
@@ -183,6 +186,37 @@ def test_static_analyser_reports_a_planted_defect(tool, tmp_path, monkeypatch):
     assert not res.clean
     for check in expected:
         assert any("planted.c" in f and check in f for f in res.findings), (check, res.findings)
+
+
+def window_features_reached(log: str) -> bool:
+    """The driver's reachability marker (eva_driver.c): EVA printed the values slipest_window_features_q
+    returns for a window the extractor closed, 0 (features computed) among them. Without it, "no alarm"
+    could mean that EVA decided no window ever closes and never analysed the feature code."""
+    for values in re.findall(r"Frama_C_show_each_window_features: (\S+)", log):
+        if values.startswith("{") and 0 in {int(v) for v in values.strip("{}").split(";")}:
+            return True
+        m = re.fullmatch(r"\[(-?\d+)\.\.(-?\d+)\]", values)
+        if m and int(m[1]) <= 0 <= int(m[2]):
+            return True
+    return False
+
+
+def test_frama_c_eva_finds_an_overflow_in_the_feature_extractor(tmp_path):
+    """Negative control of the extractor's proof: with the 64-bit widening of S * S removed from the variance
+    of a closed window, EVA reports the signed overflow (reached only through a closed window)."""
+    from fleetlab.assurance import analysers
+    from fleetlab.assurance.sources import FW
+
+    src = (FW / "src" / "slipest_features.c").read_text()
+    wide = "uint64_t d = (uint64_t)(nn * q - (int64_t)s * s);"
+    assert wide in src
+    for f in (FW / "src").iterdir():
+        (tmp_path / f.name).write_bytes(f.read_bytes())
+    (tmp_path / "slipest_features.c").write_text(src.replace(wide, "uint64_t d = (uint64_t)(nn * q - s * s);"))
+    (res,) = analysers.frama_c_eva(BUNDLE, entries=["eva_features"], src_dir=tmp_path)
+    assert window_features_reached(res.log)
+    assert any("slipest_features.c" in a and "overflow" in a and "s * s" in a for a in res.alarms), \
+        "\n".join(res.alarms)
 
 
 def test_static_analyser_can_fail(tmp_path, monkeypatch):
@@ -247,6 +281,11 @@ def test_worst_case_instruction_counts_on_the_reference_target():
     worst = wcet.per_function(rows)
     assert worst["slipest_node_handle"] > worst["slipest_infer_q"] > 4 * worst["slipest_extractor_push"] > 0, \
         wcet.table(rows)
+    # each maximum within +-10 % of the figure docs/assurance.md publishes (a rise fails until the docs say so)
+    published = worst_case_instructions()
+    assert set(published) == set(worst), (published, worst)
+    for fn, n in worst.items():
+        assert_near(n, published[fn], f"worst-case instructions of {fn}")
 
 
 def test_worst_case_parser_rejects_incomplete_output():

@@ -12,6 +12,7 @@ import importlib
 KINDS: dict[str, tuple[str, str]] = {
     "data": ("fleetlab.data.bench", "featurisation (raw samples/s) and simulation speed (simulated s per wall s)"),
     "fusion": ("fleetlab.fusion.bench", "AcoMerge: batched vs one-ant-at-a-time generation, full-run time"),
+    "link": ("fleetlab.host_tools.bench_link", "host emulation loop over a link: frames/s vs the rover's 150, estimator latency at 50 Hz"),
     "c": ("fleetlab.host_tools.firmware.bench", "C estimator: host ns/inference vs onnxruntime and torch, Cortex-M4 cost and size"),
 }
 

@@ -218,7 +218,8 @@ def test_fleet_ablation_and_calibration_fit_in_an_evaluation(dataset):
     res = result["results"]
     assert set(res) == set(settings.all_methods)
     runs = {m: res[m]["150"]["balanced_accuracy"]["runs"] for m in res}
-    assert runs["acomerge-earth-only"] != runs["acomerge"] != runs["acomerge-fleet-only"]
+    earth, both, fleet = runs["acomerge-earth-only"], runs["acomerge"], runs["acomerge-fleet-only"]
+    assert earth != both and both != fleet and earth != fleet  # three different searches, pairwise
     for m in res:
         fit = res[m]["150"]["calibration_fit"]["balanced_accuracy"]
         assert 0.0 <= fit["mean"] <= 1.0 and fit["std"] >= 0.0

@@ -53,6 +53,28 @@ def test_emulate_is_bit_exact_over_every_link(bundle, sim, link):
     assert res.ok()
 
 
+def test_a_fault_the_node_does_not_show_is_not_detected(bundle, sim):
+    """The detector observes each fault in the node's STATUS reports: with the rejections taken out of the
+    reports around them (as if the node had let the bad frames through), the counter-only faults are no
+    longer detected, while the window-flag faults still are."""
+    import dataclasses
+
+    from fleetlab.host_tools import emulate as emulate_mod
+
+    part = TelemetrySource("first 100 windows", sim.samples_q[:10_000], [])
+    kinds = ["unknown_id", "duplicated_frame", "dropped_sample"]
+    res = emulate(bundle, part, "inproc", kinds, 0.2, seed=4, progress=False)
+    counter_only = [f for f in res.faults if not f.flags_window and f.kind != "restart"]
+    assert counter_only and all(f.detected for f in res.faults)
+    plan = faults.plan_telemetry(part.samples_q, kinds, 0.2, 4)  # the same plan, its faults not yet marked
+    assert [f.kind for f in plan.faults] == [f.kind for f in res.faults]
+    for seg in res.segments:
+        seg.statuses = [dataclasses.replace(st, frames_rejected=0) for st in seg.statuses]
+    emulate_mod._mark_detected(plan, res)
+    assert not any(f.detected for f in plan.faults if not f.flags_window)
+    assert all(f.detected for f in plan.faults if f.flags_window)
+
+
 @pytest.mark.parametrize("link", ["slcan", "serial", "inproc"])
 def test_injected_faults_are_all_detected(bundle, sim, link):
     kinds = faults.parse_kinds("all", link)

@@ -2,7 +2,8 @@
 (cppcheck addon) against the recorded deviations, static analysers, and C statement/branch coverage.
 
 None of these skip: the tools come from scripts/apt-packages.txt (cppcheck, clang-tidy,
-frama-c-base) and the test extras (gcovr); a missing tool fails the test with its name.
+frama-c-base) and the test extras (gcovr); a missing tool fails the test naming its Debian package
+(fleetlab.system_tools). Every analyser also has a negative control here: a planted defect it must report.
 """
 from __future__ import annotations
 

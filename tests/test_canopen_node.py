@@ -116,18 +116,23 @@ def test_heartbeats_are_counted_on_the_nodes_own_tick(bdir):
     from fleetlab.host_tools.canopen_node import CCanopenNode
     from fleetlab.host_tools.wire.dbc import Frame
 
-    node = CCanopenNode(find_artifact(bdir, "libslipest_host.so"), NODE_ID)
-    t0 = 1_000_000  # any tick: the node measures differences, wrapping at 2^32
+    from fleetlab.host_tools.canopen_node import now_ms
+
+    node = CCanopenNode(find_artifact(bdir, "libslipest_host.so"), NODE_ID)  # boots at the tick now_ms()
+    # half the 32-bit tick away from boot: the node measures differences modulo 2^32, so any tick works;
+    # this one is surely past one period after the boot
+    t0 = now_ms() + 2**31
 
     def heartbeats(start: int, stop: int) -> list[int]:
-        return [t for t in range(start, stop) for f in node.tick(t) if f.can_id == 0x700 + NODE_ID]
+        return [t for t in range(start, stop) for f in node.tick(t & 0xFFFFFFFF) if f.can_id == 0x700 + NODE_ID]
 
     first = heartbeats(t0, t0 + 1)  # the first tick after boot is over any period: it sends at once
     assert len(first) == 1
     default = heartbeats(t0 + 1, t0 + 3001)
     assert len(default) == 3 and np.diff(default).tolist() == [od.HEARTBEAT_MS] * 2
     # SDO expedited download of 50 ms into 0x1017:00, answered with the download response
-    (ack,) = node.handle(Frame(0x600 + NODE_ID, bytes([0x2B, 0x17, 0x10, 0x00, 50, 0, 0, 0])), t0 + 3001)
+    (ack,) = node.handle(Frame(0x600 + NODE_ID, bytes([0x2B, 0x17, 0x10, 0x00, 50, 0, 0, 0])),
+                         (t0 + 3001) & 0xFFFFFFFF)
     assert ack.can_id == 0x580 + NODE_ID and ack.data[0] == 0x60
     fast = heartbeats(t0 + 3001, t0 + 4001)
     assert len(fast) == 20 and set(np.diff(fast).tolist()) == {50}

@@ -27,10 +27,10 @@ DBC = cantools.database.load_file(str(REPO / "dbc" / "slipest.dbc"))
 NO_FLOAT_CLASS = 255  # the fixed-point-only node (slipest_q) sends no float class
 
 
-def golden_frames() -> tuple[list[tuple[int, bytes]], int]:
+def golden_frames(path=GOLDEN) -> tuple[list[tuple[int, bytes]], int]:
     """(id, data) of every line, after checking that its SLCAN and COBS forms carry the same frame; and the
     frame count of the closing line."""
-    lines = GOLDEN.read_text().splitlines()
+    lines = path.read_text().splitlines()
     assert lines[-1].startswith("frames=") and lines[-1].endswith(" END"), lines[-1]
     frames = []
     for n, line in enumerate(lines[:-1], 1):
@@ -55,9 +55,8 @@ def node_frames_stream() -> np.ndarray:
     return np.stack([w1[0], w2[0], w1[1], w2[1], w3, w1[2], w2[2]], axis=1).astype(np.int16)
 
 
-@pytest.fixture(scope="module")
-def decoded():
-    frames, count = golden_frames()
+def decode(path=GOLDEN):
+    frames, count = golden_frames(path)
     estimates, status = [], []
     for can_id, data in frames:
         msg = DBC.get_message_by_frame_id(can_id)
@@ -73,6 +72,11 @@ def decoded():
             assert msg.name.startswith("STATUS_"), msg.name
             status.append((msg.name, dict(values)))
     return frames, count, estimates, status
+
+
+@pytest.fixture(scope="module")
+def decoded():
+    return decode()
 
 
 def test_every_line_is_one_frame_in_three_agreeing_encodings(decoded):
@@ -126,3 +130,24 @@ def test_closing_status_frames_count_what_the_node_received(decoded):
     assert {m["model_hash"] for m in models} == {manifest_hash}
     done = [m["windows_done"] for m in models]
     assert done == sorted(done) and len(done) > 1
+
+
+def test_a_wrong_golden_is_caught(tmp_path):
+    """The checks can fail: one logit byte changed in all three encodings of a line decodes to a logit the
+    reference does not give; changed in the data column alone, the line's encodings disagree."""
+    from fleetlab.host_tools.wire.dbc import Frame
+    from fleetlab.host_tools.wire.serial_framing import encode_packet, slcan_line
+
+    lines = GOLDEN.read_text().splitlines(keepends=True)
+    can_id, dlc, data = lines[1].split("|")[0].split()
+    assert int(can_id) == DBC.get_message_by_name("SLIP_LOGITS_01").frame_id
+    f = Frame(int(can_id), bytes([bytes.fromhex(data)[0] ^ 1]) + bytes.fromhex(data)[1:])
+    bad = tmp_path / "golden.txt"
+    bad.write_text("".join(lines[:1] + [f"{can_id} {dlc} {f.data.hex()} | {slcan_line(f)[:-1].decode()} | "
+                                         f"{encode_packet(f).hex()}\n"] + lines[2:]))
+    got = decode(bad)[2][0]["logits"]
+    want = q_logits_of(load_bundle(BUNDLE).qparams, np.load(BUNDLE / "vectors.npz")["q_inputs"][:1])[0].tolist()
+    assert got != want and got[1:] == want[1:]
+    bad.write_text("".join(lines[:1] + [lines[1].replace(data, f.data.hex(), 1)] + lines[2:]))
+    with pytest.raises(AssertionError, match="line 2"):
+        golden_frames(bad)

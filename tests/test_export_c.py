@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -11,6 +10,7 @@ import pytest
 
 from fleetlab.export.bundle import export_bundle
 from fleetlab.export.vectors import draw_inputs
+from required import need_tool as need
 
 REPO = Path(__file__).resolve().parents[1]
 INCLUDE = REPO / "firmware_c" / "include"
@@ -23,13 +23,6 @@ CHECK_SRC = REPO / "export" / "c" / "check_vectors.c"
 EXAMPLE = REPO / "firmware_c" / "bundles" / "example"
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 ARM_GCC = "arm-none-eabi-gcc"
-
-
-def need(tool: str) -> str:
-    path = shutil.which(tool)
-    if path is None:
-        pytest.skip(f"{tool} is not installed (scripts/setup.sh installs it)")
-    return path
 
 
 @pytest.fixture(scope="module")

@@ -11,8 +11,25 @@ set(TGT "${FW}/target")
 set(SLIPEST_TARGET_OPT "-O3" CACHE STRING "optimisation flags of the target kernels (per-frame code uses -Os)")
 set(VECTORS_BIN "${SLIPEST_BUNDLE}/vectors.bin")
 set(CMAKE_C_FLAGS_RELEASE "${SLIPEST_TARGET_OPT}")
+# without its emulator a target would build, but register none of its QEMU tests nor the golden
+# comparison: the bit-exact and byte-order evidence would vanish with a green ctest. So a missing
+# emulator stops the configure, naming the Debian package (scripts/apt-packages.txt), unless
+# -DSLIPEST_ALLOW_NO_EMULATOR=ON asks for a link-only build.
+option(SLIPEST_ALLOW_NO_EMULATOR "configure a target whose QEMU is missing (no QEMU tests are registered)" OFF)
 if(NOT SLIPEST_TARGET_QEMU STREQUAL "none")  # "none": link-only target
-  find_program(SLIPEST_QEMU ${SLIPEST_TARGET_QEMU})
+  # on PATH only, as the Python driver and the tests look it up (not CMake's own system folders)
+  find_program(SLIPEST_QEMU ${SLIPEST_TARGET_QEMU} NO_CMAKE_SYSTEM_PATH NO_CMAKE_INSTALL_PREFIX)
+  if(NOT SLIPEST_QEMU AND NOT SLIPEST_ALLOW_NO_EMULATOR)
+    file(STRINGS "${CMAKE_SOURCE_DIR}/scripts/apt-packages.txt" qemu_pkg
+         REGEX "^[^# ]+( .*)? ${SLIPEST_TARGET_QEMU}( |$)")
+    string(REGEX REPLACE " .*" "" qemu_pkg "${qemu_pkg}")
+    if(NOT qemu_pkg)
+      set(qemu_pkg "unknown (not in scripts/apt-packages.txt)")
+    endif()
+    message(FATAL_ERROR "${SLIPEST_TARGET_NAME}: emulator ${SLIPEST_TARGET_QEMU} not found: install the Debian "
+                        "package ${qemu_pkg} (scripts/setup.sh), or configure with -DSLIPEST_ALLOW_NO_EMULATOR=ON "
+                        "for a build without its QEMU tests")
+  endif()
 endif()
 
 if(NOT SLIPEST_TARGET_INTEGER_ONLY)

@@ -2,13 +2,13 @@
 CAN codec, include paths, and a helper that runs a tool and keeps its output."""
 from __future__ import annotations
 
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 from fleetlab.host_tools.firmware.build import Result, execute
 from ..paths import default_bundle, repo_root
+from ..system_tools import need  # noqa: F401  (the analysers' one way to find a tool: MissingTool names its package)
 
 REPO = repo_root()
 FW = REPO / "firmware_c"
@@ -40,14 +40,6 @@ def generate_dbc(out_dir: Path) -> Path:
 
 def include_dirs(bundle: Path, gen_dir: Path) -> list[Path]:
     return [FW / "include", Path(bundle), gen_dir]
-
-
-def need(tool: str) -> str:
-    """Path of `tool`, or a clear error naming the package that provides it."""
-    path = shutil.which(tool)
-    if path is None:
-        raise RuntimeError(f"{tool} not found: install it (scripts/apt-packages.txt, scripts/setup.sh)")
-    return path
 
 
 def run(cmd: list[str], *, check: bool = False, cwd: Path | None = None, timeout: float = 1800) -> Result:

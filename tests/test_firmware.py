@@ -26,8 +26,11 @@ from cobs import cobs
 
 from fleetlab.data.features import featurise
 from fleetlab.data.features_int import CHANNEL_LSB, FLAG_GAP, FLAG_INVALID, featurise_int
-from fleetlab.host_tools.firmware.bench import REPO, library_footprint, target_costs
+from fleetlab.host_tools.firmware.bench import library_footprint, target_costs
 from fleetlab.host_tools.firmware.build import cmake_build
+from fleetlab.paths import repo_root
+
+REPO = repo_root()
 
 BUNDLE = REPO / "firmware_c" / "bundles" / "example"
 DBC = cantools.database.load_file(str(REPO / "dbc" / "slipest.dbc"))

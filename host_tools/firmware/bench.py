@@ -32,7 +32,6 @@ import argparse
 import json
 import os
 import re
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -44,10 +43,8 @@ import numpy as np
 
 from . import targets as target_registry
 from .build import cmake_build, run, run_image, run_record
-from ...paths import default_bundle, repo_root
-
-REPO = repo_root()
-DEFAULT_BUNDLE = default_bundle()
+from ...errors import need
+from ...paths import build_root, default_bundle, repo_root
 from .targets import Target
 
 _run = run  # the host bench binary is run through the same helper
@@ -304,9 +301,10 @@ def _goal_line(co_node: dict) -> str:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--bundle", type=Path, default=DEFAULT_BUNDLE, help="export bundle (default: the example bundle)")
-    parser.add_argument("--build-dir", type=Path, default=REPO / "build" / "bench",
-                        help="where the host and target builds go (reused when present)")
+    parser.add_argument("--bundle", type=Path, default=None, help="export bundle (default: the example bundle)")
+    parser.add_argument("--build-dir", type=Path, default=None,
+                        help="where the host and target builds go, reused when present (default: bench/ under "
+                             "the build root: build/ in a clone, else the user's cache folder)")
     parser.add_argument("--iterations", type=int, default=2000,
                         help="onnxruntime/torch inferences per timing round (3 rounds, interleaved with the C bench)")
     parser.add_argument("--target", default=None,
@@ -323,7 +321,8 @@ def _list_targets(as_json: bool) -> int:
         return 0
     for name, t in found.items():
         flags = ", ".join([t.endian + "-endian", "FPU" if t.fpu else "no FPU"] + (["integer-only"] if t.integer_only else []))
-        print(f"{name:14s} {t.description} [{flags}] -- {t.emulator}  ({t.file.relative_to(REPO) if t.file.is_relative_to(REPO) else t.file})")
+        tree = repo_root()
+        print(f"{name:14s} {t.description} [{flags}] -- {t.emulator}  ({t.file.relative_to(tree) if t.file.is_relative_to(tree) else t.file})")
     return 0
 
 
@@ -339,15 +338,13 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"target {names[-1]} is link-only (no emulator): nothing to measure")
     if ref not in names:
         names.insert(0, ref)  # the m4_* keys (and the figures) are always measured
-    bundle = Path(args.bundle)
+    bundle = Path(args.bundle or default_bundle())
     if not (bundle / "vectors.bin").is_file():
         raise FileNotFoundError(f"{bundle}: no vectors.bin (not an export bundle?)")
-    if shutil.which("cmake") is None:
-        raise OSError("cmake not found (scripts/setup.sh installs it)")
+    args.build_dir = Path(args.build_dir or build_root() / "bench")
+    need("cmake", "fleetlab bench c")
     for name in names:
-        for tool in found[name].tools:
-            if shutil.which(tool) is None:
-                raise OSError(f"{tool} not found for target {name} (scripts/setup.sh installs it)")
+        found[name].need_tools(f"fleetlab bench c --target {name}")
     steps = tqdm(total=2 + 2 * len(names), desc="bench c", disable=args.json or not sys.stderr.isatty())
     host = cmake_build(args.build_dir / "host", bundle)
     steps.update()

@@ -15,18 +15,16 @@ import shlex
 from dataclasses import dataclass
 from pathlib import Path
 
+from ...errors import FleetlabError, need
 from ...paths import repo_root
 
-REPO = repo_root()
-
-TARGET_DIR = REPO / "firmware_c" / "cmake"
 ENV_DIRS = "FLEETLAB_TARGET_DIRS"
 _SET = re.compile(r"^\s*set\(\s*SLIPEST_TARGET_([A-Z_]+)\s+(.*?)\s*\)\s*(?:#.*)?$", re.M)
 REQUIRED = ("NAME", "DESCRIPTION", "COMPILER", "ENDIAN", "FPU", "INTEGER_ONLY", "QEMU", "QEMU_MODE", "REPORT", "VECTORS",
             "COUNTER")
 
 
-class TargetError(ValueError):
+class TargetError(FleetlabError, ValueError):
     """A target file that cannot be read as a target record."""
 
 
@@ -52,6 +50,7 @@ class Target:
     counter: str  # instruction counter of the cost image: "systick" | "instret" | "trace" | "none"
     reference: bool = False  # the target whose figures are quoted first (bench c's m4_* keys, the demo)
     cpu_flags: tuple[str, ...] = ()  # SLIPEST_CPU_FLAGS: the compiler's CPU/FPU/ABI options (stack analysis reuses them)
+    packages: tuple[str, ...] = ()  # SLIPEST_TARGET_PACKAGES (optional): Debian packages of `tools`, in order
 
     @property
     def toolchain_file(self) -> Path:
@@ -66,6 +65,11 @@ class Target:
     def tools(self) -> tuple[str, ...]:
         """Executables a build and run of this target need (compiler, emulator)."""
         return (self.compiler, self.qemu) if self.runs else (self.compiler,)
+
+    def need_tools(self, needed_for: str) -> None:
+        """errors.MissingTool, naming `needed_for` and the tool's Debian package, if a tool is not on PATH."""
+        for tool, package in zip(self.tools, self.packages or (None,) * len(self.tools)):
+            need(tool, needed_for, package)
 
     @property
     def emulator(self) -> str:
@@ -108,13 +112,13 @@ def parse_target_file(path: Path) -> Target | None:
                   compiler=fields["COMPILER"], reference=_on(fields.get("REFERENCE", "OFF")), endian=fields["ENDIAN"], fpu=_on(fields["FPU"]), integer_only=_on(fields["INTEGER_ONLY"]),
                   qemu=fields["QEMU"], qemu_mode=fields["QEMU_MODE"], qemu_machine=fields.get("QEMU_MACHINE", "none"),
                   qemu_cpu=fields.get("QEMU_CPU", ""), report=fields["REPORT"], vectors=fields["VECTORS"],
-                  counter=fields["COUNTER"], cpu_flags=tuple(shlex.split(m.group(1)) if (m := _CPU_FLAGS.search(
+                  counter=fields["COUNTER"], packages=tuple(fields.get("PACKAGES", "").split()), cpu_flags=tuple(shlex.split(m.group(1)) if (m := _CPU_FLAGS.search(
                       Path(path).read_text())) else ()))
 
 
 def target_dirs() -> list[Path]:
     extra = [Path(p) for p in os.environ.get(ENV_DIRS, "").split(os.pathsep) if p.strip()]
-    return [TARGET_DIR, *extra]
+    return [repo_root() / "firmware_c" / "cmake", *extra]
 
 
 def discover() -> dict[str, Target]:

@@ -14,7 +14,8 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .sources import EXAMPLE_BUNDLE, REPO, need, rel, run
+from ..paths import build_root, default_bundle, repo_root
+from .sources import need, rel, run
 
 GOAL_LINES = 95.0
 GOAL_BRANCHES = 90.0
@@ -55,10 +56,11 @@ class CoverageResult:
                               self.ctest_summary, self.gcovr_version)
 
 
-def measure(build: Path, bundle: Path = EXAMPLE_BUNDLE) -> CoverageResult:
+def measure(build: Path, bundle: Path | None = None) -> CoverageResult:
+    tree = repo_root()
     need("gcov")
     build = Path(build)
-    run(["cmake", "-S", REPO, "-B", build, f"-DSLIPEST_BUNDLE={Path(bundle).resolve()}",
+    run(["cmake", "-S", tree, "-B", build, f"-DSLIPEST_BUNDLE={Path(bundle or default_bundle()).resolve()}",
          f"-DPython3_EXECUTABLE={sys.executable}", "-DCMAKE_BUILD_TYPE=Debug",
          "-DCMAKE_C_FLAGS=--coverage -O0", "-DCMAKE_EXE_LINKER_FLAGS=--coverage",
          "-DCMAKE_SHARED_LINKER_FLAGS=--coverage"], check=True)
@@ -70,17 +72,17 @@ def measure(build: Path, bundle: Path = EXAMPLE_BUNDLE) -> CoverageResult:
     gen = build / "generated"
     out = build / "coverage.json"
     # gcovr resolves gcov's working directory below --root: the build directory must be in the repo
-    if not build.resolve().is_relative_to(REPO):
-        raise ValueError(f"coverage build directory {build} must lie inside {REPO} (e.g. build/coverage)")
-    run([sys.executable, "-m", "gcovr", "--root", REPO, "--object-directory", build,
-         "--filter", str(REPO / "firmware_c" / "src"), "--filter", str(gen),
-         "--json", str(out), str(build / "CMakeFiles" / "slipest_obj.dir")], check=True, cwd=REPO)
+    if not build.resolve().is_relative_to(tree):
+        raise ValueError(f"coverage build directory {build} must lie inside {tree} (e.g. build/coverage)")
+    run([sys.executable, "-m", "gcovr", "--root", tree, "--object-directory", build,
+         "--filter", str(tree / "firmware_c" / "src"), "--filter", str(gen),
+         "--json", str(out), str(build / "CMakeFiles" / "slipest_obj.dir")], check=True, cwd=tree)
     version = run([sys.executable, "-m", "gcovr", "--version"]).stdout.splitlines()[0]
     data = json.loads(out.read_text())
     files = []
     for entry in data["files"]:
         path = Path(entry["file"])
-        path = path if path.is_absolute() else REPO / path
+        path = path if path.is_absolute() else tree / path
         lines = [l for l in entry["lines"] if not l.get("gcovr/noncode", False)]
         # gcovr may list a line once per function instance; keep one record per line number
         by_line: dict[int, dict] = {}
@@ -113,10 +115,10 @@ def table(res: CoverageResult) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m fleetlab.assurance.coverage", description=__doc__.split("\n")[0])
-    ap.add_argument("--bundle", type=Path, default=EXAMPLE_BUNDLE)
-    ap.add_argument("--build", type=Path, default=REPO / "build" / "coverage")
+    ap.add_argument("--bundle", type=Path, default=None, help="export bundle (default: the example bundle)")
+    ap.add_argument("--build", type=Path, default=None, help="build directory (default: coverage/ under the build root)")
     args = ap.parse_args(argv)
-    res = measure(args.build, args.bundle)
+    res = measure(args.build or build_root() / "coverage", args.bundle)
     print(table(res))
     print(f"statements {res.line_pct:.1f} % (goal {GOAL_LINES}), branches {res.branch_pct:.1f} % (goal {GOAL_BRANCHES})")
     return 0

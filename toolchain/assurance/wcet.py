@@ -20,7 +20,7 @@ from pathlib import Path
 from ..host_tools.firmware import targets as target_registry
 from ..host_tools.firmware.bench import parse_kv
 from ..host_tools.firmware.build import cmake_build, run_image
-from .sources import EXAMPLE_BUNDLE, REPO
+from ..paths import build_root
 
 IMAGE = "slipest_wcet_target_q.elf"
 # (function, key in the image's output, overhead key, what the cases are)
@@ -57,7 +57,7 @@ def parse(text: str) -> list[WorstCase]:
     return rows
 
 
-def measure(build: Path, bundle: Path = EXAMPLE_BUNDLE, target: str | None = None) -> tuple[str, list[WorstCase]]:
+def measure(build: Path, bundle: Path | None = None, target: str | None = None) -> tuple[str, list[WorstCase]]:
     """Build the worst-case image for `target` (a SysTick target) and run it; (target description, rows)."""
     t = target_registry.get(target) if target else target_registry.reference()
     if t.counter != "systick":
@@ -82,12 +82,12 @@ def table(rows: list[WorstCase]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m fleetlab.assurance.wcet", description=__doc__.split("\n")[0])
-    ap.add_argument("--bundle", type=Path, default=EXAMPLE_BUNDLE)
+    ap.add_argument("--bundle", type=Path, default=None, help="export bundle (default: the example bundle)")
     ap.add_argument("--target", default=None, help="SysTick CPU target (default: the reference target)")
     ap.add_argument("--build", type=Path, default=None, help="cross build directory (default: build/wcet-TARGET)")
     args = ap.parse_args(argv)
     name = args.target or target_registry.reference().name
-    desc, rows = measure(args.build or REPO / "build" / f"wcet-{name}", args.bundle, args.target)
+    desc, rows = measure(args.build or build_root() / f"wcet-{name}", args.bundle, args.target)
     print(f"Worst-case instruction counts on {desc} (qemu -icount, measured maximum, not a bound):")
     print(table(rows))
     return 0

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -71,18 +72,18 @@ def measure(build: Path, bundle: Path | None = None) -> CoverageResult:
     summary = next((l for l in tests.stdout.splitlines() if "tests passed" in l), "")
     gen = build / "generated"
     out = build / "coverage.json"
-    # gcovr resolves gcov's working directory below --root: the build directory must be in the repo
-    if not build.resolve().is_relative_to(tree):
-        raise ValueError(f"coverage build directory {build} must lie inside {tree} (e.g. build/coverage)")
-    run([sys.executable, "-m", "gcovr", "--root", tree, "--object-directory", build,
+    # gcovr resolves gcov's working directory below --root: the folder holding both the sources and the build
+    # (the clone for build/coverage; for an installed wheel, whatever holds its tree and the user's cache)
+    root = Path(os.path.commonpath([tree, build.resolve()]))
+    run([sys.executable, "-m", "gcovr", "--root", root, "--object-directory", build,
          "--filter", str(tree / "firmware_c" / "src"), "--filter", str(gen),
-         "--json", str(out), str(build / "CMakeFiles" / "slipest_obj.dir")], check=True, cwd=tree)
+         "--json", str(out), str(build / "CMakeFiles" / "slipest_obj.dir")], check=True, cwd=root)
     version = run([sys.executable, "-m", "gcovr", "--version"]).stdout.splitlines()[0]
     data = json.loads(out.read_text())
     files = []
     for entry in data["files"]:
         path = Path(entry["file"])
-        path = path if path.is_absolute() else tree / path
+        path = path if path.is_absolute() else root / path
         lines = [l for l in entry["lines"] if not l.get("gcovr/noncode", False)]
         # gcovr may list a line once per function instance; keep one record per line number
         by_line: dict[int, dict] = {}

@@ -55,7 +55,7 @@ def test_wheel_carries_the_c_tree(wheel):
                  "firmware_c/eva/eva_driver.c", "export/c/check_vectors.c"):
         assert f"fleetlab/c_tree/{must}" in names, must
     assert "fleetlab/dbc/slipest.dbc" in names and "fleetlab/errors.py" in names
-    assert not any(re.search(r"\.(o|a|so|pyc)$", n) for n in names)
+    assert not any(re.search(r"\.(o|a|so|pyc|dump|ctu-info)$", n) for n in names)
 
 
 @pytest.fixture(scope="module")

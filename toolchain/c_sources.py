@@ -25,7 +25,8 @@ C_TREE = (
     "canopen_od/generate.py",
     "export/c",
 )
-_SKIP = ("*.pyc", "*.o", "*.a", "*.so")  # build leftovers, never sources
+# build and analysis leftovers, never sources (cppcheck leaves *.dump / *.ctu-info beside the files it read)
+_SKIP = ("*.pyc", "*.o", "*.a", "*.so", "*.dump", "*.ctu-info")
 
 
 def tree_files(root: Path) -> list[Path]:

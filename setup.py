@@ -2,6 +2,7 @@
 fleetlab/c_tree, so that an installed fleetlab builds and runs the C estimator without a clone."""
 
 import runpy
+import shutil
 from pathlib import Path
 
 from setuptools import setup
@@ -15,7 +16,9 @@ class BuildPyWithCTree(build_py):
     def run(self):
         super().run()
         if not getattr(self, "editable_mode", False):  # an editable install reads the clone itself
-            c_sources["copy_tree"](ROOT, Path(self.build_lib) / "fleetlab" / "c_tree")
+            dest = Path(self.build_lib) / "fleetlab" / "c_tree"
+            shutil.rmtree(dest, ignore_errors=True)  # build_lib outlives a build: no file of an earlier one stays
+            c_sources["copy_tree"](ROOT, dest)
 
 
 setup(cmdclass={"build_py": BuildPyWithCTree},

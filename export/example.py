@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..models.train import EXPERT_EPOCHS
-from ..paths import default_bundle
+from fleetlab.models.train import EXPERT_EPOCHS
+from fleetlab.paths import default_bundle
 
 TRAIN_ROLES = ("earth", "target")
 N_VECTORS = 1200

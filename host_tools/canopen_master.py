@@ -17,7 +17,7 @@ import can
 import canopen
 import numpy as np
 
-from ..canopen_od import objects as od
+from fleetlab.canopen_od import objects as od
 from .wire.dbc import Frame, WindowEstimate, codec, telemetry_frames
 
 ACTIVE_MODEL, COMMAND, COUNTERS, SLOTS, STORE_COUNTERS, UPLOAD = (

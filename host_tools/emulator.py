@@ -20,8 +20,8 @@ import threading
 import time
 from pathlib import Path
 
-from ..errors import need
-from ..paths import build_root, default_bundle
+from fleetlab.errors import need
+from fleetlab.paths import build_root, default_bundle
 from .wire.dbc import DBC_PATH, dbc_path
 from .firmware.build import build_command, configure_command
 

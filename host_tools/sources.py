@@ -1,4 +1,4 @@
-"""Where streamed data comes from: the simulator, a bundle's test vectors, a CSV folder, a CAN log.
+"""Where streamed data comes from: the simulator, a bundle's test vectors, an imported log, a CSV folder, a CAN log.
 
 Telemetry sources give int16 raw samples (whole windows only, like the Python
 featuriser, which drops a trailing partial window); feature sources give int16
@@ -84,6 +84,30 @@ def csv_dir_source(path: Path | str) -> FeatureSource:
     return FeatureSource(f"csv({root}, {len(files)} files)", quantize_features(table.features))
 
 
+def imported_source(path: Path | str) -> TelemetrySource:
+    """The raw samples of a `fleetlab data import` folder (its `*.raw.npz`, in import order), back to back.
+
+    Each file holds whole windows only (the windows of its CSV, in order), so the estimator's
+    own windowing of the stream gives exactly the imported windows.
+    """
+    from fleetlab.data.contracts import DEFAULT_RATE_HZ
+    from fleetlab.data.log_import import RAW_SUFFIX, raw_files, read_raw
+
+    root = Path(path)
+    parts, traces = [], []
+    for f in raw_files(root):
+        samples, rate = read_raw(f)
+        if rate != DEFAULT_RATE_HZ or len(samples) % SAMPLES_PER_WINDOW:
+            raise ValueError(f"{f}: {len(samples)} samples at {rate:g} Hz are not whole windows of the estimator "
+                             f"({SAMPLES_PER_WINDOW} samples at {DEFAULT_RATE_HZ:g} Hz)")
+        if len(samples):
+            parts.append(quantize_samples(samples))
+            traces.append((f.name[: -len(RAW_SUFFIX)], len(samples) // SAMPLES_PER_WINDOW))
+    if not parts:
+        raise ValueError(f"{root}: no imported raw samples (*{RAW_SUFFIX}); make them with 'fleetlab data import'")
+    return TelemetrySource(f"import({root}, {len(parts)} files)", np.concatenate(parts).astype(np.int16), traces)
+
+
 def log_frames(path: Path | str) -> Iterator[tuple[Frame, float]]:
     """Frames of a python-can log (.log candump, .asc, .blf, .csv ...) with their timestamps."""
     import can
@@ -101,7 +125,7 @@ LOG_SUFFIXES = (".log", ".asc", ".blf", ".trc", ".mf4")
 
 
 def resolve(spec: str, seed: int, scale: float, bundle: Path | str | None) -> TelemetrySource | FeatureSource:
-    """`sim`, `vectors` (needs the bundle) or a CSV folder."""
+    """`sim`, `vectors` (needs the bundle), an imported-log folder (raw samples) or a CSV folder."""
     if spec == "sim":
         return sim_source(seed, scale)
     if spec == "vectors":
@@ -110,5 +134,8 @@ def resolve(spec: str, seed: int, scale: float, bundle: Path | str | None) -> Te
         return vectors_source(bundle)
     p = Path(spec)
     if p.is_dir():
-        return csv_dir_source(p)
-    raise ValueError(f"--source {spec!r}: expected 'sim', 'vectors' or a folder of window CSV files")
+        from fleetlab.data.log_import import REPORT_NAME
+
+        return imported_source(p) if (p / REPORT_NAME).exists() else csv_dir_source(p)
+    raise ValueError(f"--source {spec!r}: expected 'sim', 'vectors', a 'fleetlab data import' folder (raw samples "
+                     "replayed) or a folder of window CSV files")

@@ -223,3 +223,21 @@ def test_worst_case_parser_rejects_incomplete_output():
 
     with pytest.raises(ValueError, match="calib_ticks"):
         wcet.parse("calib_instructions=2000000\nreps=16\n")
+
+
+def test_assure_runs_one_check_as_a_subcommand(capsys):
+    """`fleetlab assure stack` is the stack check alone (it replaced `python -m fleetlab.assurance.stack`)."""
+    from fleetlab.cli import main
+
+    assert main(["assure", "--bundle", str(BUNDLE), "stack"]) == 0
+    out = capsys.readouterr().out
+    assert "call graph acyclic: no recursion" in out and "| slipest_infer_q |" in out
+
+
+def test_assure_refuses_mixed_or_missing_options(capsys):
+    from fleetlab.cli import main
+
+    assert main(["assure"]) == 1
+    assert "--out DIR is required for the report" in capsys.readouterr().err
+    assert main(["assure", "--out", "x", "--no-eva", "stack"]) == 1
+    assert "--out, --no-eva: options of the full report, not of 'assure stack'" in capsys.readouterr().err

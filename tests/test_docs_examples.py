@@ -48,3 +48,16 @@ def test_documented_commands_parse():
         except SystemExit:
             raise AssertionError(f"{name}: '{line}' does not parse") from None
         assert getattr(args, "_module", None), f"{name}: '{line}' names no subcommand"
+
+
+def test_architecture_doc_maps_every_package_folder():
+    """docs/architecture.md and the README's Layout name every folder that pyproject maps into `fleetlab`."""
+    import tomllib
+
+    mapping = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]["package-dir"]
+    arch = (REPO / "docs" / "architecture.md").read_text()
+    readme = (REPO / "README.md").read_text()
+    assert "docs/architecture.md" in readme
+    for name, folder in mapping.items():
+        assert f"| `{folder}/` | `{name}` |" in arch, f"docs/architecture.md: no layout row for {folder}/ ({name})"
+        assert f"`{folder}/`" in readme, f"README Layout does not name {folder}/"

@@ -26,8 +26,8 @@ from cobs import cobs
 
 from fleetlab.data.features import featurise
 from fleetlab.data.features_int import CHANNEL_LSB, FLAG_GAP, FLAG_INVALID, featurise_int
-from fleetlab.host_tools.firmware.bench import library_footprint, target_costs
 from fleetlab.host_tools.firmware.build import cmake_build
+from fleetlab.host_tools.firmware.measure import library_footprint, target_costs
 from fleetlab.paths import repo_root
 
 REPO = repo_root()
@@ -117,17 +117,23 @@ def test_m4_cost_and_size_are_measured(builds):
     assert sum(o["flash"] for o in can_fw.values()) <= 6144
 
 
-def test_bench_c_prints_one_json_object(builds, capsys):
-    """`fleetlab bench c --json` end to end, reusing this module's host and M4 builds."""
+def test_bench_c_prints_one_json_object(builds, capsys, monkeypatch):
+    """`fleetlab bench c --json` end to end, reusing this module's host and M4 builds; the reference
+    target's cost images run once (its row and its figures share the measurement)."""
     import argparse
     import json
 
     from fleetlab.host_tools.firmware import bench as bench_c
+    from fleetlab.host_tools.firmware import measure
 
+    runs = []
+    counted = measure._counted_kv
+    monkeypatch.setattr(measure, "_counted_kv", lambda t, d, image: runs.append(image) or counted(t, d, image))
     parser = argparse.ArgumentParser()
     bench_c.add_arguments(parser)
     args = parser.parse_args(["--bundle", str(BUNDLE), "--build-dir", str(builds["root"]), "--iterations", "200", "--json"])
     assert bench_c.run(args) == 0
+    assert sorted(runs) == ["slipest_bench_target.elf", "slipest_bench_target_q.elf"]
     out = json.loads(capsys.readouterr().out)
     for key in ("host_ns_per_inference_q", "host_ns_per_inference_f32", "onnxruntime_ns_per_inference",
                 "torch_ns_per_inference", "speedup_vs_onnxruntime", "m4_instructions_per_inference_q",
@@ -143,7 +149,7 @@ def test_canopen_node_with_two_slots_on_m4(builds):
     the launch model provisioned into slot A through the store, boot on it, the fused model by SDO block
     download, activation, one window of RPDOs; its RAM and flash within the issue's goals (4 KB, 12 KB),
     flash measured by part; no built-in model linked. Also the same node built to authenticate images."""
-    from fleetlab.host_tools.firmware.bench import canopen_node_figures
+    from fleetlab.host_tools.firmware.figures import canopen_node_figures
 
     out = ctest(builds["cortex-m4"], "co_node")
     assert "PASS" in out and "image_bytes=" in out

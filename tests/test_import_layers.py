@@ -54,3 +54,92 @@ def test_an_upward_import_breaks_the_contract(tmp_path):
     r = _lint(tree)
     assert r.returncode != 0
     assert "fleetlab.models is not allowed to import fleetlab.evaluation" in r.stdout
+
+
+def _tree_with_crossing_imports(tmp_path: Path) -> Path:
+    """A copy of the folder mapping and the two scripts, with modules that break the folder rule."""
+    root = tmp_path / "repo"
+    (root / "scripts").mkdir(parents=True)
+    for name in ("fix_imports.py", "lint_imports.py"):
+        (root / "scripts" / name).write_text((REPO / "scripts" / name).read_text())
+    (root / "pyproject.toml").write_text((REPO / "pyproject.toml").read_text())
+    files = {
+        "toolchain/__init__.py": "",
+        "toolchain/paths.py": "A = 1\n",
+        "toolchain/cli/__init__.py": "",
+        "toolchain/cli/run.py": ("from fleetlab.paths import A  # same folder, written absolute\n"
+                                 "from .. import export\n"
+                                 "from fleetlab import paths as p\n"),
+        "host_tools/__init__.py": "",
+        "host_tools/b.py": "C = 2\n",
+        "host_tools/wire/__init__.py": "",
+        "host_tools/wire/codec.py": ("def f():\n"
+                                     "    from ...paths import (\n"
+                                     "        A,  # toolchain/paths.py, not host_tools/\n"
+                                     "    )\n"
+                                     "    from fleetlab.host_tools.b import C\n"
+                                     "    from ..b import C as D; from fleetlab.export import x\n"
+                                     "    return A, C, D, x\n"),
+        "export/__init__.py": "x = 3\n",
+    }
+    for rel, text in files.items():
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_text(text)
+    return root
+
+
+def test_folder_rule_is_checked_and_fixed_idempotently(tmp_path):
+    root = _tree_with_crossing_imports(tmp_path)
+    fix = [sys.executable, str(root / "scripts" / "fix_imports.py")]
+    check = subprocess.run([*fix, "--check"], capture_output=True, text=True)
+    assert check.returncode == 1
+    assert "host_tools/wire/codec.py:2: from ...paths import -> from fleetlab.paths import" in check.stdout
+    assert "toolchain/cli/run.py:1: from fleetlab.paths import -> from ..paths import" in check.stdout
+    assert "5 import(s) break the folder rule" in check.stdout
+    lint = subprocess.run([sys.executable, str(root / "scripts" / "lint_imports.py")], capture_output=True, text=True)
+    assert lint.returncode == 1 and "run python scripts/fix_imports.py" in lint.stdout
+
+    assert subprocess.run(fix, capture_output=True, text=True).returncode == 0
+    codec = (root / "host_tools/wire/codec.py").read_text()
+    assert "from fleetlab.paths import (\n        A,  # toolchain/paths.py" in codec
+    assert "    from ..b import C\n" in codec and "from ..b import C as D; from fleetlab.export import x" in codec
+    run = (root / "toolchain/cli/run.py").read_text()
+    assert run == "from ..paths import A  # same folder, written absolute\nfrom fleetlab import export\nfrom .. import paths as p\n"
+
+    before = {p: p.read_text() for p in root.rglob("*.py")}
+    again = subprocess.run(fix, capture_output=True, text=True)
+    assert again.returncode == 0 and "rewrote 0 import(s)" in again.stdout
+    assert {p: p.read_text() for p in root.rglob("*.py")} == before
+    assert subprocess.run([*fix, "--check"], capture_output=True, text=True).returncode == 0
+
+
+def test_the_tree_follows_the_folder_rule():
+    r = subprocess.run([sys.executable, str(REPO / "scripts" / "fix_imports.py"), "--check"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout
+
+
+# Modules outside toolchain/cli/ that still build argument parsers, and why. The list only shrinks:
+# a new command's options belong in toolchain/cli/.
+ARGPARSE_OUTSIDE_CLI = {
+    "dbc/layout.py": "run by CMake as a script, without fleetlab installed",
+    "export/erf_table.py": "maintainer script (python -m), regenerates the GELU erf header",
+    "export/example.py": "maintainer script (python -m), regenerates the example bundle",
+    "host_tools/firmware/bench.py": "fleetlab bench c options (not yet moved)",
+    "host_tools/wire/dbc.py": "the shared --dbc option (not yet moved)",
+    "toolchain/data/bench.py": "fleetlab bench data options (not yet moved)",
+    "toolchain/data/import_bench.py": "fleetlab bench import options (the bench modules' pattern, not yet moved)",
+    "toolchain/data/info.py": "fleetlab data info options (not yet moved)",
+    "toolchain/data/simulator/cli.py": "fleetlab simulate (not yet moved)",
+    "toolchain/demo.py": "fleetlab demo (not yet moved)",
+    "toolchain/fusion/bench.py": "fleetlab bench fusion options (not yet moved)",
+}
+
+
+def test_argparse_stays_in_the_cli_package():
+    config = tomllib.loads((REPO / "pyproject.toml").read_text())
+    folders = config["tool"]["setuptools"]["package-dir"].values()
+    users = {str(p.relative_to(REPO)) for f in folders for p in (REPO / f).rglob("*.py")
+             if "__pycache__" not in p.parts and "argparse" in p.read_text()}
+    outside = {u for u in users if not u.startswith("toolchain/cli/")}
+    assert outside <= ARGPARSE_OUTSIDE_CLI.keys(), f"argparse outside toolchain/cli/: {sorted(outside - ARGPARSE_OUTSIDE_CLI.keys())}"
+    assert not any(u.startswith("toolchain/assurance/") for u in users)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fleetlab.host_tools.firmware import bench, build, targets
+from fleetlab.host_tools.firmware import bench, build, figures, targets
 from fleetlab.paths import repo_root
 
 REPO = repo_root()
@@ -68,6 +68,14 @@ def test_a_new_target_file_is_discovered_without_other_changes(tmp_path, capsys,
     toy.write_text(toy.read_text().replace("set(SLIPEST_TARGET_ENDIAN big)\n", ""))
     with pytest.raises(targets.TargetError, match=r"toy-cpu.cmake.*SLIPEST_TARGET_ENDIAN"):
         targets.discover()
+
+
+def test_figure_keys_come_from_the_reference_target():
+    """bench c keys the reference target's figures by its `key` (m4_* for cortex-m4); keys are distinct."""
+    found = targets.discover()
+    assert targets.reference().key == "m4"
+    assert len({t.key for t in found.values()}) == len(found)
+    assert all(re.fullmatch(r"[a-z0-9_]+", t.key) for t in found.values())
 
 
 def test_no_cpu_is_named_in_code_outside_the_registry():
@@ -178,7 +186,7 @@ def test_bench_counts_instructions_without_systick(cross_builds, name):
     """`bench c --target` figures where there is no SysTick: the exec trace (user-mode PowerPC, bare-metal
     SPARC) and minstret under -icount (RISC-V); integer-only targets have no float figure."""
     t, bdir = _built(cross_builds, name)
-    row = bench.target_figures(t, bdir)
+    row = figures.target_figures(t, bdir)
     assert 1_000 < row["instructions_per_inference_q"] < 20_000, row
     assert 1_000 < row["instructions_per_sample_node_slcan"] < 50_000, row
     assert (row["instructions_per_inference_f32"] is None) == t.integer_only

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .fusion.acomerge import AcoMergeConfig
-from .host_tools.firmware import build as fw_build
-from .host_tools.firmware import targets as cpu_targets
+from fleetlab.host_tools.firmware import build as fw_build
+from fleetlab.host_tools.firmware import targets as cpu_targets
 from .models.train import EXPERT_EPOCHS
 from .paths import repo_root
 

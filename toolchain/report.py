@@ -15,7 +15,7 @@ from pathlib import Path
 
 from . import __version__
 from .data.contracts import CLASS_NAMES
-from .host_tools.firmware import targets as cpu_targets
+from fleetlab.host_tools.firmware import targets as cpu_targets
 
 
 def _img(path: Path, out: Path, alt: str) -> str:

@@ -13,8 +13,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from ...errors import need
-from ...paths import repo_root
+from fleetlab.errors import need
+from fleetlab.paths import repo_root
 from .targets import Target, get
 
 

@@ -15,8 +15,8 @@ import shlex
 from dataclasses import dataclass
 from pathlib import Path
 
-from ...errors import FleetlabError, need
-from ...paths import repo_root
+from fleetlab.errors import FleetlabError, need
+from fleetlab.paths import repo_root
 
 ENV_DIRS = "FLEETLAB_TARGET_DIRS"
 _SET = re.compile(r"^\s*set\(\s*SLIPEST_TARGET_([A-Z_]+)\s+(.*?)\s*\)\s*(?:#.*)?$", re.M)
@@ -48,7 +48,7 @@ class Target:
     report: str  # how the image reports: "semihosting" | "stdio" | "uart" (bare metal, QEMU serial on stdio)
     vectors: str  # how it gets vectors.bin: "semihosting" | "file" | "embed"
     counter: str  # instruction counter of the cost image: "systick" | "instret" | "trace" | "none"
-    reference: bool = False  # the target whose figures are quoted first (bench c's m4_* keys, the demo)
+    reference: bool = False  # the target whose figures are quoted first (bench c's <key>_* figures, the demo)
     cpu_flags: tuple[str, ...] = ()  # SLIPEST_CPU_FLAGS: the compiler's CPU/FPU/ABI options (stack analysis reuses them)
     packages: tuple[str, ...] = ()  # SLIPEST_TARGET_PACKAGES (optional): Debian packages of `tools`, in order
 
@@ -79,6 +79,11 @@ class Target:
         if self.qemu_mode == "system":
             return f"QEMU {self.qemu_machine}"
         return f"{self.qemu} user mode"
+
+    @property
+    def key(self) -> str:
+        """Short name in figure keys: the name without its "cortex-" family word, "-" as "_" (cortex-m4: m4)."""
+        return self.name.removeprefix("cortex-").replace("-", "_")
 
     @property
     def label(self) -> str:

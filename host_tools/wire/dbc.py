@@ -24,8 +24,8 @@ from pathlib import Path
 import cantools
 import numpy as np
 
-from ...dbc import DBC_PATH, check_layout
-from ...dbc import load as _load
+from fleetlab.dbc import DBC_PATH, check_layout
+from fleetlab.dbc import load as _load
 
 DBC_ENV = "FLEETLAB_DBC"  # environment variable naming another DBC (other CAN IDs, same layout)
 

@@ -2,13 +2,11 @@
 configuration and its disabled checks are in firmware_c/.clang-tidy), gcc -fanalyzer, the strict
 warning set, and Frama-C EVA (sound value analysis) through firmware_c/eva/eva_driver.c.
 
-    python -m fleetlab.assurance.analysers [--bundle DIR] [--eva]
+    fleetlab assure analysers [--bundle DIR] [--eva]
 """
 from __future__ import annotations
 
-import argparse
 import re
-import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -128,27 +126,3 @@ def frama_c_eva(bundle: Path | None = None, entries: list[str] | None = None,
         return results
 
     return _with_sources(bundle, go)
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fleetlab.assurance.analysers", description=__doc__.split("\n")[0])
-    ap.add_argument("--bundle", type=Path, default=None, help="export bundle (default: the example bundle)")
-    ap.add_argument("--eva", action="store_true", help="also run Frama-C EVA")
-    args = ap.parse_args(argv)
-    status = 0
-    for fn in (strict_warnings, gcc_analyzer, clang_tidy):
-        r = fn(args.bundle)
-        print(f"{r.name}: {len(r.findings)} findings ({r.seconds:.1f} s)")
-        for f in r.findings:
-            print("  " + f)
-        status |= not r.clean
-    if args.eva:
-        for e in frama_c_eva(args.bundle):
-            print(f"frama-c eva {e.entry}: {len(e.alarms)} alarms ({e.seconds:.1f} s)")
-            for a in e.alarms:
-                print("  " + a)
-    return status
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -4,18 +4,17 @@ A host build with ``--coverage -O0`` runs ctest; gcovr then summarises the libra
 (firmware_c/src/*.c and the generated codec), not the tests. Lines that stay uncovered are
 listed so the report can say why.
 
-    python -m fleetlab.assurance.coverage [--bundle DIR] [--build DIR]
+    fleetlab assure coverage [--bundle DIR] [--build DIR]
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..paths import build_root, default_bundle, repo_root
+from ..paths import default_bundle, repo_root
 from .sources import need, rel, run
 
 GOAL_LINES = 95.0
@@ -112,18 +111,3 @@ def table(res: CoverageResult) -> str:
     rows.append(f"| **hand-written (src/*.c)** | **{hw.line_pct:.1f} %** | **{hw.branch_pct:.1f} %** | |")
     rows.append(f"| **total with generated codec** | **{res.line_pct:.1f} %** | **{res.branch_pct:.1f} %** | |")
     return "\n".join(rows)
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fleetlab.assurance.coverage", description=__doc__.split("\n")[0])
-    ap.add_argument("--bundle", type=Path, default=None, help="export bundle (default: the example bundle)")
-    ap.add_argument("--build", type=Path, default=None, help="build directory (default: coverage/ under the build root)")
-    args = ap.parse_args(argv)
-    res = measure(args.build or build_root() / "coverage", args.bundle)
-    print(table(res))
-    print(f"statements {res.line_pct:.1f} % (goal {GOAL_LINES}), branches {res.branch_pct:.1f} % (goal {GOAL_BRANCHES})")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

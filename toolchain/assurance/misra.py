@@ -3,15 +3,13 @@
 The rule texts are licensed and not shipped, so findings carry rule numbers only. Each finding is
 keyed by (rule, file); ``firmware_c/MISRA_DEVIATIONS.md`` records, per key, how many findings its
 permit covers. Any finding beyond the recorded count, or of a rule without a permit, is unrecorded
-and fails the check (``python -m fleetlab.assurance.misra`` exits 1 and lists them).
+and fails the check (``fleetlab assure misra`` exits 1 and lists them).
 
-    python -m fleetlab.assurance.misra [--bundle DIR] [--table]   (--table prints the counts table)
+    fleetlab assure misra [--bundle DIR] [--table]   (--table prints the counts table)
 """
 from __future__ import annotations
 
-import argparse
 import re
-import sys
 import tempfile
 from collections import Counter
 from dataclasses import dataclass, field
@@ -121,25 +119,3 @@ def counts_table(res: MisraResult) -> str:
     for (rule, file), n in sorted(res.findings.items(), key=lambda kv: (_rule_key(kv[0][0]), kv[0][1])):
         rows.append(f"| {rule} | {file} | {n} | MD-{rule} |")
     return "\n".join(rows)
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fleetlab.assurance.misra", description=__doc__.split("\n")[0])
-    ap.add_argument("--bundle", type=Path, default=None, help="export bundle (default: the example bundle)")
-    ap.add_argument("--table", action="store_true", help="print the findings as a deviations counts table")
-    args = ap.parse_args(argv)
-    res = check(args.bundle)
-    if args.table:
-        print(counts_table(res))
-        return 0
-    print(f"{res.version}: {res.total} MISRA findings in {len(res.by_rule())} rules; "
-          f"{len(res.unrecorded)} unrecorded (rule, file) keys; {len(res.stale)} stale records")
-    for rule, file, n, rec in res.unrecorded:
-        print(f"UNRECORDED rule {rule} in {file}: {n} found, {rec} recorded; lines {res.lines[(rule, file)]}")
-    for rule, file, n, rec in res.stale:
-        print(f"stale record rule {rule} in {file}: {n} found, {rec} recorded (lower the count)")
-    return 1 if res.unrecorded else 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -6,7 +6,6 @@ findings, a finding of clang-tidy / gcc -fanalyzer / the strict warnings, recurs
 """
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import re
@@ -14,9 +13,9 @@ import sys
 import time
 from pathlib import Path
 
-from ..host_tools.firmware import targets as target_registry
-from ..host_tools.firmware.bench import target_costs
-from ..host_tools.firmware.build import cmake_build
+from fleetlab.host_tools.firmware import targets as target_registry
+from fleetlab.host_tools.firmware.measure import target_costs
+from fleetlab.host_tools.firmware.build import cmake_build
 from . import analysers, coverage, misra, stack, wcet
 from ..paths import build_root, default_bundle, in_clone, repo_root
 from .sources import need, run, tool_version
@@ -24,16 +23,6 @@ from .sources import need, run, tool_version
 
 def default_fuzz_stats() -> list[Path]:
     return [build_root() / "fuzz-long" / "fuzz-stats.json", build_root() / "fuzz" / "fuzz-stats.json"]
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--bundle", type=Path, default=None, help="export bundle (default: the example bundle)")
-    p.add_argument("--out", type=Path, required=True, help="directory for assurance.md / assurance.html")
-    p.add_argument("--fuzz-stats", type=Path, default=None,
-                   help="fuzz-stats.json of the last campaign (default: build/fuzz-long, else build/fuzz)")
-    p.add_argument("--no-eva", action="store_true", help="skip Frama-C EVA")
-    p.add_argument("--no-target", action="store_true",
-                   help="skip the Cortex-M3/M4 builds (float-free archive check, measured stack and cost)")
 
 
 def _section(title: str, body: str) -> str:
@@ -76,26 +65,29 @@ def float_free(build_m3: Path, description: str) -> tuple[bool, str]:
     return ok, body
 
 
-def required_tools(args: argparse.Namespace) -> list[str]:
-    """Every host tool this run of assure calls, so that a missing one stops it before the long work (the
+def required_tools(eva: bool, target: bool) -> list[str]:
+    """Every host tool a run of assure calls, so that a missing one stops it before the long work (the
     target builds' compilers and emulators are checked beside it)."""
     tools = ["cmake", "ctest", "gcc", "gcov", "cppcheck", "clang-tidy", "arm-none-eabi-gcc"]
-    if not args.no_eva:
+    if eva:
         tools.append("frama-c")
-    if not args.no_target:
+    if target:
         tools.append("arm-none-eabi-nm")
-    return list(dict.fromkeys(tools))
+    return tools
 
 
-def assure(args: argparse.Namespace) -> int:
-    for tool in required_tools(args):
+def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, eva: bool = True,
+           target: bool = True) -> int:
+    """Run every check on `bundle` (default: the example bundle), write OUT/assurance.md and .html; 1 when a
+    gating check fails. `eva=False` skips Frama-C EVA, `target=False` the cross builds (float-free archive,
+    measured cost)."""
+    for tool in required_tools(eva, target):
         need(tool)
-    if not args.no_target:
+    if target:
         for t in (soft_float_target(), target_registry.reference()):
             t.need_tools(f"fleetlab assure (the {t.name} build; --no-target skips it)")
-    out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    bundle = (args.bundle or default_bundle()).resolve()
+    bundle = (bundle or default_bundle()).resolve()
     t_start = time.perf_counter()
     sections, summary, gating_ok = [], [], True
 
@@ -110,7 +102,7 @@ def assure(args: argparse.Namespace) -> int:
 
     # target builds: float-free archive, measured stack and cost
     measured = {}
-    if not args.no_target:
+    if target:
         work = build_root() / "assure"
         soft = soft_float_target()
         cmake_build(work / soft.name, bundle, target=soft)
@@ -145,7 +137,7 @@ def assure(args: argparse.Namespace) -> int:
         summary_row(r.name, f"{len(r.findings)} findings", r.clean)
         details += [f"- {f}" for f in r.findings]
     eva_text = "Frama-C EVA skipped (--no-eva)."
-    if not args.no_eva:
+    if eva:
         eva = analysers.frama_c_eva(bundle)
         eva_rows = ["| EVA entry (all int16 inputs) | Alarms | Seconds |", "|---|---:|---:|"]
         alarm_rows = [f"- {e.entry}: `{a}`" for e in eva for a in e.alarms]
@@ -193,7 +185,7 @@ def assure(args: argparse.Namespace) -> int:
                                  "Worst case: the maximum MEASURED over the bundle vectors and over inputs built to "
                                  "reach the long paths (cases in `firmware_c/target/wcet_target.c`), each case timed "
                                  "over repeated identical calls; a measured maximum, not a static bound. Command: "
-                                 "`python -m fleetlab.assurance.wcet`.\n\n" + wcet.table(wc) +
+                                 "`fleetlab assure wcet`.\n\n" + wcet.table(wc) +
                                  f"\n\nAverage over the bench loop of the vectors (fleetlab bench c): slipest_infer_q "
                                  f"{measured['q']:.0f} instructions per inference; SLCAN parsing + slipest_node_handle "
                                  f"{measured['node_instructions_per_sample']:.0f} instructions per telemetry sample (3 frames)."))
@@ -208,7 +200,7 @@ def assure(args: argparse.Namespace) -> int:
                              + coverage.table(cov)))
 
     # fuzzing
-    stats_file = args.fuzz_stats or next((p for p in default_fuzz_stats() if p.exists()), None)
+    stats_file = fuzz_stats or next((p for p in default_fuzz_stats() if p.exists()), None)
     if stats_file and stats_file.exists():
         st = json.loads(stats_file.read_text())
         # a long-mode file merges campaigns of several dates: each target carries its own date, clean flag and

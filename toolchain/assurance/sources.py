@@ -6,9 +6,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ..host_tools.firmware.build import Result, execute
+from fleetlab.host_tools.firmware.build import Result, execute
+
 from .. import errors
 from ..paths import default_bundle, repo_root
+
 # sources that use float on purpose (the f32 reference path); the fixed-point library omits them
 FLOAT_SOURCES = ("slipest_features_f32.c", "slipest_infer_f32.c")
 

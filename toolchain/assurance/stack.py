@@ -7,20 +7,20 @@ in the call graph would make that unbounded, so the graph is checked for cycles 
 recursion proof); a frame GCC marks dynamic, or a call to a function with no frame size
 (a libc routine), is listed, not silently counted as zero.
 
-    python -m fleetlab.assurance.stack [--bundle DIR] [--full]
+    fleetlab assure stack [--bundle DIR] [--full]
 """
 from __future__ import annotations
 
-import argparse
 import re
-import sys
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..host_tools.firmware import targets as target_registry
+from fleetlab.host_tools.firmware import targets as target_registry
 from .sources import fw, generate_dbc, include_dirs, library_sources, need, public_headers, run
 
+# the stack bound is computed for the reference target (the CPU whose painted stack bench c measures)
+CPU_FLAGS = list(target_registry.reference().cpu_flags)
 KERNEL_OPT = "-O3"   # firmware_c/cmake/target.cmake: inference kernels
 FRAME_OPT = "-Os"    # ... and per-frame code
 KERNELS = ("slipest_infer_q.c", "slipest_infer_f32.c", "slipest_features_f32.c")
@@ -122,7 +122,7 @@ def compile_graph(bundle: Path | None = None, q_only: bool = True, with_bench: b
 
 def bench_bounds(bundle: Path | None = None) -> dict[str, int]:
     """Stack bound of each measured wrapper of the cost image (its frame plus the library call),
-    keyed like fleetlab.host_tools.firmware.bench.target_costs, so bound and measurement compare 1:1."""
+    keyed like fleetlab.host_tools.firmware.measure.target_costs, so bound and measurement compare 1:1."""
     graph = compile_graph(bundle, q_only=True, with_bench=True)
     out = {}
     for key, fn in BENCH_WRAPPERS.items():
@@ -169,21 +169,3 @@ def table(rows: list[StackRow]) -> str:
         out.append(f"| {r.function} | {r.bytes}{' (dynamic frame)' if r.dynamic else ''} | "
                    f"{' → '.join(r.chain)} | {', '.join(sorted(r.unknown)) or '—'} |")
     return "\n".join(out)
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fleetlab.assurance.stack", description=__doc__.split("\n")[0])
-    ap.add_argument("--bundle", type=Path, default=None, help="export bundle (default: the example bundle)")
-    ap.add_argument("--full", action="store_true", help="the full library (float path too) instead of slipest_q")
-    args = ap.parse_args(argv)
-    rows, cycles = analyse(args.bundle, q_only=not args.full)
-    if cycles:
-        print("RECURSION: " + "; ".join(" → ".join(c) for c in cycles))
-        return 1
-    print("call graph acyclic: no recursion")
-    print(table(rows))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

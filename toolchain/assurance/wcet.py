@@ -8,19 +8,16 @@ bundle vectors and over inputs built to reach the long paths (the case list is i
 not a static bound: a path no case takes is not counted. Counts include the few instructions of the
 image's call wrapper (arguments, result), so they slightly over-count the function alone.
 
-    python -m fleetlab.assurance.wcet [--bundle DIR] [--target NAME] [--build DIR]
+    fleetlab assure wcet [--bundle DIR] [--target NAME] [--build DIR]
 """
 from __future__ import annotations
 
-import argparse
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..host_tools.firmware import targets as target_registry
-from ..host_tools.firmware.bench import parse_kv
-from ..host_tools.firmware.build import cmake_build, run_image
-from ..paths import build_root
+from fleetlab.host_tools.firmware import targets as target_registry
+from fleetlab.host_tools.firmware.measure import parse_kv
+from fleetlab.host_tools.firmware.build import cmake_build, run_image
 
 IMAGE = "slipest_wcet_target_q.elf"
 # (function, key in the image's output, overhead key, what the cases are)
@@ -78,20 +75,3 @@ def table(rows: list[WorstCase]) -> str:
     lines = ["| Function | Cases | Count | Max instructions (measured) |", "|---|---|---:|---:|"]
     lines += [f"| {r.function} | {r.cases} | {r.n_cases} | {r.instructions:.0f} |" for r in rows]
     return "\n".join(lines)
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fleetlab.assurance.wcet", description=__doc__.split("\n")[0])
-    ap.add_argument("--bundle", type=Path, default=None, help="export bundle (default: the example bundle)")
-    ap.add_argument("--target", default=None, help="SysTick CPU target (default: the reference target)")
-    ap.add_argument("--build", type=Path, default=None, help="cross build directory (default: build/wcet-TARGET)")
-    args = ap.parse_args(argv)
-    name = args.target or target_registry.reference().name
-    desc, rows = measure(args.build or build_root() / f"wcet-{name}", args.bundle, args.target)
-    print(f"Worst-case instruction counts on {desc} (qemu -icount, measured maximum, not a bound):")
-    print(table(rows))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

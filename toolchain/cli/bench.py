@@ -11,6 +11,7 @@ import importlib
 
 KINDS: dict[str, tuple[str, str]] = {
     "data": ("fleetlab.data.bench", "featurisation (raw samples/s) and simulation speed (simulated s per wall s)"),
+    "import": ("fleetlab.data.import_bench", "data import: windows/s from a 10-minute rosbag2 (vs in-memory featurisation, real time)"),
     "fusion": ("fleetlab.fusion.bench", "AcoMerge: batched vs one-ant-at-a-time generation, full-run time"),
     "c": ("fleetlab.host_tools.firmware.bench", "C estimator: host ns/inference vs onnxruntime and torch, Cortex-M4 cost and size"),
 }

@@ -1,4 +1,4 @@
-"""`fleetlab data`: `info PATH` (fleetlab.data.info) and `compare DIR_A DIR_B` (this module).
+"""`fleetlab data`: `info PATH` (fleetlab.data.info), `compare DIR_A DIR_B` and `import SOURCE...` (this module).
 
 `compare` joins the pure statistics of `fleetlab.data.compare` with the SN-S
 learnability figures of `fleetlab.evaluation.realism`; this module only wires the
@@ -14,7 +14,9 @@ from pathlib import Path
 from ..data import info
 from ..data.compare import compare_statistics
 from ..data.contracts import CLASS_NAMES, FEATURE_NAMES
-from ..data.dataset import load_dataset
+from ..data.dataset import ROLE_PATTERN, load_dataset
+from ..data.log_import import UNASSIGNED, drop_summary, import_log, write_import
+from ..data.rover_profile import load_profile
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,6 +36,57 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--runs", type=int, default=5, help="D_Cal draws per protocol for Earth + FullFinetune (default 5)")
     p.add_argument("--seed", type=int, default=0, help="model seed (default 0)")
     p.add_argument("--no-learnability", action="store_true", help="statistics only, no model training (fast)")
+    add_import_arguments(sub)
+
+
+def add_import_arguments(sub) -> None:
+    p = sub.add_parser(
+        "import",
+        help="turn your rover's logs (rosbag2 MCAP/sqlite3, time-series CSV) into window CSVs + raw samples",
+        description="Read each SOURCE (a rosbag2 folder, a bare .mcap or .db3 file, or a folder of time-series "
+        "CSVs) as the rover profile describes it, put every stream on one time base from the header stamps at "
+        "the estimator's raw rate (linear interpolation, no extrapolation, cut at gaps), take gravity out of the "
+        "IMU if it is in, and cut 2 s windows with the 12 features and the slip label by the pipeline's own code. "
+        "Writes one Fleet-To-Lab CSV per log (or per gap-free segment), the raw 7-channel samples beside it "
+        "(<name>.raw.npz, for 'fleetlab emulate --source DIR'), dataset.json and import_report.json with every "
+        "drop counted. See docs/your_rover.md.",
+    )
+    p.add_argument("sources", nargs="+", type=Path, metavar="SOURCE", help="rosbag2 folder, .mcap/.db3 file or CSV folder")
+    p.add_argument("--rover", required=True, type=Path, metavar="PROFILE.toml", help="rover profile (docs/your_rover.md)")
+    p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder (created)")
+    p.add_argument("--role", default=UNASSIGNED,
+                   help="role of these logs in dataset.json: earth, target or fleet_<rover> (default: "
+                   f"{UNASSIGNED}; a roles file can assign it later)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def run_import(args: argparse.Namespace) -> int:
+    import time
+
+    if args.role != UNASSIGNED and not ROLE_PATTERN.match(args.role):
+        raise ValueError(f"--role {args.role!r}: expected earth, target or fleet_<rover>")
+    profile = load_profile(args.rover)
+    t0 = time.perf_counter()
+    results = [import_log(src, profile, progress=not args.no_progress) for src in args.sources]
+    elapsed = time.perf_counter() - t0
+    if not any(r.segments for r in results):
+        raise ValueError("no window survived the import: " + "; ".join(
+            f"{r.source}: {drop_summary(r.drops)}" for r in results))
+    write_import(args.out, results, profile, args.role)
+    kept = sum(r.windows_kept for r in results)
+    print(f"{'source':40s} {'files':>5s} {'windows':>8s} {'kept':>6s}  dropped")
+    for r in results:
+        print(f"{str(r.source)[-40:]:40s} {len(r.segments):5d} {r.windows_total:8d} {r.windows_kept:6d}  "
+              f"{drop_summary(r.drops)}")
+    for r in results:
+        for warning in r.warnings():
+            print(f"warning: {warning}")
+    if profile.ground_truth is None:
+        print(f"{profile.path}: no [ground_truth]: the windows are UNLABELLED (*.unlabelled.csv, not in dataset.json); "
+              "they replay through 'fleetlab emulate --source' but cannot train or evaluate a model")
+    print(f"imported {kept} windows from {len(results)} log(s) into {args.out} in {elapsed:.1f} s "
+          f"({kept / max(elapsed, 1e-9):.0f} windows/s); role {args.role}")
+    return 0
 
 
 def _fmt(v, spec: str = ".3f") -> str:
@@ -119,4 +172,6 @@ def run_compare(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.action == "import":
+        return run_import(args)
     return run_compare(args) if args.action == "compare" else info.run(args)

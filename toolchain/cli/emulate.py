@@ -7,7 +7,7 @@ import argparse
 import json
 from pathlib import Path
 
-from ..host_tools.emulate import (
+from fleetlab.host_tools.emulate import (
     DEFAULT_SCALE,
     LINKS,
     REALTIME_FRAMES_PER_S,
@@ -16,9 +16,9 @@ from ..host_tools.emulate import (
     first_windows,
     soak_source,
 )
-from ..host_tools.sources import FeatureSource, TelemetrySource, resolve
-from ..host_tools.verify import faults as fault_mod
-from ..host_tools.wire.dbc import add_dbc_option, apply_dbc_option
+from fleetlab.host_tools.sources import FeatureSource, TelemetrySource, resolve
+from fleetlab.host_tools.verify import faults as fault_mod
+from fleetlab.host_tools.wire.dbc import add_dbc_option, apply_dbc_option
 from ..paths import default_bundle
 
 EPILOG = """\
@@ -42,7 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="export bundle directory (default: the committed example bundle firmware_c/bundles/example)")
     p.add_argument("--source", default="sim",
                    help="'sim' (simulated raw telemetry, TELEM frames), 'vectors' (the bundle's test vectors, "
-                        "FEATURES frames) or a folder of window CSV files (FEATURES frames); default sim")
+                        "FEATURES frames), a 'fleetlab data import' folder (its raw samples, TELEM frames) or a folder "
+                        "of window CSV files (FEATURES frames); default sim")
     p.add_argument("--link", choices=LINKS, default="slcan",
                    help="slcan: python-can slcan bus on the emulator's pty; cobs (old name: serial): COBS+CRC packets on its pty; "
                         "inproc: the C library via ctypes on a python-can virtual bus (default slcan)")

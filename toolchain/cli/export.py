@@ -45,7 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _data_windows(dirs: list[Path]) -> np.ndarray | None:
-    from fleetlab.data.dataset import load_dataset
+    from ..data.dataset import load_dataset
 
     xs = []
     for d in dirs:
@@ -60,7 +60,7 @@ def _print_checks(lines: list[str]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..export.bundle import check_bundle, export_bundle
+    from fleetlab.export.bundle import check_bundle, export_bundle
 
     if args.check_only is not None:
         print(f"checking {args.check_only}")
@@ -71,9 +71,9 @@ def run(args: argparse.Namespace) -> int:
     if args.vectors < 1000 and not args.onnx_only:
         raise ValueError(f"--vectors {args.vectors}: at least 1000 test vectors are required")
 
-    from fleetlab.models import load_model
+    from ..models import load_model
 
-    from ..export.vectors import draw_inputs, simulator_windows
+    from fleetlab.export.vectors import draw_inputs, simulator_windows
 
     model, meta = load_model(args.model)
     if meta["arch"] != "sn-s" and not args.onnx_only:

@@ -35,7 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "fuse them with a registered method (AcoMerge by default) on a small calibration set of the target "
         "rover, and compare the fused model with the Earth expert fine-tuned on the same calibration set."
     )
-    options.data_dir(p, "dataset folder (dataset.json or Fleet-To-Lab file names)")
+    options.data_dir(p, "dataset folder (dataset.json or Fleet-To-Lab file names) or a roles .toml file")
     p.add_argument("--out", required=True, type=Path, help="run folder to create/overwrite (RUN)")
     p.add_argument("--method", default=DEFAULT_METHOD, choices=methods, metavar="NAME",
                    help=f"fusion method, one of: {', '.join(methods)} (default: {DEFAULT_METHOD})")

@@ -14,8 +14,9 @@ from ..models.train import EXPERT_EPOCHS
 ACO = AcoMergeConfig()  # the paper's AcoMerge defaults: the one source of every search default below
 
 
-def data_dir(p: argparse.ArgumentParser, help: str = "dataset folder: made by 'fleetlab simulate' (dataset.json) "
-             "or the original Fleet-To-Lab CSVs") -> None:
+def data_dir(p: argparse.ArgumentParser, help: str = "dataset folder: made by 'fleetlab simulate' or 'fleetlab data "
+             "import' (dataset.json) or the original Fleet-To-Lab CSVs; or a roles .toml file naming several "
+             "folders and their roles (docs/your_rover.md)") -> None:
     p.add_argument("--data", required=True, type=Path, metavar="DIR", help=help)
 
 

@@ -7,11 +7,11 @@ import argparse
 from pathlib import Path
 
 from ..data.features_int import SAMPLES_PER_WINDOW
-from ..host_tools.emulator import EmulatorProcess, build, find_artifact
-from ..host_tools.links import CanBusLink, Link, link_class, open_can_bus
-from ..host_tools.sources import LOG_SUFFIXES, FeatureSource, TelemetrySource, resolve
-from ..host_tools.stream import TrafficLog, stream, timed_frames
-from ..host_tools.wire.dbc import WindowEstimate, add_dbc_option, apply_dbc_option
+from fleetlab.host_tools.emulator import EmulatorProcess, build, find_artifact
+from fleetlab.host_tools.links import CanBusLink, Link, link_class, open_can_bus
+from fleetlab.host_tools.sources import LOG_SUFFIXES, FeatureSource, TelemetrySource, resolve
+from fleetlab.host_tools.stream import TrafficLog, stream, timed_frames
+from fleetlab.host_tools.wire.dbc import WindowEstimate, add_dbc_option, apply_dbc_option
 from ..paths import default_bundle
 
 
@@ -34,7 +34,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     s.add_argument("--baudrate", type=int, default=921600, help="baud rate of a real port (default 921600)")
     for q in (c, s):
         q.add_argument("--source", default="sim",
-                       help="sim | vectors | folder of window CSVs | python-can log file (default sim)")
+                       help="sim | vectors | 'fleetlab data import' folder (its raw samples) | folder of window CSVs | "
+                       "python-can log file (default sim)")
         q.add_argument("--bundle", type=Path, default=None,
                        help="export bundle (for --source vectors and for a started emulator)")
         q.add_argument("--realtime", action="store_true",

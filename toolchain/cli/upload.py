@@ -10,10 +10,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-from ..canopen_od import eds_text
-from ..host_tools.canopen_session import CobsCanBus, eds_for
-from ..host_tools.links import open_can_bus
-from ..host_tools.upload import open_tapped, read_image, rehearse, upload_image
+from fleetlab.canopen_od import eds_text
+from fleetlab.host_tools.canopen_session import CobsCanBus, eds_for
+from fleetlab.host_tools.links import open_can_bus
+from fleetlab.host_tools.upload import open_tapped, read_image, rehearse, upload_image
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     image = read_image(args.bundle)
     with tempfile.TemporaryDirectory() as tmp:
         if args.emulate:
-            from ..host_tools.emulator import EMULATOR_TARGET, build, find_artifact
+            from fleetlab.host_tools.emulator import EMULATOR_TARGET, build, find_artifact
 
             bdir = build(None, targets=(EMULATOR_TARGET,))
             nvm = args.nvm or Path(tmp) / "nvm.bin"

@@ -1,4 +1,4 @@
-"""The data contracts shared by every part of fleetlab (see ARCHITECTURE.md).
+"""The data contracts shared by every part of fleetlab (see docs/architecture.md).
 
 Changing anything here changes the feature vector that the exported C estimator
 expects, so the firmware, the exporter and the DBC must follow.

@@ -2,8 +2,10 @@
 
 Roles: `earth` (target rover in the Earth analog, D_Earth), `fleet_<rover>` (one
 per fleet rover on the Moon), `target` (target rover on the Moon: D_Cal and test).
-A folder made by `fleetlab simulate` carries `dataset.json`; a folder of the
-original Fleet-To-Lab files is recognised by the file names alone.
+A folder made by `fleetlab simulate` or `fleetlab data import` carries `dataset.json`; a folder
+of the original Fleet-To-Lab files is recognised by the file names alone; a roles file
+(TOML, `load_roles_file`) names several folders and gives each a role, so one dataset can
+mix imported logs with Fleet-To-Lab CSVs.
 """
 
 from __future__ import annotations
@@ -97,11 +99,50 @@ class Dataset:
             raise ValueError(f"{self.root}: dataset has no {', '.join(missing)} files (found roles: {self.roles})")
 
 
-def load_dataset(root: Path | str) -> Dataset:
-    """Load every window file of a dataset folder with its role."""
+ROLES_KEYS = ("path", "role")
+ROLE_PATTERN = re.compile(rf"^({EARTH}|{TARGET}|{FLEET_PREFIX}[A-Za-z0-9_-]+)$")
+
+
+def load_roles_file(path: Path) -> Dataset:
+    """A dataset made of several folders (imports, Fleet-To-Lab CSVs, simulator output), from a TOML file:
+
+        [[folder]]
+        path = "imports/analog"   # relative to this file
+        role = "earth"            # optional: every file of the folder takes this role
+        [[folder]]
+        path = "/data/fleet_to_lab"   # no role: the folder's own (dataset.json or Fleet-To-Lab names)
+    """
+    import tomllib
+
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"{path}: not valid TOML ({e})") from None
+    extra = [k for k in data if k != "folder"]
+    if extra or not isinstance(data.get("folder"), list) or not data["folder"]:
+        raise ValueError(f"{path}: a roles file holds only [[folder]] tables (path, optional role)"
+                         + (f"; unknown key {extra[0]!r}" if extra else ""))
+    files: list[DataFile] = []
+    for k, entry in enumerate(data["folder"], start=1):
+        bad = [key for key in entry if key not in ROLES_KEYS]
+        if bad or not isinstance(entry.get("path"), str):
+            raise ValueError(f"{path}: folder {k}: " + (f"unknown key {bad[0]!r} (keys: path, role)" if bad
+                                                         else "needs path = \"FOLDER\""))
+        role = entry.get("role")
+        if role is not None and not (isinstance(role, str) and ROLE_PATTERN.match(role)):
+            raise ValueError(f"{path}: folder {k}: role {role!r} is not {EARTH}, {TARGET} or {FLEET_PREFIX}<rover>")
+        folder = load_dataset(path.parent / entry["path"], roles_file=False)
+        files += [DataFile(f.path, role or f.role, f.table) for f in folder.files]
+    return Dataset(root=path, files=files, source="roles file")
+
+
+def load_dataset(root: Path | str, roles_file: bool = True) -> Dataset:
+    """Load every window file of a dataset folder (or of the folders a roles .toml file names) with its role."""
     root = Path(root)
+    if roles_file and root.is_file() and root.suffix == ".toml":
+        return load_roles_file(root)
     if not root.is_dir():
-        raise FileNotFoundError(f"{root}: not a directory")
+        raise FileNotFoundError(f"{root}: not a directory" + ("" if root.exists() else " (nor a roles .toml file)"))
     manifest = root / MANIFEST_NAME
     if manifest.exists():
         try:

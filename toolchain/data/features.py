@@ -1,4 +1,4 @@
-"""Windowed features from raw telemetry (ARCHITECTURE contract 1).
+"""Windowed features from raw telemetry (docs/architecture.md, contract 1).
 
 One vectorised implementation, used by the simulator and by anything that
 featurises raw telemetry; the C streaming extractor is checked against it.

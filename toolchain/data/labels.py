@@ -1,4 +1,4 @@
-"""Slip labels from travelled and commanded distance (ARCHITECTURE contract 2)."""
+"""Slip labels from travelled and commanded distance (docs/architecture.md, contract 2)."""
 
 from __future__ import annotations
 

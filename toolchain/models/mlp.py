@@ -1,4 +1,4 @@
-"""SN-S and SN-D (ARCHITECTURE contract 3) and the flat-parameter view used by fusion.
+"""SN-S and SN-D (docs/architecture.md, contract 3) and the flat-parameter view used by fusion.
 
 Flat order is `model.parameters()` order: for each hidden block Linear.weight,
 Linear.bias, LayerNorm.weight, LayerNorm.bias; then the output Linear.weight,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from pathlib import Path
 
@@ -10,6 +11,7 @@ import numpy as np
 
 from ..contracts import CLASS_NAMES, DEFAULT_RATE_HZ
 from ..dataset import load_dataset
+from .bag import STORAGES
 from .engine import ACCEL_CONVENTIONS, ACCEL_LINEAR
 from .rovers import ROVERS
 from .scenario import DEFAULT_FLEET, SCENARIO, write_scenario
@@ -36,6 +38,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "Fleet-To-Lab files; 'specific-force' = raw accelerometer output with gravity "
                         f"(default {ACCEL_LINEAR})")
     parser.add_argument("--raw", action="store_true", help="also save the raw samples of each traverse as .npz")
+    parser.add_argument("--bag", type=Path, metavar="DIR",
+                        help="also write each traverse as a rosbag2 in DIR (topics and types of a ROS 2 collector: "
+                        "JointState, Imu with gravity, Odometry, PoseStamped ground truth) with the rover profiles "
+                        "beside them, ready for 'fleetlab data import'")
+    parser.add_argument("--bag-storage", choices=STORAGES, default="mcap",
+                        help="storage of the --bag files: mcap (default) or sqlite3 (.db3)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -43,10 +51,13 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--rate must be a positive number of Hz, got {args.rate}")
     if not np.isfinite(args.scale) or not 0 < args.scale <= 10:
         raise ValueError(f"--scale must be in (0, 10], got {args.scale}")
+    if args.bag and args.accel != ACCEL_LINEAR:
+        raise ValueError("--bag writes the IMU as a raw accelerometer (gravity added from the attitude) itself; "
+                         f"keep the default --accel {ACCEL_LINEAR}")
     fleet = tuple(r.strip() for r in args.fleet.split(",") if r.strip())
     t0 = time.perf_counter()
     out = write_scenario(args.out, args.seed, args.scale, args.rate, raw=args.raw, progress=True, fleet=fleet,
-                          accel=args.accel)
+                          accel=args.accel, bag=args.bag, bag_storage=args.bag_storage)
     elapsed = time.perf_counter() - t0
     ds = load_dataset(out)
     print(f"wrote {len(ds.files)} traverses to {out} in {elapsed:.1f} s (seed {args.seed}, scale {args.scale:g})")
@@ -57,4 +68,7 @@ def run(args: argparse.Namespace) -> int:
         counts = t.class_counts()
         mix = "  ".join(f"{c:6d} ({100 * c / max(1, len(t)):4.1f}%)" for c in counts)
         print(f"{role:14s} {len(ds.files_of(role)):5d} {len(t):6d}  {mix}")
+    if args.bag:
+        profiles = sorted({f["bag"]["profile"] for f in json.loads((out / "dataset.json").read_text())["files"].values()})
+        print(f"wrote {len(ds.files)} {args.bag_storage} bags and the rover profiles {', '.join(profiles)} to {args.bag}")
     return 0

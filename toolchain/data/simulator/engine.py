@@ -337,6 +337,7 @@ def _sensors(spec: TraverseSpec, d: _Draws, t: dict[str, np.ndarray], yaw: np.nd
         "accel": accel_convention,
     }
     truth = {k: t[k] for k in ("slip", "sinkage", "speed", "x", "y", "pitch", "roll", "patch")}
+    truth["wheel_left"], truth["wheel_right"] = left, right  # measured side speeds (rad/s), as a bag logs them
     return Trace(samples, np.abs(speed) * dt, wheel_speed * r * dt, float(rate_hz), meta, truth)
 
 

@@ -111,10 +111,12 @@ def scenario_traces(seed: int, scale: float = 1.0, rate_hz: float = DEFAULT_RATE
 
 def write_scenario(out_dir: Path | str, seed: int, scale: float = 1.0, rate_hz: float = DEFAULT_RATE_HZ,
                    raw: bool = False, progress: bool = False, fleet: tuple[str, ...] | None = None,
-                   accel: str = ACCEL_LINEAR) -> Path:
+                   accel: str = ACCEL_LINEAR, bag: Path | str | None = None, bag_storage: str = "mcap") -> Path:
     """Write one window CSV per traverse and dataset.json into out_dir (created); returns out_dir.
 
     With `raw`, also one .npz per traverse with the raw samples and distance increments.
+    With `bag`, also one rosbag2 per traverse in that folder, and the rover profiles beside them
+    (`simulator.bag`).
     """
     WindowSpec.for_rate(rate_hz)  # refuse a rate too low for 2 s windows before simulating
     out = Path(out_dir)
@@ -131,6 +133,14 @@ def write_scenario(out_dir: Path | str, seed: int, scale: float = 1.0, rate_hz: 
                                 d_cmd_step=trace.d_cmd_step, rate_hz=trace.rate_hz,
                                 channels=np.array(RAW_CHANNELS), **{f"truth_{k}": v for k, v in trace.truth.items()})
             entry["raw"] = f"{name}.npz"
+        if bag is not None:
+            from .bag import profile_name, profile_toml, write_traverse_bag
+
+            Path(bag).mkdir(parents=True, exist_ok=True)
+            write_traverse_bag(Path(bag) / name, trace, trace.meta["rover"], trace.meta["gravity"], bag_storage)
+            profile = Path(bag) / profile_name(trace.meta["rover"], trace.meta["gravity"])
+            profile.write_text(profile_toml(trace.meta["rover"], trace.meta["gravity"]))
+            entry["bag"] = {"path": name, "profile": profile.name}
         files[f"{name}.csv"] = entry
     write_manifest(out, files, {"generator": GENERATOR, "seed": seed, "scale": scale, "rate_hz": rate_hz,
                                 "fleet": list(DEFAULT_FLEET if fleet is None else fleet), "accel": accel})

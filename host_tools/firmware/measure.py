@@ -1,0 +1,189 @@
+"""Measurements behind `fleetlab bench c`: what the cost images print, what the linker and `nm`
+recorded, and how fast the host runs one inference. Numbers only; figures.py turns them into the
+reported figures.
+
+* key=value lines of a QEMU cost image (`parse_kv`), and on exec-trace targets the instructions
+  between the image's count marks (`instructions_between_marks`);
+* instructions per inference, per sample and the painted stacks of one target (`target_costs`);
+* bytes per library object in a linked image, from its linker map (`library_footprint`), and the
+  model store's flash and RAM (`model_slots_footprint`);
+* host ns per single-window inference of the C bench, onnxruntime and torch (`host_timings`).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from . import targets as target_registry
+from .build import run, run_image, run_record
+from .targets import Target
+
+MARK = "] slipest_count_mark"
+_MAP_ENTRY = re.compile(r"^ (\.[\w.]+|COMMON)\s*\n?\s+0x([0-9a-f]+)\s+0x([0-9a-f]+)\s+(\S+)", re.M)
+# the model store's objects (docs/model_slots.md): store, SHA-256, image reader, model check
+STORE_OBJECTS = ("slipest_store.c.obj", "slipest_sha256.c.obj", "slipest_image.c.obj", "slipest_model.c.obj")
+
+
+def parse_kv(text: str) -> dict[str, int]:
+    return {k: int(v) for k, v in re.findall(r"^(\w+)=(\d+)\s*$", text, flags=re.M)}
+
+
+def instructions_between_marks(trace: Path) -> list[int]:
+    """Executed instructions between consecutive (start, end) calls of slipest_count_mark in a QEMU
+    exec trace taken with -singlestep -d exec,nochain: every "Trace" line is one guest instruction."""
+    entries, n, in_mark = [], 0, False
+    with open(trace, errors="replace") as fh:
+        for line in fh:
+            if not line.startswith("Trace "):
+                continue
+            here = MARK in line
+            if here and not in_mark:
+                entries.append(n)
+            in_mark = here
+            n += 1
+    if len(entries) % 2:
+        raise ValueError(f"{trace}: odd number of count marks ({len(entries)})")
+    return [entries[k + 1] - entries[k] for k in range(0, len(entries), 2)]
+
+
+def _counted_kv(t: Target, build_dir: Path, image: str) -> dict[str, int]:
+    """key=value output of a cost image; on exec-trace targets the *_ticks placeholders (all but the
+    calibration) are replaced, in output order, by the instructions counted in the trace."""
+    if t.counter != "trace":
+        return parse_kv(run_image(build_dir, image, icount=True))
+    with tempfile.TemporaryDirectory(dir=build_dir) as d:
+        log = Path(d) / "exec.log"
+        kv = parse_kv(run_image(build_dir, image, icount=True, trace=log, timeout=900))
+        phases = instructions_between_marks(log)
+    keys = [k for k in kv if k.endswith("_ticks") and k != "calib_ticks"]
+    if len(keys) != len(phases):
+        raise ValueError(f"{image}: {len(keys)} counted phases printed, {len(phases)} marked in the trace")
+    kv.update(zip(keys, phases))
+    return kv
+
+
+def target_costs(target: Target | str, build_dir: Path) -> dict[str, float | None]:
+    """Instructions per inference and node costs from the QEMU cost images (SysTick or minstret under -icount);
+    on an integer-only target there is no float image and the float figures are None."""
+    t = target_registry.get(target) if isinstance(target, str) else target
+    qonly = _counted_kv(t, build_dir, "slipest_bench_target_q.elf")
+    full = None if t.integer_only else _counted_kv(t, build_dir, "slipest_bench_target.elf")
+    ref = full or qonly
+    per_tick = ref["calib_instructions"] / ref["calib_ticks"]
+    n = ref["inferences"]
+
+    def per_inference(ticks: int) -> float:
+        return (ticks - ref["empty_ticks"]) * per_tick / n
+
+    return {
+        "instructions_per_tick": per_tick,
+        "q": per_inference(ref["q_ticks"]),
+        "f32": per_inference(full["f32_ticks"]) if full else None,
+        "node_instructions_per_sample": qonly["node_99_samples_ticks"] * per_tick / 99,
+        "stack_q": qonly["stack_q"],
+        "stack_f32": full["stack_f32"] if full else None,
+        "stack_node_window": qonly["stack_node_window"],
+        "node_bytes": qonly["node_bytes"],
+    }
+
+
+def library_footprint(map_file: Path, archive: str) -> dict[str, dict[str, int]]:
+    """Bytes per object of `archive` in the linked image: flash (text+rodata+data) and static RAM (data+bss)."""
+    text = Path(map_file).read_text()
+    start = text.find("Linker script and memory map")
+    if start < 0:
+        raise ValueError(f"{map_file}: no memory map section")
+    per_obj: dict[str, dict[str, int]] = {}
+    for name, _addr, size, origin in _MAP_ENTRY.findall(text[start:]):
+        m = re.match(re.escape(archive) + r"\((.+)\)$", Path(origin).name)
+        if not m:
+            continue
+        size_b = int(size, 16)
+        obj = per_obj.setdefault(m.group(1), {"flash": 0, "ram": 0})
+        if name.startswith((".text", ".rodata")):
+            obj["flash"] += size_b
+        elif name.startswith(".data"):
+            obj["flash"] += size_b
+            obj["ram"] += size_b
+        elif name.startswith(".bss") or name == "COMMON":
+            obj["ram"] += size_b
+    return per_obj
+
+
+def by_source(footprint: dict[str, dict[str, int]]) -> dict[str, dict[str, int]]:
+    """Objects keyed by source stem: CMake names them x.c.obj on bare metal and x.c.o on Linux."""
+    return {re.sub(r"\.c\.o(bj)?$", "", k): v for k, v in footprint.items()}
+
+
+def model_slots_footprint(build_dir: Path) -> dict[str, int]:
+    """Flash of the model-store objects and RAM of the store state, from the store test image
+    (firmware_c/target/store_target.c) of a cross build."""
+    image = Path(build_dir) / "slipest_store_target.elf"
+    objs = library_footprint(Path(f"{image}.map"), "libslipest_q.a")
+    nm = run_record(build_dir)["nm"]
+    out = subprocess.run([nm, "-S", str(image)], capture_output=True, text=True, check=True).stdout
+    m = re.search(r"^[0-9a-f]+ ([0-9a-f]+) [bB] store$", out, flags=re.M)
+    if m is None:
+        raise ValueError(f"{image}: no 'store' symbol (slipest_store_t) in the symbol table")
+    return {"flash": sum(o["flash"] for k, o in objs.items() if k in STORE_OBJECTS), "ram": int(m.group(1), 16),
+            "objects": {k: v["flash"] for k, v in objs.items() if k in STORE_OBJECTS}}
+
+
+def _time_per_call(fn, n: int) -> float:
+    fn()  # warm-up
+    best = float("inf")
+    for _ in range(3):
+        t0 = time.perf_counter_ns()
+        for _ in range(n):
+            fn()
+        best = min(best, (time.perf_counter_ns() - t0) / n)
+    return best
+
+
+def python_baselines(bundle: Path, n: int) -> dict[str, Callable[[], object]]:
+    """Single-window inference callables for onnxruntime and torch (1 thread each)."""
+    import onnxruntime as ort
+    import torch
+
+    from fleetlab.export.bundle import load_bundle
+
+    b = load_bundle(bundle)
+    with np.load(Path(bundle) / "vectors.npz") as z:
+        x = np.ascontiguousarray(z["inputs"][:1], dtype=np.float32)
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 1
+    opts.inter_op_num_threads = 1
+    sess = ort.InferenceSession(str(Path(bundle) / "model.onnx"), opts, providers=["CPUExecutionProvider"])
+    name = sess.get_inputs()[0].name
+
+    torch.set_num_threads(1)
+    model = b.fparams.to_model()
+    xt = torch.from_numpy(x)
+
+    def torch_call():
+        with torch.inference_mode():
+            return model(xt)
+
+    return {"onnxruntime": lambda: sess.run(None, {name: x}), "torch": torch_call}
+
+
+def host_timings(host_build: Path, bundle: Path, n: int, rounds: int = 3) -> dict[str, float]:
+    """Best-of-rounds ns per inference; C, onnxruntime and torch interleaved so that load
+    from other processes hits all of them alike."""
+    calls = python_baselines(bundle, n)
+    best = {"q": float("inf"), "f32": float("inf"), "onnxruntime": float("inf"), "torch": float("inf")}
+    for _ in range(rounds):
+        c = json.loads(run([str(host_build / "slipest_bench"), str(Path(bundle) / "vectors.bin"), "100000"]))
+        best["q"] = min(best["q"], c["host_ns_per_inference_q"])
+        best["f32"] = min(best["f32"], c["host_ns_per_inference_f32"])
+        for key, fn in calls.items():
+            best[key] = min(best[key], _time_per_call(fn, n))
+    return best

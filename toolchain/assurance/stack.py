@@ -19,8 +19,6 @@ from pathlib import Path
 from fleetlab.host_tools.firmware import targets as target_registry
 from .sources import fw, generate_dbc, include_dirs, library_sources, need, public_headers, run
 
-# the stack bound is computed for the reference target (the CPU whose painted stack bench c measures)
-CPU_FLAGS = list(target_registry.reference().cpu_flags)
 KERNEL_OPT = "-O3"   # firmware_c/cmake/target.cmake: inference kernels
 FRAME_OPT = "-Os"    # ... and per-frame code
 KERNELS = ("slipest_infer_q.c", "slipest_infer_f32.c", "slipest_features_f32.c")

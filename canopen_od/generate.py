@@ -54,10 +54,34 @@ def c_header() -> str:
         f"#define SLIPEST_CO_IDX_MODEL_IMAGE 0x{od.IDX_MODEL_IMAGE:04X}u",
         f"#define SLIPEST_CO_IDX_HEARTBEAT 0x1017u",
         "",
+        "/* EMCY error codes (CiA 301) the node sends */",
+    ]
+    lines += [f"#define SLIPEST_CO_EMCY_{n} 0x{c:04X}u /**< {doc} */" for n, c, doc in od.EMCY_CODES]
+    lines += ["/* SDO abort codes (CiA 301) the server sends */"]
+    lines += [f"#define SLIPEST_CO_ABORT_{n} 0x{c:08X}u /**< {doc} */" for n, c, doc in od.ABORT_CODES]
+    lines += [
+        "",
         "/* where a value lives (see canopen_od/objects.py) */",
     ]
     lines += [f"#define SLIPEST_CO_KIND_{k.upper()} {i}u" for i, k in enumerate(KINDS)]
     lines += [f"#define SLIPEST_CO_CNT_{n.upper()} {i}u" for i, n in enumerate(od.COUNTERS)]
+    lines += [
+        "/* byte offsets of the counters the node reads out of the estimator's slipest_counters_t and the",
+        " * store's slipest_store_counters_t, in sub-index order (expanded where those types are known) */",
+        "#define SLIPEST_CO_ESTIMATOR_COUNTER_OFFSETS \\",
+        "    {" + ", ".join(f"offsetof(slipest_counters_t, {n})" for n in od.ESTIMATOR_COUNTERS) + "}",
+        "#define SLIPEST_CO_STORE_COUNTER_OFFSETS \\",
+        "    {" + ", ".join(f"offsetof(slipest_store_counters_t, {n})" for n in od.STORE_COUNTERS) + "}",
+    ]
+    lines += ["/* the kinds' arguments (canopen_od/objects.py) */"]
+    lines += [f"#define SLIPEST_CO_MODEL_{n.upper()} {i}u" for i, n in enumerate(od.MODEL_ARGS)]
+    lines += [f"#define SLIPEST_CO_CMD_{n.upper()} {od.command_arg(n)}u" for n in od.COMMAND_ARGS]
+    lines += [f"#define SLIPEST_CO_UPLOAD_{n.upper()} {i}u" for i, n in enumerate(od.UPLOAD_ARGS)]
+    lines += [f"#define SLIPEST_CO_SLOT_{n.upper()} {i}u" for i, (n, _) in enumerate(od.SLOT_FIELDS)]
+    lines += [f"#define SLIPEST_CO_SLOT_SHIFT {od.SLOT_SHIFT}u",
+              f"#define SLIPEST_CO_SLOT_FIELD_MASK 0x{(1 << od.SLOT_SHIFT) - 1:X}u",
+              f"#define SLIPEST_CO_PDO_SHIFT {od.PDO_SHIFT}u",
+              f"#define SLIPEST_CO_PDO_OFFSET_MASK 0x{(1 << od.PDO_SHIFT) - 1:X}u"]
     lines += [
         "#define SLIPEST_CO_ACC_R 1u",
         "#define SLIPEST_CO_ACC_W 2u",

@@ -9,13 +9,13 @@ Each entry: (index, sub, name, data type, access, default, kind, arg, pdo_mappab
   hb_time    producer heartbeat time 0x1017 (read/write)
   err_reg    error register 0x1001
   serial     identity serial number (given to slipest_co_init)
-  pdo        bytes of the last payload of a PDO: arg = 8 * payload buffer + byte offset
-  model      the active model: arg 0 version, 1 hash32, 2 sha256, 3 slot, 4 library version
+  pdo        bytes of the last payload of a PDO: arg = payload buffer << PDO_SHIFT | byte offset
+  model      the active model: arg = position in MODEL_ARGS
   counter    node counter number arg (slipest_co_counter())
-  slot       slot arg >> 4, field arg & 15: 0 state, 1 length, 2 version, 3 hash32
+  slot       slot arg >> SLOT_SHIFT, field (low bits) = position in SLOT_FIELDS
   store_cnt  store counter number arg (slipest_store_counters_t field order)
-  upload     arg 0 upload state, 1 last store status, 2 bytes received
-  command    write-only command arg: 1 activate, 2 rollback, 3 abort upload
+  upload     arg = position in UPLOAD_ARGS (upload state, last store status, bytes received)
+  command    write-only command arg = command_arg(name) for COMMAND_ARGS (activate, rollback, abort)
   domain     the model image (DOMAIN, written into the inactive slot)
 PDO communication and mapping objects (0x1400/0x1600/0x1800/0x1A00) are derived from PDOS.
 """
@@ -47,9 +47,60 @@ IDX_SLOTS = 0x2004
 IDX_STORE_COUNTERS = 0x2005
 IDX_UPLOAD = 0x2006
 
-COUNTERS = ("frames_received", "frames_rejected", "samples_dropped", "windows_flagged", "windows_done",
-            "saturations", "rpdo_received", "sdo_aborts_sent", "sdo_aborts_received", "emcy_sent",
+# SDO abort codes (CiA 301) the node's server sends or its master side names: (C name, code, meaning).
+# The one source of slipest_co_od.h's SLIPEST_CO_ABORT_* and of the host's names for them.
+ABORT_CODES = (
+    ("TOGGLE", 0x05030000, "toggle bit not alternated"),
+    ("TIMEOUT", 0x05040000, "SDO protocol timed out"),
+    ("COMMAND", 0x05040001, "command specifier not valid or unknown"),
+    ("SEQUENCE", 0x05040003, "invalid sequence number (block mode)"),
+    ("CRC", 0x05040004, "CRC error (block mode)"),
+    ("UNSUPPORTED", 0x06010000, "unsupported access to an object"),
+    ("WRITE_ONLY", 0x06010001, "attempt to read a write-only object"),
+    ("READ_ONLY", 0x06010002, "attempt to write a read-only object"),
+    ("NO_OBJECT", 0x06020000, "object does not exist"),
+    ("HARDWARE", 0x06060000, "access failed: hardware (NVM) error"),
+    ("LENGTH", 0x06070010, "length of the service parameter does not match"),
+    ("TOO_HIGH", 0x06070012, "length too high"),
+    ("TOO_LOW", 0x06070013, "length too low"),
+    ("NO_SUB", 0x06090011, "sub-index does not exist"),
+    ("VALUE", 0x06090030, "invalid value (a command other than 1)"),
+    ("GENERAL", 0x08000000, "general error"),
+    ("STORE", 0x08000020, "data cannot be stored (image refused)"),
+    ("STATE", 0x08000022, "not in the present device state (no store, nothing to activate)"),
+    ("NO_DATA", 0x08000024, "no data available (the built-in model's sha256, no store)"),
+)
+# EMCY error codes (CiA 301) the node sends: (C name, code, meaning), the source of SLIPEST_CO_EMCY_*.
+EMCY_CODES = (
+    ("RESET", 0x0000, "error reset: the error register is clear again"),
+    ("HARDWARE", 0x5000, "an NVM callback failed"),
+    ("DATA_SET", 0x6300, "a model image was refused (byte 3: slipest status)"),
+    ("PDO_LENGTH", 0x8210, "an RPDO had the wrong length"),
+    ("NO_MODEL", 0xFF00, "device specific: no model to run (none built in, no valid slot)"),
+)
+ABORT = {name: code for name, code, _ in ABORT_CODES}
+EMCY = {name: code for name, code, _ in EMCY_CODES}
+
+# The arguments of the kinds (what the C node's handler switches on), by name: generate.py writes
+# them into slipest_co_od.h as SLIPEST_CO_<KIND>_<NAME>, so neither side spells a bare number.
+MODEL_ARGS = ("version", "hash32", "sha256", "slot", "library_version")
+COMMAND_ARGS = ("activate", "rollback", "abort")  # arg = 1 + position (the value written must be 1)
+UPLOAD_ARGS = ("state", "last_status", "received")
+SLOT_SHIFT = 4  # slot arg: slot << SLOT_SHIFT | position of the field in SLOT_FIELDS
+PDO_SHIFT = 3  # pdo arg: payload buffer << PDO_SHIFT | byte offset
+
+
+def command_arg(name: str) -> int:
+    return 1 + COMMAND_ARGS.index(name)
+
+
+# the estimator's own counters (slipest_counters_t, in its field order: the C build checks the names
+# through offsetof, tests/test_canopen_od.py the order), then the CANopen node's
+ESTIMATOR_COUNTERS = ("frames_received", "frames_rejected", "samples_dropped", "windows_flagged", "windows_done",
+                      "saturations")
+COUNTERS = ESTIMATOR_COUNTERS + ("rpdo_received", "sdo_aborts_sent", "sdo_aborts_received", "emcy_sent",
             "block_sequence_errors", "nmt_commands", "frames_ignored", "rpdo_no_model")
+# slipest_store_counters_t's fields in the order 0x2005 lists them (any order: read through offsetof)
 STORE_COUNTERS = ("uploads_started", "uploads_aborted", "images_accepted", "refused_length", "refused_format",
                   "refused_arch", "refused_crc", "refused_hash", "refused_range", "refused_hmac", "refused_version",
                   "activations", "rollbacks", "nvm_errors", "boot_fallbacks")
@@ -145,28 +196,28 @@ def objects() -> list[Entry]:
         ])
     e.append(Entry(IDX_MODEL_IMAGE, 0, "Model image", DOMAIN, "wo", 0, "domain"))
     e += _record(IDX_ACTIVE_MODEL, "Active model", [
-        ("version", UNSIGNED32, "ro", 0, "model", 0),
-        ("hash32", UNSIGNED32, "ro", 0, "model", 1),
-        ("sha256", OCTET_STRING, "ro", 0, "model", 2),
-        ("slot", UNSIGNED8, "ro", 0, "model", 3),  # 0xFF: the built-in model, 0xFE: no model
-        ("library version", UNSIGNED16, "ro", 0, "model", 4),
+        ("version", UNSIGNED32, "ro", 0, "model", MODEL_ARGS.index("version")),
+        ("hash32", UNSIGNED32, "ro", 0, "model", MODEL_ARGS.index("hash32")),
+        ("sha256", OCTET_STRING, "ro", 0, "model", MODEL_ARGS.index("sha256")),
+        ("slot", UNSIGNED8, "ro", 0, "model", MODEL_ARGS.index("slot")),  # 0xFF: the built-in model, 0xFE: none
+        ("library version", UNSIGNED16, "ro", 0, "model", MODEL_ARGS.index("library_version")),
     ])
     e += _record(IDX_COMMAND, "Model command", [
-        ("activate", UNSIGNED8, "wo", 0, "command", 1),  # write 1
-        ("rollback", UNSIGNED8, "wo", 0, "command", 2),
-        ("abort upload", UNSIGNED8, "wo", 0, "command", 3),
+        ("activate", UNSIGNED8, "wo", 0, "command", command_arg("activate")),  # write 1
+        ("rollback", UNSIGNED8, "wo", 0, "command", command_arg("rollback")),
+        ("abort upload", UNSIGNED8, "wo", 0, "command", command_arg("abort")),
     ])
     e += _record(IDX_COUNTERS, "Node counters",
                  [(n, UNSIGNED32, "ro", 0, "counter", k) for k, n in enumerate(COUNTERS)])
     e += _record(IDX_SLOTS, "Model slots",
-                 [(f"slot {s} {f}", t, "ro", 0, "slot", (s << 4) | k) for s in (0, 1)
+                 [(f"slot {s} {f}", t, "ro", 0, "slot", (s << SLOT_SHIFT) | k) for s in (0, 1)
                   for k, (f, t) in enumerate(SLOT_FIELDS)])
     e += _record(IDX_STORE_COUNTERS, "Store counters",
                  [(n, UNSIGNED32, "ro", 0, "store_cnt", k) for k, n in enumerate(STORE_COUNTERS)])
     e += _record(IDX_UPLOAD, "Upload status", [
-        ("state", UNSIGNED8, "ro", 0, "upload", 0),
-        ("last store status", INTEGER8, "ro", 0, "upload", 1),
-        ("bytes received", UNSIGNED32, "ro", 0, "upload", 2),
+        ("state", UNSIGNED8, "ro", 0, "upload", UPLOAD_ARGS.index("state")),
+        ("last store status", INTEGER8, "ro", 0, "upload", UPLOAD_ARGS.index("last_status")),
+        ("bytes received", UNSIGNED32, "ro", 0, "upload", UPLOAD_ARGS.index("received")),
     ])
     for rec, (name, _, fields) in PDO_RECORDS.items():
         direction, number = next((d, n) for d, n, r in PDOS if r == rec)
@@ -174,7 +225,7 @@ def objects() -> list[Entry]:
         access = "rww" if direction == "rx" else "ro"
         subs, off = [], 0
         for fname, t in fields:
-            subs.append((fname, t, access, 0, "pdo", 8 * slot + off, True))
+            subs.append((fname, t, access, 0, "pdo", (slot << PDO_SHIFT) + off, True))
             off += TYPE_BYTES[t]
         e += _record(rec, name, subs)
     e.sort(key=lambda x: (x.index, x.sub))

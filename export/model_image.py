@@ -1,16 +1,17 @@
 """model.img: the SN-S model as one self-describing, versioned binary (the run-time model format).
 
 Layout (every multi-byte integer and float is LITTLE-ENDIAN; floats are IEEE-754 binary32 bits;
-specified in docs/fixed_point.md, "Model image"):
+specified in docs/fixed_point.md, "Model image"; every offset and size in image_layout.py, the one
+description this module, the C reader and the model store are driven from):
 
-    header   64 bytes   magic "SLPM", format version, architecture id, header size, flags, layer sizes,
+    header              magic "SLPM", format version, architecture id, header size, flags, layer sizes,
                         every shift and scale of the fixed-point scheme, model version, hash32,
-                        payload size (see HEADER below, zero-padded to 64 bytes)
+                        payload size, zero-padded to the header size
     payload             fixed-point arrays w1 b1 gamma beta w2 b2 gelu rsqrt_seed, then (flag F32)
                         the float32 LayerNorm eps and arrays w1 b1 gamma beta w2 b2
-    trailer  36 bytes   CRC-32 (IEEE 802.3, as zlib.crc32) of header + payload, then the bundle's
-                        sha256 content hash (32 bytes; its first 4 bytes big-endian are hash32)
-    tag      32 bytes   only with flag HMAC: HMAC-SHA256 of header + payload under the key the
+    trailer             CRC-32 (IEEE 802.3, as zlib.crc32) of header + payload, then the bundle's
+                        sha256 content hash (its first 4 bytes big-endian are hash32)
+    tag                 only with flag HMAC: HMAC-SHA256 of header + payload under the key the
                         flight build was provisioned with (firmware_c/src/slipest_store.c checks it)
 
 One writer (here) and one validating C reader (firmware_c/src/slipest_image.c). `read_image` is the
@@ -30,23 +31,22 @@ import numpy as np
 
 from .quant import FloatParams, QParams
 
+from . import image_layout as layout
+
 IMAGE_FILE = "model.img"
-MAGIC = b"SLPM"
-FORMAT_VERSION = 1
-ARCH_SN_S = 1  # 12 features -> Linear(30) -> LayerNorm -> GELU -> Linear(3), fixed-point scheme 1
-HEADER_SIZE = 64
-TRAILER_SIZE = 4 + 32
-FLAG_F32 = 0x0001
-FLAG_HMAC = 0x0002  # an HMAC-SHA256 tag over header + payload follows the trailer
-HMAC_SIZE = 32
+# the layout's facts, under the names the rest of the toolchain imports (one source: image_layout.py)
+MAGIC, ARCH_SN_S, FLAG_F32, FLAG_HMAC, HMAC_SIZE = (layout.MAGIC, layout.ARCH_SN_S, layout.FLAG_F32, layout.FLAG_HMAC,
+                                                    layout.HMAC_SIZE)
+FORMAT_VERSION = layout.CURRENT.version
+HEADER_SIZE = layout.CURRENT.header_size
+TRAILER_SIZE = layout.CURRENT.trailer_size
 HMAC_KEY_BYTES = (16, 64)  # accepted key lengths (the C build refuses others too)
-# magic, version, arch, header size, flags, n_in, n_hidden, n_out, gelu_n, rsqrt_seed_n, h_bits, e_bits,
-# fz, fg, fy, gelu_step_log2, eps_e (int8), eps_m (int16), c30, eps_cap, model version, hash32, payload size
-HEADER = struct.Struct("<4sHHHH11BbhiiIII")
+HEADER = layout.CURRENT.header_struct
 # (QParams attribute, little-endian dtype, element count)
-Q_LAYOUT = (("w1", "<i2", 360), ("b1", "<i4", 30), ("g", "<i2", 30), ("bb", "<i4", 30), ("w2", "<i2", 90),
-            ("b2", "<i4", 3), ("gelu", "<i2", 129), ("rsqrt_seed", "<u4", 24))
-F32_LAYOUT = (("w1", 360), ("b1", 30), ("gamma", 30), ("beta", 30), ("w2", 90), ("b2", 3))
+Q_LAYOUT = tuple((a.name, a.dtype, a.count) for a in layout.CURRENT.q_arrays)
+F32_LAYOUT = tuple((a.name, a.count) for a in layout.CURRENT.f32_arrays)
+_SCALARS = ("n_in", "n_hidden", "n_out", "gelu_n", "rsqrt_seed_n", "h_bits", "e_bits", "fz", "fg", "fy",
+            "gelu_step_log2", "eps_e", "eps_m", "c30", "eps_cap")
 
 
 @dataclass
@@ -71,13 +71,11 @@ def _tag(key: bytes, body: bytes) -> bytes:
 def sign_image(data: bytes, key: bytes) -> bytes:
     """An unsigned image with flag HMAC set, its CRC redone and the tag appended."""
     read_image(data)  # only a valid image is signed
-    (flags,) = struct.unpack_from("<H", data, 10)
+    flags = int(layout.header_fields(data)["flags"])
     if flags & FLAG_HMAC:
         raise ValueError("image is already signed")
-    body = bytearray(data[:-TRAILER_SIZE])
-    struct.pack_into("<H", body, 10, flags | FLAG_HMAC)
-    body = bytes(body)
-    return body + struct.pack("<I", zlib.crc32(body)) + data[-32:] + _tag(key, body)
+    flagged = layout.patch_header(data, seal=False, flags=flags | FLAG_HMAC)
+    return layout.reseal(flagged + bytes(HMAC_SIZE), key=check_hmac_key(key))  # room for the tag, then sealed
 
 
 def image_bytes(qp: QParams, fp: FloatParams | None, content_hash: str, model_version: int = 1,
@@ -93,13 +91,13 @@ def image_bytes(qp: QParams, fp: FloatParams | None, content_hash: str, model_ve
         flags |= FLAG_F32
         payload += struct.pack("<f", float(np.float32(fp.eps)))
         payload += b"".join(np.asarray(getattr(fp, a), dtype="<f4").reshape(-1).tobytes() for a, _ in F32_LAYOUT)
-    header = HEADER.pack(
-        MAGIC, FORMAT_VERSION, ARCH_SN_S, HEADER_SIZE, flags, sc["n_in"], sc["n_hidden"], sc["n_out"], sc["gelu_n"],
-        len(qp.rsqrt_seed), sc["h_bits"], sc["e_bits"], sc["fz"], sc["fg"], sc["fy"], sc["gelu_step_log2"],
-        sc["eps_e"], sc["eps_m"], sc["c30"], sc["eps_cap"], model_version, int(content_hash[:8], 16), len(payload),
-    ).ljust(HEADER_SIZE, b"\0")
+    fields = {**{k: sc[k] for k in _SCALARS if k != "rsqrt_seed_n"}, "rsqrt_seed_n": len(qp.rsqrt_seed),
+              "magic": MAGIC, "format": FORMAT_VERSION, "arch": ARCH_SN_S, "header_size": HEADER_SIZE,
+              "flags": flags, "model_version": model_version, "hash32": int(content_hash[:8], 16),
+              "payload_size": len(payload)}
+    header = HEADER.pack(*(fields[f.name] for f in layout.CURRENT.header)).ljust(HEADER_SIZE, b"\0")
     data = header + payload
-    data += struct.pack("<I", zlib.crc32(data)) + bytes.fromhex(content_hash)
+    data += layout.CURRENT.trailer_struct.pack(zlib.crc32(data), bytes.fromhex(content_hash))
     return sign_image(data, hmac_key) if hmac_key is not None else data
 
 
@@ -115,30 +113,28 @@ def read_image(data: bytes, hmac_key: bytes | None = None) -> ModelImage:
     carry a tag that verifies under it (without, a tag is length-checked only, as the C reader does)."""
     if len(data) < HEADER_SIZE + TRAILER_SIZE:
         raise ValueError(f"image of {len(data)} bytes is shorter than header + trailer")
-    f = HEADER.unpack_from(data, 0)
-    magic, version, arch, hsize, flags = f[:5]
+    f = layout.header_fields(data)
+    magic, version, arch, hsize, flags = f["magic"], f["format"], f["arch"], f["header_size"], f["flags"]
     if magic != MAGIC:
         raise ValueError(f"bad magic {magic!r}")
     if version != FORMAT_VERSION:
         raise ValueError(f"format version {version}, this reader knows {FORMAT_VERSION}")
     if arch != ARCH_SN_S or hsize != HEADER_SIZE:
         raise ValueError(f"architecture {arch} / header size {hsize} is not SN-S format 1")
-    keys = ("n_in", "n_hidden", "n_out", "gelu_n", "rsqrt_seed_n", "h_bits", "e_bits", "fz", "fg", "fy",
-            "gelu_step_log2", "eps_e", "eps_m", "c30", "eps_cap")
-    scalars = dict(zip(keys, f[5:20]))
-    model_version, hash32, payload_len = f[20], f[21], f[22]
-    q_len = sum(np.dtype(dt).itemsize * n for _, dt, n in Q_LAYOUT)
-    f_len = 4 + 4 * sum(n for _, n in F32_LAYOUT) if flags & FLAG_F32 else 0
+    scalars = {k: f[k] for k in _SCALARS}
+    model_version, hash32, payload_len = f["model_version"], f["hash32"], f["payload_size"]
+    q_len = layout.CURRENT.q_payload_size
+    f_len = layout.CURRENT.f32_payload_size if flags & FLAG_F32 else 0
     if flags & ~(FLAG_F32 | FLAG_HMAC):
         raise ValueError(f"unknown flags 0x{flags:04x}")
     tag_len = HMAC_SIZE if flags & FLAG_HMAC else 0
     if payload_len != q_len + f_len or len(data) != HEADER_SIZE + payload_len + TRAILER_SIZE + tag_len:
         raise ValueError(f"payload size {payload_len} / image size {len(data)} disagree with the SN-S layout")
     body_end = HEADER_SIZE + payload_len
-    (crc,) = struct.unpack_from("<I", data, body_end)
+    crc, sha_bytes = layout.CURRENT.trailer_struct.unpack_from(data, body_end)
     if crc != zlib.crc32(data[:body_end]):
         raise ValueError("CRC-32 mismatch")
-    sha = data[body_end + 4 : body_end + 36].hex()
+    sha = sha_bytes.hex()
     if int(sha[:8], 16) != hash32:
         raise ValueError("hash32 in the header is not the start of the trailer's sha256")
     if hmac_key is not None:

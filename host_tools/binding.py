@@ -6,6 +6,8 @@ from __future__ import annotations
 import ctypes
 from pathlib import Path
 
+from fleetlab.canopen_od import objects as od
+
 from .wire.dbc import Frame
 
 
@@ -14,8 +16,7 @@ class CFrame(ctypes.Structure):
 
 
 class CCounters(ctypes.Structure):
-    _fields_ = [(n, ctypes.c_uint32) for n in ("frames_received", "frames_rejected", "samples_dropped",
-                                                "windows_flagged", "windows_done", "saturations")]
+    _fields_ = [(n, ctypes.c_uint32) for n in od.ESTIMATOR_COUNTERS]  # slipest_counters_t
 
 
 class CEstimator:

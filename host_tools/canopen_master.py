@@ -23,28 +23,8 @@ from .wire.dbc import Frame, WindowEstimate, codec, telemetry_frames
 ACTIVE_MODEL, COMMAND, COUNTERS, SLOTS, STORE_COUNTERS, UPLOAD = (
     od.IDX_ACTIVE_MODEL, od.IDX_COMMAND, od.IDX_COUNTERS, od.IDX_SLOTS, od.IDX_STORE_COUNTERS, od.IDX_UPLOAD)
 
-# SDO abort codes (CiA 301) by meaning, as the node sends them
-ABORT_NAMES = {
-    0x05030000: "toggle bit not alternated",
-    0x05040000: "SDO protocol timed out",
-    0x05040001: "command specifier not valid",
-    0x05040003: "invalid sequence number",
-    0x05040004: "CRC error (block mode)",
-    0x06010000: "unsupported access",
-    0x06010001: "attempt to read a write-only object",
-    0x06010002: "attempt to write a read-only object",
-    0x06020000: "object does not exist",
-    0x06060000: "hardware error (NVM)",
-    0x06070010: "length does not match",
-    0x06070012: "length too high",
-    0x06070013: "length too low",
-    0x06090011: "sub-index does not exist",
-    0x06090030: "invalid value",
-    0x08000000: "general error",
-    0x08000020: "data cannot be stored (image refused)",
-    0x08000022: "not in the present device state",
-    0x08000024: "no data available",
-}
+# SDO abort codes (CiA 301) by meaning, as the node sends them (canopen_od/objects.py is their one source)
+ABORT_NAMES = {code: doc for _, code, doc in od.ABORT_CODES}
 
 
 def rpdo_cob_ids(node_id: int) -> dict[str, int]:
@@ -146,7 +126,7 @@ class SlipestMaster:
         try:
             sha = bytes(rec[3].raw).hex()
         except canopen.SdoAbortedError as e:
-            if e.code != 0x08000024:
+            if e.code != od.ABORT["NO_DATA"]:
                 raise
             sha = None  # the built-in model: its sha256 is not compiled into the node
         slot = rec[4].raw

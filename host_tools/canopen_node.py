@@ -14,8 +14,11 @@ from pathlib import Path
 
 import can
 
+from fleetlab.export import image_layout
+
 from .wire.dbc import Frame
 from .binding import CFrame
+from .status_codes import STATUS
 
 # slipest_nvm_t callbacks
 _READ = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32, ctypes.POINTER(ctypes.c_uint8), ctypes.c_uint32)
@@ -23,9 +26,7 @@ _WRITE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32, ctypes
                           ctypes.c_uint32)
 _ERASE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32)
 
-SLIPEST_OK = 0
-SLIPEST_E_NVM = -14
-SLIPEST_E_STATE = -10
+SLIPEST_OK, SLIPEST_E_NVM, SLIPEST_E_STATE = STATUS["SLIPEST_OK"], STATUS["SLIPEST_E_NVM"], STATUS["SLIPEST_E_STATE"]
 
 
 class CNvm(ctypes.Structure):
@@ -33,13 +34,15 @@ class CNvm(ctypes.Structure):
                 ("n_sectors", ctypes.c_uint32), ("ctx", ctypes.c_void_p)]
 
 
-def nvm_sectors(sector_size: int, image_max: int = 3842) -> int:
-    """SLIPEST_STORE_NVM_SECTORS(s): two record sectors and two slots."""
+def nvm_sectors(sector_size: int, image_max: int = image_layout.CURRENT.max_size) -> int:
+    """SLIPEST_STORE_NVM_SECTORS(s): two record sectors and two slots (of SLIPEST_IMAGE_MAX_SIZE)."""
     return 2 + 2 * ((image_max + sector_size - 1) // sector_size)
 
 
 class RamNvm:
-    """An NVM area in RAM (erased to 0xFF), with counts of the store's writes and erases."""
+    """An NVM area in RAM (erased to 0xFF), with counts of the store's writes and erases. Strict as flash
+    and as the C ram_nvm (firmware_c/common/ram_nvm.c): a write must be one whole, aligned, in-range
+    sector that is erased; an erase one aligned, in-range sector. Anything else is refused (SLIPEST_E_NVM)."""
 
     def __init__(self, sector_size: int = 256, n_sectors: int | None = None) -> None:
         self.sector_size = sector_size
@@ -58,6 +61,8 @@ class RamNvm:
 
     def _write(self, _ctx, addr, buf, n):
         if addr % self.sector_size or n != self.sector_size or addr + n > len(self.mem):
+            return SLIPEST_E_NVM
+        if self.mem[addr:addr + n].count(0xFF) != n:  # programming flash only clears bits: erase first
             return SLIPEST_E_NVM
         self.mem[addr:addr + n] = ctypes.string_at(buf, n)
         self.writes += 1

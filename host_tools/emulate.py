@@ -20,7 +20,7 @@ from tqdm import tqdm
 
 from fleetlab.data.features_int import FLAG_GAP, FLAG_INVALID, SAMPLES_PER_WINDOW
 
-from .verify import faults as fault_mod
+from .verify import stream_faults as fault_mod
 from .verify.compare import EstimatorModel, WindowVerdict, compare_status, compare_windows
 from .wire.dbc import (
     TELEM_NAMES,

@@ -148,7 +148,7 @@ def test_nmt_heartbeat_and_sdo_reads(bdir, tmp_path, link):
         assert e.value.code == 0x06010002
         with pytest.raises(canopen.SdoAbortedError) as e:
             node.sdo[od.IDX_COMMAND][1].raw = 1  # nothing uploaded: nothing to activate
-        assert e.value.code == 0x08000022
+        assert e.value.code == od.ABORT["STATE"]
 
 
 @pytest.mark.parametrize("link", LINKS)
@@ -185,7 +185,7 @@ def test_block_download_activate_then_new_model_bit_exact(bdir, tmp_path, link, 
         # the same image again is not newer than the active one: refused, counted, EMCY
         with pytest.raises(canopen.SdoAbortedError) as e:
             m.upload(img, block=True)
-        assert e.value.code == 0x08000020
+        assert e.value.code == od.ABORT["STORE"]
         assert m.store_counters()["refused_version"] == 1
         assert wait_emcy(m.node, 0x6300)
 
@@ -205,3 +205,21 @@ def test_docs_object_dictionary_table_is_the_generated_one():
     doc = (REPO / "docs" / "model_update.md").read_text()
     start = doc.index("\n", doc.index("<!-- od-table:start")) + 1
     assert doc[start:doc.index("<!-- od-table:end")] == markdown_table()
+
+
+def test_python_ram_nvm_keeps_the_strict_nvm_rules() -> None:
+    """RamNvm mirrors firmware_c/common/ram_nvm.c: a write onto a sector that is not erased, an unaligned,
+    short or out-of-range write is refused (SLIPEST_E_NVM) and changes nothing; after an erase it is taken."""
+    import ctypes
+
+    from fleetlab.host_tools.canopen_node import SLIPEST_E_NVM, SLIPEST_OK, RamNvm
+
+    nvm = RamNvm(sector_size=64, n_sectors=4)
+    buf = (ctypes.c_uint8 * 64)(*([0x5A] * 64))
+    assert nvm._write(None, 64, buf, 64) == SLIPEST_OK
+    assert nvm._write(None, 64, buf, 64) == SLIPEST_E_NVM  # not erased
+    assert nvm._write(None, 65, buf, 64) == SLIPEST_E_NVM  # unaligned
+    assert nvm._write(None, 128, buf, 63) == SLIPEST_E_NVM  # short
+    assert nvm._write(None, 256, buf, 64) == SLIPEST_E_NVM  # out of range
+    assert nvm.writes == 1 and nvm.mem[128:192] == b"\xff" * 64
+    assert nvm._erase(None, 64) == SLIPEST_OK and nvm._write(None, 64, buf, 64) == SLIPEST_OK

@@ -17,8 +17,8 @@ from fleetlab.export.bundle import load_bundle
 from fleetlab.host_tools.canopen_master import EstimateCollector
 from fleetlab.host_tools.canopen_session import CanopenSession, eds_for, stream_telemetry
 from fleetlab.host_tools.emulator import EMULATOR_TARGET, find_artifact
-from fleetlab.host_tools.verify.faults import (UPLOAD_EFFECTS, UPLOAD_FAULTS, UPLOAD_WIRE_FAULTS, SdoFaultBus,
-                                               faulty_image)
+from fleetlab.host_tools.verify.upload_faults import (UPLOAD_EFFECTS, UPLOAD_FAULTS, UPLOAD_WIRE_FAULTS,
+                                                      SdoFaultBus, faulty_image)
 
 from test_canopen_node import EXAMPLE, NODE_ID, bdir, expected_logits, new_bundle, samples, wait_emcy  # noqa: F401
 
@@ -119,3 +119,43 @@ def test_keyed_node_refuses_images_without_the_right_tag_then_takes_a_signed_one
         m.upload(sign_image(img, key))
         m.activate()
         assert m.active_model()["version"] == 2
+
+
+SIGN_KEY = bytes(range(7, 39))
+
+
+def _one_defect(kind: str, good: bytes, bad: bytes) -> None:
+    """bad is good with exactly the defect `kind` names and nothing else: whatever check a reader runs first,
+    it can only refuse the image for that one reason."""
+    from fleetlab.export import image_layout
+
+    n_body = image_layout.body_size(good)
+    if kind == "corrupt_image":  # one payload bit, CRC left as it was
+        diff = [i for i, (a, b) in enumerate(zip(good, bad)) if a != b]
+        assert len(bad) == len(good) and len(diff) == 1 and image_layout.CURRENT.header_size <= diff[0] < n_body
+        assert bin(good[diff[0]] ^ bad[diff[0]]).count("1") == 1
+    elif kind == "wrong_arch":  # another architecture id under a CRC that matches; nothing else changed
+        fields = image_layout.header_fields(bad)
+        assert fields["arch"] != image_layout.header_fields(good)["arch"]
+        assert image_layout.reseal(bad) == bad, "the CRC does not cover the edited header"
+        assert image_layout.patch_header(bad, arch=image_layout.header_fields(good)["arch"]) == good
+    elif kind == "truncated":
+        assert len(bad) < len(good) and good.startswith(bad)
+    else:  # the bytes are unchanged: the node refuses the version, or a wire fault acts on the frames
+        assert bad == good
+
+
+@pytest.mark.parametrize("signed", [False, True], ids=["unsigned", "signed"])
+@pytest.mark.parametrize("kind", UPLOAD_FAULTS)
+def test_every_upload_fault_leaves_exactly_its_defect(new_bundle, kind, signed) -> None:
+    """Every upload fault applied to an unsigned and to an HMAC-signed image changes only what it names
+    (on a signed image the CRC sits 32 bytes further from the end: a fault that reseals it must find it)."""
+    from fleetlab.export.model_image import read_image, sign_image
+
+    good = (new_bundle / "model.img").read_bytes()
+    if signed:
+        good = sign_image(good, SIGN_KEY)
+    bad = faulty_image(kind, good)
+    _one_defect(kind, good, bad)
+    if kind in UPLOAD_WIRE_FAULTS or kind == "stale_version":
+        read_image(bad, hmac_key=SIGN_KEY if signed else None)  # still a valid image

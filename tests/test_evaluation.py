@@ -103,6 +103,13 @@ def test_dask_backend_gives_identical_results(dataset, small_settings, loky_resu
     assert comparable(on_dask) == comparable(loky_result)
 
 
+def test_batched_runs_beside_cpu_jobs_give_the_same_numbers(dataset, small_settings, loky_result):
+    """The GPU layout of an evaluation (AcoMerge's runs batched in this process while the other
+    methods' jobs run on workers beside it), here with the CPU engine: same numbers as always."""
+    beside = run_mccv(dataset, small_settings, n_jobs=2, progress=False, batch_runs=True)
+    assert comparable(beside) == comparable(loky_result)
+
+
 def test_another_seed_changes_the_search(dataset, small_settings, loky_result):
     other = run_mccv(dataset, EvalSettings(**{**small_settings.__dict__, "seed": 4}), n_jobs=2, progress=False)
     a = loky_result["results"]["acomerge"]["150"]["macro_f1"]["runs"]

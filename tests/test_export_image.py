@@ -4,13 +4,12 @@ refuses what the C reader refuses (the C reader itself: tests/test_firmware.py).
 from __future__ import annotations
 
 import struct
-import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from fleetlab.export import model_image
+from fleetlab.export import image_layout, model_image
 from fleetlab.export.bundle import load_bundle
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "firmware_c" / "bundles" / "example"
@@ -27,8 +26,8 @@ def test_writer_reader_roundtrip() -> None:
     for name in ("w1", "b1", "gamma", "beta", "w2", "b2"):
         assert np.array_equal(getattr(img.fparams, name), getattr(b.fparams, name)), name
     assert img.scalars["fy"] == b.qparams.fy and img.scalars["eps_m"] == b.qparams.eps_m
-    # explicit little-endian: w1[0][0] sits at byte 64 low byte first, whatever the host's order
-    assert struct.unpack_from("<h", data, 64)[0] == int(b.qparams.w1[0, 0])
+    # explicit little-endian: w1[0][0] sits right after the header, low byte first, whatever the host's order
+    assert struct.unpack_from("<h", data, image_layout.CURRENT.header_size)[0] == int(b.qparams.w1[0, 0])
 
 
 def test_bundle_image_is_the_bundles_model() -> None:
@@ -48,12 +47,10 @@ def test_reader_refuses_corrupt_images(edit, match) -> None:
 
 
 def test_reader_refuses_a_hash32_that_is_not_the_trailers() -> None:
-    d = bytearray((EXAMPLE / "model.img").read_bytes())
-    d[38] ^= 1
-    body = bytes(d[:-36])
-    d[-36:-32] = zlib.crc32(body).to_bytes(4, "little")
+    d = (EXAMPLE / "model.img").read_bytes()
+    hash32 = image_layout.header_fields(d)["hash32"]
     with pytest.raises(ValueError, match="hash32"):
-        model_image.read_image(bytes(d))
+        model_image.read_image(image_layout.patch_header(d, hash32=hash32 ^ 1))
 
 
 KEY = bytes(range(1, 33))
@@ -64,7 +61,7 @@ def test_signed_image_verifies_only_under_its_key() -> None:
     another key or when the tag is altered, and an unsigned image is refused when a key is required."""
     b = load_bundle(EXAMPLE)
     signed = model_image.image_bytes(b.qparams, b.fparams, b.content_hash, model_version=2, hmac_key=KEY)
-    assert len(signed) == 3842 + 32 and struct.unpack_from("<H", signed, 10)[0] == 0x0003
+    assert len(signed) == 3842 + 32 and image_layout.header_fields(signed)["flags"] == 0x0003
     assert model_image.read_image(signed, hmac_key=KEY).model_version == 2
     assert model_image.read_image(signed).model_version == 2  # no key: tag length-checked only
     # the same as signing the unsigned image afterwards
@@ -80,3 +77,26 @@ def test_signed_image_verifies_only_under_its_key() -> None:
         model_image.sign_image(unsigned, b"abc")
     with pytest.raises(ValueError, match="disagree"):
         model_image.read_image(signed[:-32])  # flag set, tag cut off
+
+
+def test_c_layout_header_is_generated_from_the_one_description() -> None:
+    """firmware_c/include/slipest_image_layout.h is what export/image_layout.py generates (run
+    `python -m fleetlab.export.image_layout c firmware_c/include/slipest_image_layout.h` after changing the
+    layout), the same text on every run, and its offsets are the Python writer's."""
+    text = image_layout.c_header()
+    assert text == image_layout.c_header()
+    assert image_layout.C_HEADER.read_text(encoding="utf-8") == text, "regenerate slipest_image_layout.h"
+    data = (EXAMPLE / "model.img").read_bytes()
+    off = image_layout.CURRENT.offsets
+    assert f"#define SLIPEST_IMAGE_OFF_FLAGS {off['flags']}u" in text and off["flags"] == 10
+    assert f"#define SLIPEST_IMAGE_TRAILER_SIZE {model_image.TRAILER_SIZE}u" in text
+    assert struct.unpack_from("<I", data, off["model_version"])[0] == model_image.read_image(data).model_version
+
+
+def test_patch_header_names_fields_and_reseals() -> None:
+    data = (EXAMPLE / "model.img").read_bytes()
+    patched = image_layout.patch_header(data, model_version=9)
+    assert model_image.read_image(patched).model_version == 9  # CRC resealed: every check passes
+    assert image_layout.patch_header(patched, model_version=1) == data
+    with pytest.raises(ValueError, match="no header field 'archh'"):
+        image_layout.patch_header(data, archh=2)

@@ -26,6 +26,7 @@ from cobs import cobs
 
 from fleetlab.data.features import featurise
 from fleetlab.data.features_int import CHANNEL_LSB, FLAG_GAP, FLAG_INVALID, featurise_int
+from fleetlab.export.image_layout import CURRENT, header_fields, patch_header, reseal
 from fleetlab.host_tools.firmware.build import cmake_build
 from fleetlab.host_tools.firmware.measure import library_footprint, target_costs
 from fleetlab.paths import repo_root
@@ -496,14 +497,6 @@ def test_python_can_slcan_adapter_talks_to_the_emulator(builds):
 
 
 # --------------------------------------------------------------------------- model image (model.img)
-def _recrc(img: bytes) -> bytes:
-    """Re-seal an edited image with a correct CRC-32, so that the reader's other checks are reached."""
-    import zlib
-
-    body = img[:-36]
-    return body + zlib.crc32(body).to_bytes(4, "little") + img[-32:]
-
-
 def _emu_model(build: Path, img: bytes, tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
     path = tmp_path / "m.img"
     path.write_bytes(img)
@@ -542,32 +535,23 @@ def test_emulator_runs_the_model_image_bit_exact(builds, tmp_path) -> None:
 ])
 def test_c_reader_rejects_bad_images(builds, tmp_path, case, status) -> None:
     """Every corruption is refused with its status, never a crash or an out-of-bounds read (ASan build)."""
-    img = bytearray((BUNDLE / "model.img").read_bytes())
+    img = (BUNDLE / "model.img").read_bytes()
+    hdr = header_fields(img)
+    # header edits are resealed with a valid CRC by patch_header: the check under test must catch them
+    edits = {"magic": {"magic": b"SLPX"}, "format version": {"format": 2}, "architecture": {"arch": 2},
+             "hidden width": {"n_hidden": 29}, "shift out of range": {"fy": 40},
+             "hash32": {"hash32": int(hdr["hash32"]) ^ 0xFF}, "length field": {"payload_size": 0xFFFFFFF0}}
     if case == "truncated":
         img = img[:-1]
     elif case == "one byte more":
         img += b"\0"
     elif case == "bit flip":
-        img[100] ^= 0x10
-    elif case == "magic":
-        img[0:4] = b"SLPX"
-    elif case == "format version":
-        img[4] = 2
-    elif case == "architecture":
-        img[6] = 2
-    elif case == "hidden width":
-        img[13] = 29
-    elif case == "shift out of range":
-        img[21] = 40  # fy
+        img = img[:100] + bytes([img[100] ^ 0x10]) + img[101:]
     elif case == "accumulator bound":
-        off = 64 + 720 + 120 + 60 + 120 + 180  # b2[0]
-        img[off:off + 4] = (2**31 - 1).to_bytes(4, "little")
-    elif case == "hash32":
-        img[38] ^= 0xFF
-    elif case == "length field":
-        img[42:46] = (0xFFFFFFF0).to_bytes(4, "little")
-    if case not in ("truncated", "one byte more", "bit flip"):
-        img = bytearray(_recrc(bytes(img)))  # a valid CRC: the check under test must catch it
+        off = CURRENT.header_size + sum(a.size for a in CURRENT.q_arrays[:5])  # b2[0]
+        img = reseal(img[:off] + (2**31 - 1).to_bytes(4, "little") + img[off + 4:])
+    else:
+        img = patch_header(img, **edits[case])
     res = _emu_model(builds["asan"], bytes(img), tmp_path, "--version")
     assert res.returncode == 2 and f"model image rejected: {status}" in res.stderr, res.stdout + res.stderr
     assert "AddressSanitizer" not in res.stderr and "runtime error" not in res.stderr

@@ -10,7 +10,7 @@ import time
 import pytest
 
 from fleetlab.cli import main as fleetlab_main
-from fleetlab.host_tools.verify import faults
+from fleetlab.host_tools.verify import stream_faults as faults
 from fleetlab.host_tools.verify.compare import EstimatorModel
 from fleetlab.host_tools.wire.dbc import OutputAssembler, StatusReport, control_frame
 from fleetlab.host_tools.emulate import DEFAULT_SCALE, emulate, soak_source

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fleetlab.data import features_int as fi
-from fleetlab.host_tools.verify import faults
+from fleetlab.host_tools.verify import stream_faults as faults
 from fleetlab.host_tools.verify.compare import EstimatorModel, compare_status, compare_windows
 from fleetlab.host_tools.wire.items import WireItem
 from fleetlab.host_tools.wire.dbc import Frame, StatusReport, WindowEstimate, control_frame, telemetry_frames

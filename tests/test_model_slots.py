@@ -23,6 +23,7 @@ import pytest
 
 from fleetlab.export import model_image
 from fleetlab.export.bundle import export_bundle, load_bundle
+from fleetlab.export.image_layout import patch_header
 from fleetlab.export.vectors import draw_inputs
 from fleetlab.host_tools.emulator import EMULATOR_TARGET, build, find_artifact
 from fleetlab.host_tools.firmware.build import cmake_build
@@ -162,7 +163,7 @@ def test_refused_uploads_keep_the_old_model(emu, models, tmp_path) -> None:
     cases = {
         "flip": (good[:300] + bytes([good[300] ^ 1]) + good[301:], "CRC mismatch"),
         "truncated": (good[:-5], "wrong length"),
-        "arch": (_recrc(good[:6] + b"\x02" + good[7:]), "model architecture mismatch"),
+        "arch": (patch_header(good, arch=2), "model architecture mismatch"),
         "older": ((EXAMPLE / "model.img").read_bytes(), "model version not newer than the active one"),
     }
     for name, (data, why) in cases.items():
@@ -171,13 +172,6 @@ def test_refused_uploads_keep_the_old_model(emu, models, tmp_path) -> None:
         res = run(emu, "--nvm", str(nvm), "--upload", str(img), "--activate")
         assert res.returncode == 3 and f"upload refused: {why}" in res.stderr, (name, res.stderr)
         assert served(emu, nvm, 256, models) == "old"
-
-
-def _recrc(img: bytes) -> bytes:
-    import zlib
-
-    body = img[:-36]
-    return body + zlib.crc32(body).to_bytes(4, "little") + img[-32:]
 
 
 @pytest.fixture(scope="module")

@@ -9,9 +9,10 @@ import shutil
 
 import pytest
 
+from fleetlab.canopen_od import objects as od
 from fleetlab.cli import main
 from fleetlab.export.bundle import load_bundle
-from fleetlab.host_tools.verify.faults import faulty_image
+from fleetlab.host_tools.verify.upload_faults import faulty_image
 
 from test_canopen_node import EXAMPLE, bdir, new_bundle  # noqa: F401
 
@@ -32,7 +33,7 @@ def test_upload_activates_and_reads_back(bdir, new_bundle, tmp_path, capsys, lin
     # the NVM file keeps the model: a second run finds version 2 active and refuses a re-upload of it
     assert main(["upload", "--bundle", str(new_bundle), "--link", link, "--emulate", "--nvm", str(nvm)]) == 1
     err = capsys.readouterr().err
-    assert "SDO abort 0x08000020" in err and "image refused" in err
+    assert f"SDO abort 0x{od.ABORT['STORE']:08X}" in err and "image refused" in err
 
 
 def test_upload_errors_are_one_clear_line(bdir, new_bundle, tmp_path, capsys):
@@ -42,7 +43,7 @@ def test_upload_errors_are_one_clear_line(bdir, new_bundle, tmp_path, capsys):
     shutil.copytree(new_bundle, bad)
     (bad / "model.img").write_bytes(faulty_image("wrong_arch", (new_bundle / "model.img").read_bytes()))
     assert main(["upload", "--bundle", str(bad), "--emulate", "--activate"]) == 1
-    assert "SDO abort 0x08000020" in capsys.readouterr().err
+    assert f"SDO abort 0x{od.ABORT['STORE']:08X}" in capsys.readouterr().err
     assert main(["upload", "--bundle", str(new_bundle)]) == 1
     assert "--channel" in capsys.readouterr().err
 

@@ -33,7 +33,7 @@ if(SLIPEST_TARGET_KERNEL_OPT)
 endif()
 
 # runtime of the test images: startup + host I/O (semihosting on bare metal, stdio in user mode)
-set(rt_sources ${TGT}/target_vectors.c ${TGT}/target_measure.c ${TGT}/target_nvm.c)
+set(rt_sources ${TGT}/target_vectors.c ${TGT}/target_measure.c ${TGT}/target_nvm.c ${FW}/common/ram_nvm.c)
 foreach(s ${SLIPEST_TARGET_STARTUP})
   list(APPEND rt_sources ${TGT}/${s})
 endforeach()
@@ -51,7 +51,7 @@ set_source_files_properties(${TGT}/target_measure.c PROPERTIES COMPILE_OPTIONS -
 set_source_files_properties(${TGT}/freestanding_libc.c PROPERTIES
                             COMPILE_OPTIONS "-fno-builtin;-fno-tree-loop-distribute-patterns")
 add_library(slipest_rt STATIC ${rt_sources})
-target_include_directories(slipest_rt PUBLIC ${TGT} PRIVATE ${SLIPEST_INCLUDES})
+target_include_directories(slipest_rt PUBLIC ${TGT} PRIVATE ${SLIPEST_INCLUDES} ${FW}/common)
 target_compile_options(slipest_rt PRIVATE ${SLIPEST_WARNINGS})
 target_compile_definitions(slipest_rt PRIVATE SLIPEST_VECTORS_PATH="${VECTORS_BIN}")
 if(SLIPEST_APBUART_BASE)
@@ -226,6 +226,7 @@ endif()
 # size matters more than speed outside the inference kernels (per-frame code, run at 150 Hz; the model
 # store, the image reader and the model checks run at boot and once per upload or activation)
 set_source_files_properties(${FW}/src/slipest_co.c ${FW}/src/slipest_co_sdo.c ${FW}/src/slipest_co_od_access.c
+    ${FW}/src/slipest_co_model.c
                             "${GEN}/slipest_co_od.c" PROPERTIES COMPILE_OPTIONS -Os)
 set_source_files_properties(${FW}/src/slipest_node.c ${FW}/src/slipest_slcan.c ${FW}/src/slipest_cobs.c
                             ${FW}/src/slipest_crc.c ${FW}/src/slipest_status.c ${FW}/src/slipest_features.c

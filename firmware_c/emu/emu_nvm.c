@@ -3,6 +3,7 @@
 #define _XOPEN_SOURCE 700
 
 #include "emu_nvm.h"
+#include "ram_nvm.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -51,7 +52,12 @@ static slipest_status_t nvm_read(void *ctx, uint32_t addr, uint8_t *buf, uint32_
 static slipest_status_t nvm_write(void *ctx, uint32_t addr, const uint8_t *buf, uint32_t len)
 {
     emu_nvm_t *e = ctx;
-    if (len != e->sector || addr % e->sector != 0u || !in_area(e, addr, len)) return SLIPEST_E_RANGE;
+    uint8_t cur[SLIPEST_STORE_SECTOR_MAX];
+    slipest_status_t st = ram_nvm_erase_rule(addr, e->sector, e->size); /* aligned and inside: cur can be read */
+    if (st != SLIPEST_OK) return st;
+    if (pread(e->fd, cur, e->sector, (off_t)addr) != (ssize_t)e->sector) return SLIPEST_E_NVM;
+    st = ram_nvm_write_rule(addr, len, e->sector, e->size, cur); /* the strict NVM's rules, on the file */
+    if (st != SLIPEST_OK) return st;
     return put_then_maybe_die(e, cut_before(e, addr, buf, len), addr, buf, len);
 }
 
@@ -59,7 +65,7 @@ static slipest_status_t nvm_erase(void *ctx, uint32_t addr)
 {
     emu_nvm_t *e = ctx;
     uint8_t ff[SLIPEST_STORE_SECTOR_MAX];
-    if (addr % e->sector != 0u || !in_area(e, addr, e->sector)) return SLIPEST_E_RANGE;
+    if (ram_nvm_erase_rule(addr, e->sector, e->size) != SLIPEST_OK) return SLIPEST_E_RANGE;
     memset(ff, 0xFF, e->sector);
     return put_then_maybe_die(e, cut_before(e, addr, ff, e->sector), addr, ff, e->sector);
 }

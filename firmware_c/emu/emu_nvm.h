@@ -1,7 +1,8 @@
 /* File-backed NVM for the emulator (slipest_nvm_t over a regular file), with the power-loss
  * test hook: the process kills itself with SIGKILL from inside the K-th write or erase: before
  * it touches the file, after only the first half of the sector (a torn write), or right after
- * completing it (before the store sees the result). */
+ * completing it (before the store sees the result). Writes and erases keep the rules of the strict
+ * RAM NVM (firmware_c/common/ram_nvm.h): one whole erased aligned sector, nothing outside the area. */
 #ifndef EMU_NVM_H
 #define EMU_NVM_H
 

@@ -1,61 +1,55 @@
 /* RAM NVM and seed image for the store fuzzers; see fuzz_nvm.h. */
 #include "fuzz_nvm.h"
 
+#include "ram_nvm.h"
+
 #include <stdio.h>
 #include <string.h>
 
 uint8_t fuzz_nvm_mem[FUZZ_NVM_SIZE];
-static int fail_next;
+static ram_nvm_t ram;
+static slipest_nvm_t strict;
+
+/* The strict RAM NVM, trapping on an access outside the area or off a sector boundary (the store
+ * must keep to slipest_store.h). A write onto a sector that is not erased is the fuzzer's own doing
+ * (a bit flipped into an erased sector): the store sees it as the failed program it would be. */
+static slipest_status_t checked(slipest_status_t st)
+{
+    if (st == SLIPEST_E_RANGE) __builtin_trap();
+    return (st == SLIPEST_E_STATE) ? SLIPEST_E_NVM : st;
+}
 
 static slipest_status_t nvm_read(void *ctx, uint32_t addr, uint8_t *buf, uint32_t len)
 {
     (void)ctx;
-    if (addr > sizeof fuzz_nvm_mem || len > sizeof fuzz_nvm_mem - addr) __builtin_trap();
-    memcpy(buf, fuzz_nvm_mem + addr, len);
-    return SLIPEST_OK;
+    return checked(strict.read(strict.ctx, addr, buf, len));
 }
 
 static slipest_status_t nvm_write(void *ctx, uint32_t addr, const uint8_t *buf, uint32_t len)
 {
     (void)ctx;
-    if (len != FUZZ_NVM_SECTOR || addr % FUZZ_NVM_SECTOR != 0u || addr > sizeof fuzz_nvm_mem - len) {
-        __builtin_trap();
-    }
-    if (fail_next) {
-        fail_next = 0;
-        return SLIPEST_E_NVM;
-    }
-    memcpy(fuzz_nvm_mem + addr, buf, len);
-    return SLIPEST_OK;
+    return checked(strict.write(strict.ctx, addr, buf, len));
 }
 
 static slipest_status_t nvm_erase(void *ctx, uint32_t addr)
 {
     (void)ctx;
-    if (addr % FUZZ_NVM_SECTOR != 0u || addr > sizeof fuzz_nvm_mem - FUZZ_NVM_SECTOR) __builtin_trap();
-    if (fail_next) {
-        fail_next = 0;
-        return SLIPEST_E_NVM;
-    }
-    memset(fuzz_nvm_mem + addr, 0xFF, FUZZ_NVM_SECTOR);
-    return SLIPEST_OK;
+    return checked(strict.erase(strict.ctx, addr));
 }
 
 void fuzz_nvm_reset(slipest_nvm_t *nvm)
 {
-    memset(fuzz_nvm_mem, 0xFF, sizeof fuzz_nvm_mem);
-    fail_next = 0;
+    ram_nvm_init(&ram, fuzz_nvm_mem, FUZZ_NVM_SECTOR, FUZZ_NVM_SECTORS, &strict);
+    *nvm = strict;
     nvm->read = nvm_read;
     nvm->write = nvm_write;
     nvm->erase = nvm_erase;
-    nvm->sector_size = FUZZ_NVM_SECTOR;
-    nvm->n_sectors = FUZZ_NVM_SECTORS;
     nvm->ctx = NULL;
 }
 
 void fuzz_nvm_fail_next(void)
 {
-    fail_next = 1;
+    ram.fail_at = 1u;
 }
 
 const uint8_t *fuzz_seed_image(size_t *len)

@@ -1,6 +1,7 @@
-/* Shared by the fuzzers that drive the model store (fuzz_store, fuzz_co_frames): a RAM NVM with
- * 64-byte sectors that traps on any access outside the area or off a sector boundary (the store
- * must stay inside what it was given) and can fail the next write or erase on command, and the
+/* Shared by the fuzzers that drive the model store (fuzz_store, fuzz_co_frames): the strict RAM
+ * NVM (firmware_c/common/ram_nvm.h) with 64-byte sectors, trapping on any access outside the area
+ * or off a sector boundary (the store must keep to slipest_store.h; a write onto a sector the fuzzer
+ * flipped a bit into is an NVM error), which can fail the next write or erase on command, and the
  * seed image those fuzzers upload (the example bundle's model.img, read once per process). */
 #ifndef FUZZ_NVM_H
 #define FUZZ_NVM_H

@@ -62,7 +62,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         case 9: /* mutate the image to upload: one byte, or the model version */
             if (p < size) {
                 uint8_t v = data[p++];
-                if (arg & 1u) img[34] = (uint8_t)(img[34] + v);
+                if (arg & 1u) img[SLIPEST_IMAGE_OFF_MODEL_VERSION] = (uint8_t)(img[SLIPEST_IMAGE_OFF_MODEL_VERSION] + v);
                 else img[((size_t)arg * 16u + v) % img_len] ^= v;
             }
             break;

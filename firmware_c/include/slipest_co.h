@@ -38,7 +38,7 @@ extern "C" {
 /** Output frames per call at most: 2 windows x 3 TPDOs, the model status TPDO, an EMCY, and
  *  one SDO response / heartbeat. */
 #define SLIPEST_CO_MAX_OUT 9u
-/** An SDO transfer with no frame for this long is aborted (0x05040000) by slipest_co_tick(). */
+/** An SDO transfer with no frame for this long is aborted (SLIPEST_CO_ABORT_TIMEOUT) by slipest_co_tick(). */
 #define SLIPEST_CO_SDO_TIMEOUT_MS 1000u
 /** Block size the SDO server asks for in a block download (segments per block, 1..127). */
 #define SLIPEST_CO_BLKSIZE 127u
@@ -49,32 +49,8 @@ extern "C" {
 #define SLIPEST_CO_NMT_OPERATIONAL 0x05u /**< operational: PDOs, SDO, EMCY */
 #define SLIPEST_CO_NMT_PRE_OPERATIONAL 0x7Fu /**< pre-operational: SDO and EMCY, no PDO */
 
-/** EMCY error codes (CiA 301) the node sends. */
-#define SLIPEST_CO_EMCY_RESET 0x0000u      /**< error reset: the error register is clear again */
-#define SLIPEST_CO_EMCY_HARDWARE 0x5000u   /**< an NVM callback failed */
-#define SLIPEST_CO_EMCY_DATA_SET 0x6300u   /**< a model image was refused (byte 3: slipest status) */
-#define SLIPEST_CO_EMCY_PDO_LENGTH 0x8210u /**< an RPDO had the wrong length */
-#define SLIPEST_CO_EMCY_NO_MODEL 0xFF00u   /**< device specific: no model to run (none built in, no valid slot) */
-
-/* SDO abort codes (CiA 301) the server sends. */
-#define SLIPEST_CO_ABORT_TOGGLE 0x05030000u /**< toggle bit not alternated */
-#define SLIPEST_CO_ABORT_TIMEOUT 0x05040000u /**< SDO protocol timed out */
-#define SLIPEST_CO_ABORT_COMMAND 0x05040001u /**< command specifier not valid or unknown */
-#define SLIPEST_CO_ABORT_CRC 0x05040004u /**< CRC error (block mode) */
-#define SLIPEST_CO_ABORT_UNSUPPORTED 0x06010000u /**< unsupported access to an object */
-#define SLIPEST_CO_ABORT_WRITE_ONLY 0x06010001u /**< attempt to read a write-only object */
-#define SLIPEST_CO_ABORT_READ_ONLY 0x06010002u /**< attempt to write a read-only object */
-#define SLIPEST_CO_ABORT_NO_OBJECT 0x06020000u /**< object does not exist */
-#define SLIPEST_CO_ABORT_HARDWARE 0x06060000u /**< access failed: hardware (NVM) error */
-#define SLIPEST_CO_ABORT_LENGTH 0x06070010u /**< length of the service parameter does not match */
-#define SLIPEST_CO_ABORT_TOO_HIGH 0x06070012u /**< length too high */
-#define SLIPEST_CO_ABORT_TOO_LOW 0x06070013u /**< length too low */
-#define SLIPEST_CO_ABORT_NO_SUB 0x06090011u /**< sub-index does not exist */
-#define SLIPEST_CO_ABORT_VALUE 0x06090030u /**< invalid value (a command other than 1) */
-#define SLIPEST_CO_ABORT_GENERAL 0x08000000u /**< general error */
-#define SLIPEST_CO_ABORT_STORE 0x08000020u /**< data cannot be stored: the image was refused */
-#define SLIPEST_CO_ABORT_STATE 0x08000022u /**< not in the present device state (no store, nothing to activate) */
-#define SLIPEST_CO_ABORT_NO_DATA 0x08000024u /**< no data available (the built-in model's sha256, no store) */
+/* EMCY codes (SLIPEST_CO_EMCY_*) and SDO abort codes (SLIPEST_CO_ABORT_*): slipest_co_od.h, generated
+ * from canopen_od/objects.py (EMCY_CODES, ABORT_CODES), the one source the host tools read too. */
 
 /** State of the SDO server (one transfer at a time). */
 typedef struct {

@@ -6,7 +6,8 @@
  * magic, format version, architecture, every length, every shift range, the CRC-32 and the
  * content hash are checked before a model struct is filled, and nothing is read outside the
  * buffer whatever the length fields say. Integers are assembled from little-endian bytes, so
- * the reader works on a core of either byte order. Layout: docs/fixed_point.md, "Model image".
+ * the reader works on a core of either byte order. Layout: docs/fixed_point.md, "Model image";
+ * its offsets and sizes: slipest_image_layout.h, generated from export/image_layout.py.
  */
 #ifndef SLIPEST_IMAGE_H
 #define SLIPEST_IMAGE_H
@@ -14,31 +15,13 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "slipest_image_layout.h"
 #include "slipest_model.h"
 #include "slipest_status.h"
 
 #ifdef __cplusplus
 extern "C" {
 #endif
-
-/** Magic of a model image ("SLPM"). */
-#define SLIPEST_IMAGE_MAGIC "SLPM"
-/** Image format version this reader understands. */
-#define SLIPEST_IMAGE_FORMAT 1u
-/** Architecture id of SN-S (12 -> 30 -> LayerNorm -> GELU -> 3, fixed-point scheme 1). */
-#define SLIPEST_IMAGE_ARCH_SN_S 1u
-/** Bytes of the image header. */
-#define SLIPEST_IMAGE_HEADER_SIZE 64u
-/** Bytes of the trailer: CRC-32 and the 32-byte sha256 content hash. */
-#define SLIPEST_IMAGE_TRAILER_SIZE 36u
-/** Header flag: the image carries the float32 model after the fixed-point one. */
-#define SLIPEST_IMAGE_FLAG_F32 0x0001u
-/** Header flag: an HMAC-SHA256 tag over header and payload follows the trailer. */
-#define SLIPEST_IMAGE_FLAG_HMAC 0x0002u
-/** Bytes of the HMAC-SHA256 tag (present when SLIPEST_IMAGE_FLAG_HMAC is set). */
-#define SLIPEST_IMAGE_HMAC_SIZE 32u
-/** Largest valid image (with the float32 model and an HMAC tag), for sizing a receive buffer. */
-#define SLIPEST_IMAGE_MAX_SIZE 3874u
 
 /** Storage of a fixed-point model read from an image (the model struct points into it). */
 typedef struct {

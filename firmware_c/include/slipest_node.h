@@ -88,6 +88,13 @@ slipest_status_t slipest_node_set_model(slipest_node_t *node, const slipest_mode
                                         const slipest_model_f32_t *mf);
 
 /**
+ * @brief Leave the node without a model (its model is gone, none can replace it): frames are still
+ *        taken and counted, but no window is inferred until slipest_node_set_model().
+ * @param[in,out] node  an initialised node (NULL: nothing happens)
+ */
+void slipest_node_clear_model(slipest_node_t *node);
+
+/**
  * @brief The active fixed-point model (its sha256 and version are what status frames report).
  * @param[in] node  an initialised node
  * @return the model, or NULL when node is NULL

@@ -40,14 +40,17 @@ int slipest_co_sdo_tick(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
 /* Abandon any SDO transfer (NMT reset); an open model upload is aborted in the store. */
 void slipest_co_sdo_reset(slipest_co_t *co);
 
+/* --- slipest_co_model.c: the model lifecycle (a leaf: it calls no other slipest_co file) --- */
+
 /* Write an EMCY frame (unless stopped) and set the error register bits; returns 0 or 1. */
 int slipest_co_emcy(slipest_co_t *co, uint16_t code, uint8_t reg_bits, int status, slipest_frame_t *out);
 
 /* SDO abort code of a failed store call; an EMCY for a refused image or an NVM error. */
 uint32_t slipest_co_store_failed(slipest_co_t *co, int status, slipest_frame_t *out, int *n);
 
-/* Hand the store's active model to the estimator (after activate / rollback). */
-void slipest_co_use_store_model(slipest_co_t *co);
+/* 0x2002 command `what` (SLIPEST_CO_CMD_ACTIVATE, _ROLLBACK, _ABORT; the object write checked
+ * that 1 was written); may write one EMCY to *out (count in *n). Returns 0 or an SDO abort code. */
+uint32_t slipest_co_model_command(slipest_co_t *co, unsigned what, slipest_frame_t *out, int *n);
 
 /* Little-endian helpers: explicit byte order on the wire. */
 static inline void slipest_co_put_le(uint8_t *p, uint32_t v, uint32_t nbytes)

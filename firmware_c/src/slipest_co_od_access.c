@@ -31,17 +31,23 @@ const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32
 }
 
 /* 0x2005 sub n + 1: store counter n, in slipest_store_counters_t's field order (every field a uint32_t) */
+uint32_t slipest_co_counter(const slipest_co_t *co, unsigned n)
+{
+    /* the first counters are the estimator's slipest_counters_t fields (every one a uint32_t) */
+    static const uint8_t at[] = SLIPEST_CO_ESTIMATOR_COUNTER_OFFSETS;
+    slipest_counters_t c;
+    const uint8_t *bytes = (const uint8_t *)&c;
+    uint32_t v;
+    if (co == NULL || n >= SLIPEST_CO_N_COUNTERS) return 0u;
+    if (n >= sizeof at) return co->cnt[n];
+    (void)slipest_node_counters(&co->est, &c);
+    (void)memcpy(&v, &bytes[at[n]], sizeof v); /* a native value, not wire data */
+    return v;
+}
+
 static uint32_t store_counter(const slipest_store_counters_t *c, unsigned n)
 {
-    static const uint8_t at[] = {
-        offsetof(slipest_store_counters_t, uploads_started), offsetof(slipest_store_counters_t, uploads_aborted),
-        offsetof(slipest_store_counters_t, images_accepted), offsetof(slipest_store_counters_t, refused_length),
-        offsetof(slipest_store_counters_t, refused_format),  offsetof(slipest_store_counters_t, refused_arch),
-        offsetof(slipest_store_counters_t, refused_crc),     offsetof(slipest_store_counters_t, refused_hash),
-        offsetof(slipest_store_counters_t, refused_range),   offsetof(slipest_store_counters_t, refused_hmac),
-        offsetof(slipest_store_counters_t, refused_version), offsetof(slipest_store_counters_t, activations),
-        offsetof(slipest_store_counters_t, rollbacks),       offsetof(slipest_store_counters_t, nvm_errors),
-        offsetof(slipest_store_counters_t, boot_fallbacks)};
+    static const uint8_t at[] = SLIPEST_CO_STORE_COUNTER_OFFSETS;
     const uint8_t *bytes = (const uint8_t *)c;
     uint32_t v = 0u;
     if (n < sizeof at) {
@@ -55,9 +61,9 @@ static uint32_t read_model(const slipest_co_t *co, unsigned what, uint8_t buf[32
     const slipest_model_q_t *m = slipest_node_model_q(&co->est);
     uint32_t v;
     switch (what) {
-    case 0u: v = (m == NULL) ? 0u : m->version; break; /* 0: no model */
-    case 1u: v = slipest_model_hash32(m); break;
-    case 2u: {
+    case SLIPEST_CO_MODEL_VERSION: v = (m == NULL) ? 0u : m->version; break; /* 0: no model */
+    case SLIPEST_CO_MODEL_HASH32: v = slipest_model_hash32(m); break;
+    case SLIPEST_CO_MODEL_SHA256: {
         /* the built-in model's sha256 is not compiled in: only a slot's image carries it */
         const uint8_t *h = co->from_store ? slipest_store_active_sha256(co->store) : NULL;
         if (h == NULL) return SLIPEST_CO_ABORT_NO_DATA;
@@ -65,7 +71,7 @@ static uint32_t read_model(const slipest_co_t *co, unsigned what, uint8_t buf[32
         *len = 32u;
         return 0u;
     }
-    case 3u: {
+    case SLIPEST_CO_MODEL_SLOT: {
         int s = co->from_store ? slipest_store_active_slot(co->store) : SLIPEST_STORE_NO_SLOT;
         v = (s < 0) ? 0xFFu : (uint32_t)s;
         if (m == NULL) {
@@ -73,7 +79,7 @@ static uint32_t read_model(const slipest_co_t *co, unsigned what, uint8_t buf[32
         }
         break;
     }
-    default: v = slipest_lib_version(); break;
+    default: v = slipest_lib_version(); break; /* SLIPEST_CO_MODEL_LIBRARY_VERSION */
     }
     slipest_co_put_le(buf, v, *len);
     return 0u;
@@ -94,7 +100,7 @@ uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e,
     case SLIPEST_CO_KIND_ERR_REG: v = co->err_reg; break;
     case SLIPEST_CO_KIND_SERIAL: v = co->serial; break;
     case SLIPEST_CO_KIND_PDO: {
-        unsigned pdo = arg >> 3, off = arg & 7u;
+        unsigned pdo = arg >> SLIPEST_CO_PDO_SHIFT, off = arg & SLIPEST_CO_PDO_OFFSET_MASK;
         if (pdo >= SLIPEST_CO_N_PDO || off + *len > 8u) return SLIPEST_CO_ABORT_GENERAL;
         (void)memcpy(buf, &co->pdo[pdo][off], *len); /* already little-endian wire bytes */
         return 0u;
@@ -104,14 +110,14 @@ uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e,
     case SLIPEST_CO_KIND_SLOT: {
         slipest_slot_info_t info;
         if (co->store == NULL) return SLIPEST_CO_ABORT_NO_DATA;
-        if (slipest_store_slot_info(co->store, arg >> 4, &info) != SLIPEST_OK) {
+        if (slipest_store_slot_info(co->store, arg >> SLIPEST_CO_SLOT_SHIFT, &info) != SLIPEST_OK) {
             return SLIPEST_CO_ABORT_GENERAL;
         }
-        switch (arg & 0xFu) {
-        case 0u: v = (uint32_t)info.state; break;
-        case 1u: v = info.length; break;
-        case 2u: v = info.version; break;
-        default: v = info.hash32; break;
+        switch (arg & SLIPEST_CO_SLOT_FIELD_MASK) {
+        case SLIPEST_CO_SLOT_STATE: v = (uint32_t)info.state; break;
+        case SLIPEST_CO_SLOT_LENGTH: v = info.length; break;
+        case SLIPEST_CO_SLOT_VERSION: v = info.version; break;
+        default: v = info.hash32; break; /* SLIPEST_CO_SLOT_HASH32 */
         }
         break;
     }
@@ -120,59 +126,17 @@ uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e,
         v = store_counter(slipest_store_counters(co->store), arg);
         break;
     case SLIPEST_CO_KIND_UPLOAD:
-        if (arg == 0u) {
+        if (arg == SLIPEST_CO_UPLOAD_STATE) {
             v = (co->store == NULL) ? 0u : (uint32_t)slipest_store_upload_state(co->store);
-        } else if (arg == 1u) {
+        } else if (arg == SLIPEST_CO_UPLOAD_LAST_STATUS) {
             v = (uint32_t)(uint8_t)co->last_store_status; /* two's complement byte */
-        } else {
+        } else { /* SLIPEST_CO_UPLOAD_RECEIVED */
             v = co->sdo.done;
         }
         break;
     default: return SLIPEST_CO_ABORT_GENERAL;
     }
     slipest_co_put_le(buf, v, *len);
-    return 0u;
-}
-
-/* 0x2002: model commands (value 1 only) */
-static uint32_t command(slipest_co_t *co, unsigned what, uint32_t value, slipest_frame_t *out, int *n)
-{
-    slipest_status_t st;
-    if (value != 1u) return SLIPEST_CO_ABORT_VALUE;
-    if (co->store == NULL) return SLIPEST_CO_ABORT_STATE;
-    if (what == 1u) {
-        st = slipest_store_activate(co->store);
-    } else if (what == 2u) {
-        st = slipest_store_rollback(co->store);
-    } else {
-        st = slipest_store_abort(co->store);
-    }
-    co->last_store_status = (int8_t)st;
-    if (st != SLIPEST_OK) {
-        /* a failed activate or rollback may have reloaded the previous slot (follow the store), or
-         * left no valid model in the store's RAM: then the built-in model serves */
-        if (what != 3u) {
-            if (slipest_store_model_q(co->store) != NULL) {
-                slipest_co_use_store_model(co);
-            } else {
-                if (slipest_node_set_model(&co->est, co->builtin_q, co->builtin_f) != SLIPEST_OK) {
-                    /* no built-in model either: stop estimating (the store's RAM copy is gone) */
-                    co->est.mq = NULL;
-                    co->est.mf = NULL;
-                }
-                co->from_store = 0u;
-            }
-        }
-        return slipest_co_store_failed(co, st, out, n);
-    }
-    if (what != 3u) {
-        /* between two frames: the next window is the first one of the new model */
-        slipest_co_use_store_model(co);
-        if (co->err_reg != 0u) {
-            co->err_reg = 0u;
-            *n += slipest_co_emcy(co, SLIPEST_CO_EMCY_RESET, 0u, 0, out);
-        }
-    }
     return 0u;
 }
 
@@ -192,12 +156,14 @@ uint32_t slipest_co_od_write(slipest_co_t *co, const slipest_co_entry_t *e, cons
         co->hb_ms = (uint16_t)v;
         return 0u;
     case SLIPEST_CO_KIND_PDO: {
-        unsigned pdo = arg >> 3, off = arg & 7u;
+        unsigned pdo = arg >> SLIPEST_CO_PDO_SHIFT, off = arg & SLIPEST_CO_PDO_OFFSET_MASK;
         if (pdo >= SLIPEST_CO_N_PDO || off + len > 8u) return SLIPEST_CO_ABORT_GENERAL;
         (void)memcpy(&co->pdo[pdo][off], data, len); /* wire bytes; processed only as a whole RPDO */
         return 0u;
     }
-    case SLIPEST_CO_KIND_COMMAND: return command(co, arg, v, out, n);
+    case SLIPEST_CO_KIND_COMMAND:
+        if (v != 1u) return SLIPEST_CO_ABORT_VALUE; /* a command is started by writing 1 */
+        return slipest_co_model_command(co, arg, out, n);
     default: return SLIPEST_CO_ABORT_READ_ONLY;
     }
 }

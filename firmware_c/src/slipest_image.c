@@ -1,5 +1,6 @@
 /* Validating model-image reader (layout: docs/fixed_point.md "Model image", writer:
- * export/model_image.py). Every integer is assembled from little-endian bytes, every offset is
+ * export/model_image.py; every offset and size from slipest_image_layout.h, generated from
+ * export/image_layout.py). Every integer is assembled from little-endian bytes, every offset is
  * checked against len before use, and the length fields are compared with the only layout SN-S
  * allows, never used to size a read. */
 #include "slipest_image.h"
@@ -7,16 +8,18 @@
 
 #include <string.h>
 
-#define Q_PAYLOAD (2u * 360u + 4u * 30u + 2u * 30u + 4u * 30u + 2u * 90u + 4u * 3u + 2u * 129u + 4u * 24u)
-#define F32_PAYLOAD (4u + 4u * (360u + 30u + 30u + 30u + 90u + 3u))
-
-#if SLIPEST_N_FEATURES != 12 || SLIPEST_N_HIDDEN != 30 || SLIPEST_N_CLASSES != 3 || SLIPEST_Q_GELU_N != 129 || \
-    SLIPEST_Q_RSQRT_SEED_N != 24
-#error "slipest_image.c: the image layout is that of SN-S"
+#if SLIPEST_IMAGE_Q_W1_N != SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES || SLIPEST_IMAGE_Q_B1_N != SLIPEST_N_HIDDEN || \
+    SLIPEST_IMAGE_Q_W2_N != SLIPEST_N_CLASSES * SLIPEST_N_HIDDEN || SLIPEST_IMAGE_Q_B2_N != SLIPEST_N_CLASSES || \
+    SLIPEST_IMAGE_Q_GELU_N != SLIPEST_Q_GELU_N || SLIPEST_IMAGE_Q_RSQRT_SEED_N != SLIPEST_Q_RSQRT_SEED_N
+#error "slipest_image.c: slipest_image_layout.h does not describe the model struct's SN-S"
 #endif
-#if SLIPEST_IMAGE_HEADER_SIZE + Q_PAYLOAD + F32_PAYLOAD + SLIPEST_IMAGE_TRAILER_SIZE + SLIPEST_IMAGE_HMAC_SIZE != SLIPEST_IMAGE_MAX_SIZE
+#if SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_Q_PAYLOAD + SLIPEST_IMAGE_F32_PAYLOAD + SLIPEST_IMAGE_TRAILER_SIZE + \
+        SLIPEST_IMAGE_HMAC_SIZE != SLIPEST_IMAGE_MAX_SIZE
 #error "slipest_image.c: SLIPEST_IMAGE_MAX_SIZE disagrees with the layout"
 #endif
+
+#define SHA SLIPEST_IMAGE_TRAILER_OFF_SHA256
+#define EPS_E SLIPEST_IMAGE_OFF_EPS_E
 
 static uint16_t le16(const uint8_t *p) { return (uint16_t)((unsigned)p[0] | ((unsigned)p[1] << 8)); }
 
@@ -27,9 +30,9 @@ uint32_t slipest_image_le32(const uint8_t *p)
 
 slipest_status_t slipest_image_check_hash32(const uint8_t *hdr, const uint8_t *trailer)
 {
-    uint32_t sha_head = ((uint32_t)trailer[4] << 24) | ((uint32_t)trailer[5] << 16) |
-                        ((uint32_t)trailer[6] << 8) | (uint32_t)trailer[7]; /* sha256 bytes, big-endian */
-    return (slipest_image_le32(&hdr[38]) == sha_head) ? SLIPEST_OK : SLIPEST_E_HASH;
+    uint32_t sha_head = ((uint32_t)trailer[SHA] << 24) | ((uint32_t)trailer[SHA + 1u] << 16) |
+                        ((uint32_t)trailer[SHA + 2u] << 8) | (uint32_t)trailer[SHA + 3u]; /* sha256 bytes, big-endian */
+    return (slipest_image_le32(&hdr[SLIPEST_IMAGE_OFF_HASH32]) == sha_head) ? SLIPEST_OK : SLIPEST_E_HASH;
 }
 
 /* two's complement from the unsigned bit pattern without implementation-defined conversions */
@@ -108,17 +111,20 @@ slipest_status_t slipest_image_check_header(const uint8_t *img, size_t len, uint
     uint16_t f;
     size_t i, tail;
     if (len < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE) return SLIPEST_E_LENGTH;
-    if (memcmp(img, SLIPEST_IMAGE_MAGIC, 4) != 0) return SLIPEST_E_FORMAT;
-    if (le16(img + 4) != SLIPEST_IMAGE_FORMAT) return SLIPEST_E_VERSION;
-    if (le16(img + 6) != SLIPEST_IMAGE_ARCH_SN_S || le16(img + 8) != SLIPEST_IMAGE_HEADER_SIZE) return SLIPEST_E_ARCH;
-    f = le16(img + 10);
+    if (memcmp(img + SLIPEST_IMAGE_OFF_MAGIC, SLIPEST_IMAGE_MAGIC, 4) != 0) return SLIPEST_E_FORMAT;
+    if (le16(img + SLIPEST_IMAGE_OFF_FORMAT) != SLIPEST_IMAGE_FORMAT) return SLIPEST_E_VERSION;
+    if (le16(img + SLIPEST_IMAGE_OFF_ARCH) != SLIPEST_IMAGE_ARCH_SN_S ||
+        le16(img + SLIPEST_IMAGE_OFF_HEADER_SIZE) != SLIPEST_IMAGE_HEADER_SIZE) return SLIPEST_E_ARCH;
+    f = le16(img + SLIPEST_IMAGE_OFF_FLAGS);
     if ((f & ~(SLIPEST_IMAGE_FLAG_F32 | SLIPEST_IMAGE_FLAG_HMAC)) != 0u) return SLIPEST_E_FORMAT;
-    for (i = 46u; i < SLIPEST_IMAGE_HEADER_SIZE; ++i) {
+    for (i = SLIPEST_IMAGE_OFF_RESERVED; i < SLIPEST_IMAGE_HEADER_SIZE; ++i) {
         if (img[i] != 0u) return SLIPEST_E_FORMAT; /* reserved bytes */
     }
     /* the payload size must be the one SN-S layout with or without the float model */
-    payload = slipest_image_le32(img + 42);
-    if (payload != Q_PAYLOAD + ((f & SLIPEST_IMAGE_FLAG_F32) ? F32_PAYLOAD : 0u)) return SLIPEST_E_LENGTH;
+    payload = slipest_image_le32(img + SLIPEST_IMAGE_OFF_PAYLOAD_SIZE);
+    if (payload != SLIPEST_IMAGE_Q_PAYLOAD + ((f & SLIPEST_IMAGE_FLAG_F32) ? SLIPEST_IMAGE_F32_PAYLOAD : 0u)) {
+        return SLIPEST_E_LENGTH;
+    }
     tail = SLIPEST_IMAGE_TRAILER_SIZE;
     if ((f & SLIPEST_IMAGE_FLAG_HMAC) != 0u) {
         tail += SLIPEST_IMAGE_HMAC_SIZE;
@@ -132,23 +138,23 @@ slipest_status_t slipest_image_check_header(const uint8_t *img, size_t len, uint
 void slipest_image_header_scalars(const uint8_t *img, slipest_model_q_t *q)
 {
     memset(q, 0, sizeof *q);
-    q->n_in = img[12];
-    q->n_hidden = img[13];
-    q->n_out = img[14];
-    q->gelu_n = img[15];
-    q->rsqrt_seed_n = img[16];
-    q->h_bits = img[17];
-    q->e_bits = img[18];
-    q->fz = img[19];
-    q->fg = img[20];
-    q->fy = img[21];
-    q->gelu_step_log2 = img[22];
-    q->eps_e = (int8_t)(img[23] > 127u ? (int)img[23] - 256 : (int)img[23]);
-    q->eps_m = s16(le16(img + 24));
-    q->c30 = s32(slipest_image_le32(img + 26));
-    q->eps_cap = s32(slipest_image_le32(img + 30));
-    q->version = slipest_image_le32(img + 34);
-    q->hash32 = slipest_image_le32(img + 38);
+    q->n_in = img[SLIPEST_IMAGE_OFF_N_IN];
+    q->n_hidden = img[SLIPEST_IMAGE_OFF_N_HIDDEN];
+    q->n_out = img[SLIPEST_IMAGE_OFF_N_OUT];
+    q->gelu_n = img[SLIPEST_IMAGE_OFF_GELU_N];
+    q->rsqrt_seed_n = img[SLIPEST_IMAGE_OFF_RSQRT_SEED_N];
+    q->h_bits = img[SLIPEST_IMAGE_OFF_H_BITS];
+    q->e_bits = img[SLIPEST_IMAGE_OFF_E_BITS];
+    q->fz = img[SLIPEST_IMAGE_OFF_FZ];
+    q->fg = img[SLIPEST_IMAGE_OFF_FG];
+    q->fy = img[SLIPEST_IMAGE_OFF_FY];
+    q->gelu_step_log2 = img[SLIPEST_IMAGE_OFF_GELU_STEP_LOG2];
+    q->eps_e = (int8_t)(img[EPS_E] > 127u ? (int)img[EPS_E] - 256 : (int)img[EPS_E]);
+    q->eps_m = s16(le16(img + SLIPEST_IMAGE_OFF_EPS_M));
+    q->c30 = s32(slipest_image_le32(img + SLIPEST_IMAGE_OFF_C30));
+    q->eps_cap = s32(slipest_image_le32(img + SLIPEST_IMAGE_OFF_EPS_CAP));
+    q->version = slipest_image_le32(img + SLIPEST_IMAGE_OFF_MODEL_VERSION);
+    q->hash32 = slipest_image_le32(img + SLIPEST_IMAGE_OFF_HASH32);
 }
 
 slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t expect32, slipest_model_q_t *mq,
@@ -164,8 +170,8 @@ slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t exp
     if (img == NULL || mq == NULL || qs == NULL || (mf != NULL && fs == NULL)) return SLIPEST_E_NULL;
     st = slipest_image_check_header(img, len, &flags, &body);
     if (st != SLIPEST_OK) return st;
-    if (slipest_image_le32(img + body) != slipest_crc32(img, body)) return SLIPEST_E_CRC;
-    hash32 = slipest_image_le32(&img[38]);
+    if (slipest_image_le32(img + body + SLIPEST_IMAGE_TRAILER_OFF_CRC32) != slipest_crc32(img, body)) return SLIPEST_E_CRC;
+    hash32 = slipest_image_le32(&img[SLIPEST_IMAGE_OFF_HASH32]);
     if (slipest_image_check_hash32(img, &img[body]) != SLIPEST_OK || (expect32 != 0u && hash32 != expect32)) {
         return SLIPEST_E_HASH;
     }

@@ -19,6 +19,14 @@ slipest_status_t slipest_node_set_model(slipest_node_t *node, const slipest_mode
     return SLIPEST_OK;
 }
 
+void slipest_node_clear_model(slipest_node_t *node)
+{
+    if (node != NULL) {
+        node->mq = NULL;
+        node->mf = NULL;
+    }
+}
+
 const slipest_model_q_t *slipest_node_model_q(const slipest_node_t *node)
 {
     return node == NULL ? NULL : node->mq;

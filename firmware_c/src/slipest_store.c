@@ -72,7 +72,8 @@ static slipest_status_t nvm_erase(slipest_store_t *s, uint32_t addr)
 }
 
 /* ------------------------------------------------------------------ streaming image walk
- * The payload is a fixed sequence of little-endian arrays (docs/fixed_point.md "Model image");
+ * The payload is a fixed sequence of little-endian arrays (docs/fixed_point.md "Model image",
+ * slipest_image_layout.h);
  * each element is checked as it arrives and, when loading, stored. */
 #define K_W1 0u
 #define K_B1 1u
@@ -197,12 +198,17 @@ static void visit(walk_t *w, unsigned seg, unsigned i, uint32_t raw, unsigned si
 /* one payload byte: assemble elements in layout order */
 static void payload_byte(walk_t *w, uint8_t b)
 {
-    static const uint16_t seg_n[K_END] = {SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES, SLIPEST_N_HIDDEN, SLIPEST_N_HIDDEN,
-                                          SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES * SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES,
-                                          SLIPEST_Q_GELU_N, SLIPEST_Q_RSQRT_SEED_N, 1u,
-                                          SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES, SLIPEST_N_HIDDEN, SLIPEST_N_HIDDEN,
-                                          SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES * SLIPEST_N_HIDDEN, SLIPEST_N_CLASSES};
-    static const uint8_t seg_size[K_END] = {2u, 4u, 2u, 4u, 2u, 4u, 2u, 4u, 4u, 4u, 4u, 4u, 4u, 4u, 4u};
+    static const uint16_t seg_n[K_END] = {SLIPEST_IMAGE_Q_W1_N, SLIPEST_IMAGE_Q_B1_N, SLIPEST_IMAGE_Q_GAMMA_N,
+                                          SLIPEST_IMAGE_Q_BETA_N, SLIPEST_IMAGE_Q_W2_N, SLIPEST_IMAGE_Q_B2_N,
+                                          SLIPEST_IMAGE_Q_GELU_N, SLIPEST_IMAGE_Q_RSQRT_SEED_N, 1u,
+                                          SLIPEST_IMAGE_F32_W1_N, SLIPEST_IMAGE_F32_B1_N, SLIPEST_IMAGE_F32_GAMMA_N,
+                                          SLIPEST_IMAGE_F32_BETA_N, SLIPEST_IMAGE_F32_W2_N, SLIPEST_IMAGE_F32_B2_N};
+    static const uint8_t seg_size[K_END] = {
+        SLIPEST_IMAGE_Q_W1_BYTES, SLIPEST_IMAGE_Q_B1_BYTES, SLIPEST_IMAGE_Q_GAMMA_BYTES, SLIPEST_IMAGE_Q_BETA_BYTES,
+        SLIPEST_IMAGE_Q_W2_BYTES, SLIPEST_IMAGE_Q_B2_BYTES, SLIPEST_IMAGE_Q_GELU_BYTES, SLIPEST_IMAGE_Q_RSQRT_SEED_BYTES,
+        4u, /* the float LayerNorm eps */
+        SLIPEST_IMAGE_F32_W1_BYTES, SLIPEST_IMAGE_F32_B1_BYTES, SLIPEST_IMAGE_F32_GAMMA_BYTES,
+        SLIPEST_IMAGE_F32_BETA_BYTES, SLIPEST_IMAGE_F32_W2_BYTES, SLIPEST_IMAGE_F32_B2_BYTES};
     unsigned last = K_FEPS;
     if ((w->flags & SLIPEST_IMAGE_FLAG_F32) != 0u) {
         last = K_END;
@@ -280,7 +286,7 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
             }
         }
     }
-    if (slipest_image_le32(w.tail) != (w.crc ^ 0xFFFFFFFFu)) {
+    if (slipest_image_le32(&w.tail[SLIPEST_IMAGE_TRAILER_OFF_CRC32]) != (w.crc ^ 0xFFFFFFFFu)) {
         return SLIPEST_E_CRC;
     }
     if (slipest_image_check_hash32(w.hdr, w.tail) != SLIPEST_OK) {
@@ -303,7 +309,7 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
     if (w.deferred != SLIPEST_OK) {
         return w.deferred;
     }
-    id->crc = slipest_image_le32(w.tail);
+    id->crc = slipest_image_le32(&w.tail[SLIPEST_IMAGE_TRAILER_OFF_CRC32]);
     id->version = q.version;
     id->hash32 = q.hash32;
     if (load == 0) {
@@ -323,7 +329,7 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
     q.gelu = s->qs.gelu;
     q.rsqrt_seed = s->qs.rsqrt_seed;
     s->mq = q;
-    memcpy(s->sha256, w.tail + 4, sizeof s->sha256);
+    memcpy(s->sha256, &w.tail[SLIPEST_IMAGE_TRAILER_OFF_SHA256], sizeof s->sha256);
 #ifndef SLIPEST_Q_ONLY
     s->have_f32 = 0u;
     if ((w.flags & SLIPEST_IMAGE_FLAG_F32) != 0u) {

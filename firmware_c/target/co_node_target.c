@@ -78,17 +78,19 @@ static uint32_t crc32_update(uint32_t crc, uint8_t byte)
     return crc;
 }
 
-/* Byte i of the bundle's image as model version `version` (header bytes 34..37, little-endian) with
+#define VERSION_AT SLIPEST_IMAGE_OFF_MODEL_VERSION
+
+/* Byte i of the bundle's image as model version `version` (little-endian header field) with
  * the CRC-32 field (first trailer bytes) that goes with it; with CO_NODE_AUTH the HMAC flag is set
  * and the tag follows the trailer. */
 static uint8_t image_byte(uint32_t i, uint32_t version, uint32_t crc)
 {
     uint32_t len = (uint32_t)co_image_len, crc_at = len - SLIPEST_IMAGE_TRAILER_SIZE;
-    if (i >= 34u && i < 38u) return (uint8_t)(version >> (8u * (i - 34u)));
+    if (i >= VERSION_AT && i < VERSION_AT + 4u) return (uint8_t)(version >> (8u * (i - VERSION_AT)));
     if (i >= crc_at && i < crc_at + 4u) return (uint8_t)(crc >> (8u * (i - crc_at)));
     if (i >= len) return tag[i - len];
 #ifdef CO_NODE_AUTH
-    if (i == 10u) return (uint8_t)(co_image[i] | SLIPEST_IMAGE_FLAG_HMAC); /* flags, low byte */
+    if (i == SLIPEST_IMAGE_OFF_FLAGS) return (uint8_t)(co_image[i] | SLIPEST_IMAGE_FLAG_HMAC); /* flags, low byte */
 #endif
     return co_image[i];
 }
@@ -144,8 +146,8 @@ int main(void)
           "an unsigned image is refused and counted");
 #endif
     /* integration: the launch model into slot A, through the store exactly like an upload */
-    version = (uint32_t)co_image[34] | ((uint32_t)co_image[35] << 8) | ((uint32_t)co_image[36] << 16) |
-              ((uint32_t)co_image[37] << 24);
+    version = (uint32_t)co_image[VERSION_AT] | ((uint32_t)co_image[VERSION_AT + 1u] << 8) |
+              ((uint32_t)co_image[VERSION_AT + 2u] << 16) | ((uint32_t)co_image[VERSION_AT + 3u] << 24);
     crc32 = seal(version);
     check(slipest_store_begin(&store, len, 0u) == SLIPEST_OK, "provisioning: begin");
     for (i = 0; i < len && wrote; i++) {

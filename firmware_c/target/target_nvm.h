@@ -1,7 +1,7 @@
 /* The model store's NVM in the QEMU test images (co_node_target.c, store_target.c): a RAM array of
  * 64-byte sectors, sized for two slots and the records, standing for the integrator's flash. It
- * enforces what slipest_store.h promises an integrator: whole-sector writes at sector-aligned
- * addresses, sector-aligned erases, nothing outside the area. */
+ * is the strict common RAM NVM (firmware_c/common/ram_nvm.h): whole erased sectors written at
+ * sector-aligned addresses, sector-aligned erases, nothing outside the area. */
 #ifndef TARGET_NVM_H
 #define TARGET_NVM_H
 #include <stdint.h>

@@ -12,11 +12,14 @@
 #include "slipest_dbc.h"
 #include "slipest_store.h"
 
+#include "image_edit.h"
+#include "ram_nvm.h"
+
 #define ID 5u
 #define SECTOR 256u
 
 static uint8_t mem[SLIPEST_STORE_NVM_SECTORS(SECTOR) * SECTOR];
-static int nvm_fail;
+static ram_nvm_t ram;
 static slipest_store_t store;
 static slipest_co_t co;
 static slipest_frame_t out[SLIPEST_CO_MAX_OUT];
@@ -24,27 +27,6 @@ static int n;
 static uint32_t now;
 static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
 static size_t img_len;
-
-static slipest_status_t m_read(void *c, uint32_t a, uint8_t *b, uint32_t l)
-{
-    (void)c;
-    memcpy(b, &mem[a], l);
-    return SLIPEST_OK;
-}
-static slipest_status_t m_write(void *c, uint32_t a, const uint8_t *b, uint32_t l)
-{
-    (void)c;
-    if (nvm_fail) return SLIPEST_E_NVM;
-    memcpy(&mem[a], b, l);
-    return SLIPEST_OK;
-}
-static slipest_status_t m_erase(void *c, uint32_t a)
-{
-    (void)c;
-    if (nvm_fail) return SLIPEST_E_NVM;
-    memset(&mem[a], 0xFF, SECTOR);
-    return SLIPEST_OK;
-}
 
 static void send(uint32_t id, uint8_t dlc, const uint8_t *d)
 {
@@ -158,21 +140,9 @@ static uint32_t segmented(const uint8_t *data, size_t len, int toggle_error)
 
 static void put_version(uint8_t *im, uint32_t v)
 {
-    im[34] = (uint8_t)v;
-    im[35] = (uint8_t)(v >> 8);
-    im[36] = (uint8_t)(v >> 16);
-    im[37] = (uint8_t)(v >> 24);
+    image_edit_put_le32(im + SLIPEST_IMAGE_OFF_MODEL_VERSION, v);
 }
 
-static void fix_crc(uint8_t *im, size_t len)
-{
-    uint32_t c = slipest_crc32(im, len - SLIPEST_IMAGE_TRAILER_SIZE);
-    uint8_t *p = im + len - SLIPEST_IMAGE_TRAILER_SIZE;
-    p[0] = (uint8_t)c;
-    p[1] = (uint8_t)(c >> 8);
-    p[2] = (uint8_t)(c >> 16);
-    p[3] = (uint8_t)(c >> 24);
-}
 
 static int emcy_in_out(uint16_t code)
 {
@@ -314,7 +284,8 @@ static void test_telemetry_matches_handle(const slipest_model_q_t *mq)
 
 int main(void)
 {
-    slipest_nvm_t nvm = {m_read, m_write, m_erase, SECTOR, SLIPEST_STORE_NVM_SECTORS(SECTOR), NULL};
+    slipest_nvm_t nvm;
+    ram_nvm_init(&ram, mem, SECTOR, SLIPEST_STORE_NVM_SECTORS(SECTOR), &nvm);
     uint32_t code, v;
     uint8_t bad[SLIPEST_IMAGE_MAX_SIZE];
     FILE *fp = fopen(SLIPEST_TEST_IMAGE, "rb");
@@ -323,7 +294,7 @@ int main(void)
     img_len = fread(img, 1, sizeof img, fp);
     fclose(fp);
     put_version(img, 3u); /* newer than the built-in model */
-    fix_crc(img, img_len);
+    image_edit_reseal(img, img_len - SLIPEST_IMAGE_TRAILER_SIZE);
     memset(mem, 0xFF, sizeof mem);
     CHECK(slipest_store_open(&store, &nvm, NULL) == SLIPEST_E_STATE);
 
@@ -452,7 +423,7 @@ int main(void)
     bad[100] ^= 1u; /* after the CRC was computed */
     CHECK(segmented(bad, img_len, 0) == SLIPEST_CO_ABORT_STORE);
     CHECK(slipest_store_counters(&store)->refused_crc == 1u);
-    fix_crc(bad, img_len);
+    image_edit_reseal(bad, img_len - SLIPEST_IMAGE_TRAILER_SIZE);
     CHECK(segmented(bad, img_len, 1) == SLIPEST_CO_ABORT_TOGGLE);
     sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
     sdo8(0x80u, 0x2000u, 0u, 0x08000000u); /* the client aborts */
@@ -462,10 +433,10 @@ int main(void)
     CHECK(slipest_co_tick(&co, now + SLIPEST_CO_SDO_TIMEOUT_MS, out, 2u) >= 1);
     CHECK(out[0].data[0] == 0x80u || out[1].data[0] == 0x80u);
     /* NVM failure while opening an upload */
-    nvm_fail = 1;
+    ram.fail_all = 1;
     CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == SLIPEST_CO_ABORT_HARDWARE);
     CHECK(emcy_in_out(SLIPEST_CO_EMCY_HARDWARE));
-    nvm_fail = 0;
+    ram.fail_all = 0;
     /* a good version 4: block download, activate (error register cleared, EMCY reset), rollback, abort */
     CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == 0u);
     CHECK(wr(0x2002u, 1u, 1u, 1u) == 0u && emcy_in_out(SLIPEST_CO_EMCY_RESET));
@@ -473,7 +444,7 @@ int main(void)
     CHECK(wr(0x2002u, 2u, 1u, 1u) == 0u && rd(0x2001u, 1u, &code) == 3u);
     CHECK(block(img, img_len, (uint32_t)img_len, 0u, 0) == SLIPEST_CO_ABORT_STORE); /* 3 is active: stale */
     put_version(bad, 5u);
-    fix_crc(bad, img_len);
+    image_edit_reseal(bad, img_len - SLIPEST_IMAGE_TRAILER_SIZE);
     CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == 0u);
     CHECK(wr(0x2002u, 3u, 1u, 1u) == 0u); /* abandon the validated upload */
     CHECK((rd(0x2006u, 1u, &code) & 0xFFu) == 0u && wr(0x2002u, 1u, 1u, 1u) == SLIPEST_CO_ABORT_STATE);
@@ -495,7 +466,7 @@ int main(void)
         CHECK(aborted() == SLIPEST_CO_ABORT_TOO_HIGH && k == 16u);
     }
     put_version(bad, 6u);
-    fix_crc(bad, img_len);
+    image_edit_reseal(bad, img_len - SLIPEST_IMAGE_TRAILER_SIZE);
     {
         /* a whole image, then an end request with the wrong count of unused bytes, then a bad command */
         size_t off = 0;
@@ -519,7 +490,7 @@ int main(void)
         size_t off = 0;
         unsigned t = 0;
         sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
-        nvm_fail = 1;
+        ram.fail_all = 1;
         while (off < img_len && aborted() == 0u) {
             uint8_t d[8] = {0};
             d[0] = (uint8_t)(t << 4);
@@ -528,7 +499,7 @@ int main(void)
             t ^= 1u;
             off += 7u;
         }
-        nvm_fail = 0;
+        ram.fail_all = 0;
         CHECK(aborted() == SLIPEST_CO_ABORT_HARDWARE && off <= 2u * SECTOR);
     }
 

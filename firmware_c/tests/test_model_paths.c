@@ -10,6 +10,7 @@
 #include <math.h>
 
 #include "check.h"
+#include "image_edit.h"
 #include "slipest_bundle.h"
 #include "slipest_image.h"
 #include "slipest_infer.h"
@@ -158,19 +159,8 @@ static uint32_t le32(const uint8_t *p)
 {
     return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
 }
-static void put_le32(uint8_t *p, uint32_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    p[2] = (uint8_t)(v >> 16);
-    p[3] = (uint8_t)(v >> 24);
-}
-/* recompute the CRC after an edit, so that the reader gets past it */
-static void reseal(uint8_t *p, size_t len)
-{
-    size_t body = len - SLIPEST_IMAGE_TRAILER_SIZE;
-    put_le32(p + body, slipest_crc32(p, body));
-}
+/* recompute the CRC after an edit of an image of len bytes (no tag), so that the reader gets past it */
+static void reseal(uint8_t *p, size_t len) { image_edit_reseal(p, len - SLIPEST_IMAGE_TRAILER_SIZE); }
 
 static int read_img(size_t len, uint32_t expect, int with_f32)
 {
@@ -195,12 +185,12 @@ static void image_rejects(void)
 {
     slipest_image_q_storage_t qs;
     slipest_model_q_t mq;
-    uint16_t flags = (uint16_t)(img0[10] | (img0[11] << 8));
+    uint16_t flags = (uint16_t)(img0[SLIPEST_IMAGE_OFF_FLAGS] | (img0[SLIPEST_IMAGE_OFF_FLAGS + 1u] << 8));
     size_t f32_size = 4u + 4u * (NH * NI + 3u * NH + NO * NH + NO); /* ln_eps, w1, b1, gamma, beta, w2, b2 */
     CHECK(slipest_crc32(NULL, 4) == 0u);
     FRESH();
     CHECK(read_img(len0, 0, 0) == SLIPEST_OK);
-    CHECK(read_img(len0, le32(img0 + 38), 0) == SLIPEST_OK);
+    CHECK(read_img(len0, le32(img0 + SLIPEST_IMAGE_OFF_HASH32), 0) == SLIPEST_OK);
     CHECK(slipest_image_read(NULL, len0, 0, &mq, &qs, NULL, NULL) == SLIPEST_E_NULL);
     CHECK(slipest_image_read(img, len0, 0, NULL, &qs, NULL, NULL) == SLIPEST_E_NULL);
     CHECK(slipest_image_read(img, len0, 0, &mq, NULL, NULL, NULL) == SLIPEST_E_NULL);
@@ -210,31 +200,31 @@ static void image_rejects(void)
     }
     CHECK(read_img(SLIPEST_IMAGE_HEADER_SIZE, 0, 0) == SLIPEST_E_LENGTH);
     FRESH(); img[0] = 'X'; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT);
-    FRESH(); img[4] = 2; CHECK(read_img(len0, 0, 0) == SLIPEST_E_VERSION);
-    FRESH(); img[6] = 2; CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH);
-    FRESH(); img[8] = 65; CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH);
-    FRESH(); img[10] |= 0x04u; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT); /* undefined flag */
-    FRESH(); img[10] |= 0x02u; CHECK(read_img(len0, 0, 0) == SLIPEST_E_LENGTH); /* HMAC flag, no tag */
-    FRESH(); img[50] = 1; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT);
-    FRESH(); put_le32(img + 42, le32(img0 + 42) + 2u); CHECK(read_img(len0, 0, 0) == SLIPEST_E_LENGTH);
+    FRESH(); img[SLIPEST_IMAGE_OFF_FORMAT] = 2; CHECK(read_img(len0, 0, 0) == SLIPEST_E_VERSION);
+    FRESH(); img[SLIPEST_IMAGE_OFF_ARCH] = 2; CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH);
+    FRESH(); img[SLIPEST_IMAGE_OFF_HEADER_SIZE] = 65; CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH);
+    FRESH(); img[SLIPEST_IMAGE_OFF_FLAGS] |= 0x04u; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT); /* undefined flag */
+    FRESH(); img[SLIPEST_IMAGE_OFF_FLAGS] |= SLIPEST_IMAGE_FLAG_HMAC; CHECK(read_img(len0, 0, 0) == SLIPEST_E_LENGTH); /* HMAC flag, no tag */
+    FRESH(); img[SLIPEST_IMAGE_OFF_RESERVED + 4u] = 1; CHECK(read_img(len0, 0, 0) == SLIPEST_E_FORMAT);
+    FRESH(); image_edit_put_le32(img + SLIPEST_IMAGE_OFF_PAYLOAD_SIZE, le32(img0 + SLIPEST_IMAGE_OFF_PAYLOAD_SIZE) + 2u); CHECK(read_img(len0, 0, 0) == SLIPEST_E_LENGTH);
     FRESH(); CHECK(read_img(len0 - 1u, 0, 0) == SLIPEST_E_LENGTH);
     FRESH(); img[100] ^= 1u; CHECK(read_img(len0, 0, 0) == SLIPEST_E_CRC);
-    FRESH(); CHECK(read_img(len0, le32(img0 + 38) ^ 1u, 0) == SLIPEST_E_HASH);
-    FRESH(); img[38] ^= 1u; reseal(img, len0); CHECK(read_img(len0, 0, 0) == SLIPEST_E_HASH); /* header vs trailer */
-    FRESH(); img[12] = NI - 1; reseal(img, len0); CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH); /* model check */
+    FRESH(); CHECK(read_img(len0, le32(img0 + SLIPEST_IMAGE_OFF_HASH32) ^ 1u, 0) == SLIPEST_E_HASH);
+    FRESH(); img[SLIPEST_IMAGE_OFF_HASH32] ^= 1u; reseal(img, len0); CHECK(read_img(len0, 0, 0) == SLIPEST_E_HASH); /* header vs trailer */
+    FRESH(); img[SLIPEST_IMAGE_OFF_N_IN] = NI - 1; reseal(img, len0); CHECK(read_img(len0, 0, 0) == SLIPEST_E_ARCH); /* model check */
     if (flags & SLIPEST_IMAGE_FLAG_F32) {
 #ifndef SLIPEST_Q_ONLY
         size_t body = len0 - SLIPEST_IMAGE_TRAILER_SIZE, qlen = len0 - f32_size;
         FRESH();
         CHECK(read_img(len0, 0, 1) == SLIPEST_OK);
         /* a non-finite float weight: the float model check refuses it */
-        FRESH(); put_le32(img + body - 4u, 0x7F800000u); reseal(img, len0);
+        FRESH(); image_edit_put_le32(img + body - 4u, 0x7F800000u); reseal(img, len0);
         CHECK(read_img(len0, 0, 1) == SLIPEST_E_NONFINITE);
         CHECK(read_img(len0, 0, 0) == SLIPEST_OK); /* the fixed-point model alone is fine */
         /* the same image without its float part: asking for the float model is a state error */
         FRESH();
-        img[10] = (uint8_t)(flags & ~SLIPEST_IMAGE_FLAG_F32);
-        put_le32(img + 42, le32(img0 + 42) - (uint32_t)f32_size);
+        img[SLIPEST_IMAGE_OFF_FLAGS] = (uint8_t)(flags & ~SLIPEST_IMAGE_FLAG_F32);
+        image_edit_put_le32(img + SLIPEST_IMAGE_OFF_PAYLOAD_SIZE, le32(img0 + SLIPEST_IMAGE_OFF_PAYLOAD_SIZE) - (uint32_t)f32_size);
         memmove(img + body - f32_size, img0 + body, SLIPEST_IMAGE_TRAILER_SIZE);
         reseal(img, qlen);
         CHECK(read_img(qlen, 0, 0) == SLIPEST_OK);

@@ -7,56 +7,14 @@
 #include "check.h"
 #include "slipest_image.h"
 #include "slipest_sha256.h"
+#include "image_edit.h"
+#include "ram_nvm.h"
 #include "slipest_store.h"
 
 #define SECTOR 128u
 #define N_SECT (SLIPEST_STORE_NVM_SECTORS(SECTOR))
 
-typedef struct {
-    uint8_t mem[N_SECT * SECTOR];
-    int fail_at;  /* fail the fail_at-th write/erase from now (1 = next); 0 = never */
-    int fail_reads;
-    int ops;
-} ram_nvm_t;
-
-static slipest_status_t r_read(void *ctx, uint32_t addr, uint8_t *buf, uint32_t len)
-{
-    ram_nvm_t *r = ctx;
-    if (r->fail_reads) return SLIPEST_E_NVM;
-    if (addr > sizeof r->mem || len > sizeof r->mem - addr) return SLIPEST_E_RANGE;
-    memcpy(buf, r->mem + addr, len);
-    return SLIPEST_OK;
-}
-
-static int r_fail(ram_nvm_t *r)
-{
-    r->ops++;
-    if (r->fail_at > 0 && --r->fail_at == 0) return 1;
-    return 0;
-}
-
-static slipest_status_t r_write(void *ctx, uint32_t addr, const uint8_t *buf, uint32_t len)
-{
-    ram_nvm_t *r = ctx;
-    uint32_t i;
-    if (len != SECTOR || addr % SECTOR != 0u || addr + len > sizeof r->mem) return SLIPEST_E_RANGE;
-    if (r_fail(r)) return SLIPEST_E_NVM;
-    for (i = 0; i < len; ++i) {
-        if (r->mem[addr + i] != 0xFFu) return SLIPEST_E_STATE; /* programming needs an erased sector */
-        r->mem[addr + i] = buf[i];
-    }
-    return SLIPEST_OK;
-}
-
-static slipest_status_t r_erase(void *ctx, uint32_t addr)
-{
-    ram_nvm_t *r = ctx;
-    if (addr % SECTOR != 0u || addr + SECTOR > sizeof r->mem) return SLIPEST_E_RANGE;
-    if (r_fail(r)) return SLIPEST_E_NVM;
-    memset(r->mem + addr, 0xFF, SECTOR);
-    return SLIPEST_OK;
-}
-
+static uint8_t mem[N_SECT * SECTOR];
 static ram_nvm_t ram;
 static slipest_nvm_t nvm;
 static slipest_store_t st;
@@ -66,39 +24,25 @@ static const uint8_t key[32] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 1
                                 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32};
 static const uint8_t other_key[32] = {9};
 
-static void put_le32(uint8_t *p, uint32_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    p[2] = (uint8_t)(v >> 16);
-    p[3] = (uint8_t)(v >> 24);
-}
-
 /* body length of an image without a tag */
 static size_t body_of(size_t len) { return len - SLIPEST_IMAGE_TRAILER_SIZE; }
-
-static void recrc(uint8_t *img, size_t len, size_t body)
-{
-    (void)len;
-    put_le32(img + body, slipest_crc32(img, body));
-}
 
 /* a copy of the base image with model version v (valid CRC), optionally signed with k */
 static size_t make_image(uint8_t *out, uint32_t v, const uint8_t *k)
 {
     size_t body = body_of(base_len), len = base_len;
     memcpy(out, base_img, base_len);
-    put_le32(out + 34, v);
+    image_edit_put_le32(out + SLIPEST_IMAGE_OFF_MODEL_VERSION, v);
     if (k != NULL) {
         slipest_hmac_sha256_t h;
-        out[10] = (uint8_t)(out[10] | SLIPEST_IMAGE_FLAG_HMAC);
-        recrc(out, len, body);
+        out[SLIPEST_IMAGE_OFF_FLAGS] = (uint8_t)(out[SLIPEST_IMAGE_OFF_FLAGS] | SLIPEST_IMAGE_FLAG_HMAC);
+        image_edit_reseal(out, body);
         slipest_hmac_sha256_init(&h, k, 32);
         slipest_hmac_sha256_update(&h, out, body);
         slipest_hmac_sha256_final(&h, out + len);
         return len + SLIPEST_IMAGE_HMAC_SIZE;
     }
-    recrc(out, len, body);
+    image_edit_reseal(out, body);
     return len;
 }
 
@@ -133,9 +77,7 @@ static int reboot(const uint8_t *k)
 
 static void fresh(void)
 {
-    memset(&ram, 0xFF, sizeof ram.mem);
-    ram.fail_at = 0;
-    ram.fail_reads = 0;
+    ram_nvm_init(&ram, mem, SECTOR, N_SECT, &nvm);
 }
 
 static void test_boot_upload_activate_rollback(void)
@@ -164,7 +106,7 @@ static void test_boot_upload_activate_rollback(void)
     CHECK(memcmp(slipest_store_model_q(&st)->rsqrt_seed, qs.rsqrt_seed, sizeof qs.rsqrt_seed) == 0);
     CHECK(slipest_store_active_hash32(&st) == mq.hash32 && slipest_store_model_q(&st)->c30 == mq.c30);
     CHECK(slipest_model_q_check(slipest_store_model_q(&st)) == SLIPEST_OK);
-    CHECK(memcmp(slipest_store_active_sha256(&st), img + body_of(n) + 4, 32) == 0);
+    CHECK(memcmp(slipest_store_active_sha256(&st), img + body_of(n) + SLIPEST_IMAGE_TRAILER_OFF_SHA256, 32) == 0);
 #ifndef SLIPEST_Q_ONLY
     CHECK(slipest_store_model_f32(&st) != NULL && slipest_model_f32_check(slipest_store_model_f32(&st)) == SLIPEST_OK);
 #endif
@@ -223,28 +165,28 @@ static void test_version_rule_and_refusals(void)
     CHECK(upload(img, n) == SLIPEST_E_CRC && c->refused_crc == 1u);
 
     n = make_image(img, 11u, NULL);
-    img[6] = 2u; /* architecture id */
-    recrc(img, n, body);
+    img[SLIPEST_IMAGE_OFF_ARCH] = 2u;
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_ARCH && c->refused_arch == 1u);
 
     n = make_image(img, 11u, NULL);
     img[0] = 'X';
-    recrc(img, n, body);
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_FORMAT && c->refused_format == 1u);
 
     n = make_image(img, 11u, NULL);
-    img[38] ^= 0xFFu; /* hash32 no longer the trailer's */
-    recrc(img, n, body);
+    img[SLIPEST_IMAGE_OFF_HASH32] ^= 0xFFu; /* no longer the trailer's */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_HASH && c->refused_hash == 1u);
 
     n = make_image(img, 11u, NULL);
-    put_le32(img + 64 + 720 + 120 + 60 + 120 + 180, 0x7FFFFFFFu); /* b2[0]: head accumulator bound */
-    recrc(img, n, body);
+    image_edit_put_le32(img + SLIPEST_IMAGE_Q_B2_AT, 0x7FFFFFFFu); /* b2[0]: head accumulator bound */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_RANGE && c->refused_range == 1u);
 
     n = make_image(img, 11u, NULL);
-    img[21] = 40u; /* fy: shift out of range */
-    recrc(img, n, body);
+    img[SLIPEST_IMAGE_OFF_FY] = 40u; /* shift out of range */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_RANGE && c->refused_range == 2u);
 
     n = make_image(img, 11u, NULL);
@@ -309,6 +251,25 @@ static void test_hmac(void)
     }
 }
 
+/* the common strict RAM NVM refuses, as flash does, every write but one whole erased aligned sector */
+static void test_strict_nvm(void)
+{
+    static uint8_t sec[SECTOR];
+    slipest_nvm_t n;
+    ram_nvm_t r;
+    memset(sec, 0x5A, sizeof sec);
+    ram_nvm_init(&r, mem, SECTOR, N_SECT, &n);
+    CHECK(n.write(n.ctx, SECTOR, sec, SECTOR) == SLIPEST_OK);
+    CHECK(n.write(n.ctx, SECTOR, sec, SECTOR) == SLIPEST_E_STATE);           /* not erased */
+    CHECK(n.write(n.ctx, SECTOR + 1u, sec, SECTOR) == SLIPEST_E_RANGE);      /* unaligned */
+    CHECK(n.write(n.ctx, 2u * SECTOR, sec, SECTOR - 1u) == SLIPEST_E_RANGE); /* short */
+    CHECK(n.write(n.ctx, N_SECT * SECTOR, sec, SECTOR) == SLIPEST_E_RANGE);  /* out of range */
+    CHECK(n.erase(n.ctx, SECTOR + 1u) == SLIPEST_E_RANGE && n.erase(n.ctx, N_SECT * SECTOR) == SLIPEST_E_RANGE);
+    CHECK(n.read(n.ctx, N_SECT * SECTOR - 1u, sec, 2u) == SLIPEST_E_RANGE);
+    CHECK(r.refused == 7u && mem[SECTOR] == 0x5Au && mem[2u * SECTOR] == 0xFFu); /* nothing changed */
+    CHECK(n.erase(n.ctx, SECTOR) == SLIPEST_OK && n.write(n.ctx, SECTOR, sec, SECTOR) == SLIPEST_OK);
+}
+
 static void test_nvm_errors_and_torn_record(void)
 {
     static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
@@ -335,13 +296,13 @@ static void test_nvm_errors_and_torn_record(void)
     CHECK(slipest_store_active_version(&st) == 2u);
     /* tear the newest record (half of it left erased): the boot falls back to the older one */
     rec_sector = st.rec_sector;
-    memset(ram.mem + rec_sector * SECTOR + SLIPEST_STORE_RECORD_SIZE / 2u, 0xFF, SLIPEST_STORE_RECORD_SIZE / 2u);
+    memset(mem + rec_sector * SECTOR + SLIPEST_STORE_RECORD_SIZE / 2u, 0xFF, SLIPEST_STORE_RECORD_SIZE / 2u);
     CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_active_version(&st) == 1u);
     CHECK(slipest_store_counters(&st)->boot_fallbacks == 1u);
     /* a corrupted active slot: the boot falls back too, never to no model while one is valid */
-    ram.mem[(2u + SLIPEST_STORE_SLOT_SECTORS(SECTOR)) * SECTOR + 300u] ^= 1u; /* not the active slot */
+    mem[(2u + SLIPEST_STORE_SLOT_SECTORS(SECTOR)) * SECTOR + 300u] ^= 1u; /* not the active slot */
     CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_active_version(&st) == 1u);
-    ram.mem[2u * SECTOR + 300u] ^= 1u; /* the active slot 0 */
+    mem[2u * SECTOR + 300u] ^= 1u; /* the active slot 0 */
     CHECK(reboot(NULL) == SLIPEST_E_STATE && slipest_store_model_q(&st) == NULL);
     ram.fail_reads = 1;
     CHECK(reboot(NULL) == SLIPEST_E_NVM && slipest_store_model_q(&st) == NULL);
@@ -354,38 +315,39 @@ static void test_parameter_refusals(void)
     static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
     const slipest_store_counters_t *c;
     size_t n, body;
-    const size_t b1 = 64u + 720u, beta = b1 + 120u + 60u, rsqrt = 64u + 1566u - 96u, f32 = 64u + 1566u;
+    const size_t b1 = SLIPEST_IMAGE_Q_B1_AT, beta = SLIPEST_IMAGE_Q_BETA_AT, rsqrt = SLIPEST_IMAGE_Q_RSQRT_SEED_AT,
+                 f32 = SLIPEST_IMAGE_F32_AT;
     fresh();
     (void)reboot(NULL);
     c = slipest_store_counters(&st);
     n = make_image(img, 1u, NULL);
     body = body_of(n);
-    put_le32(img + b1, 0x7FFFFFFFu); /* b1[0]: layer-1 accumulator bound */
-    recrc(img, n, body);
+    image_edit_put_le32(img + b1, 0x7FFFFFFFu); /* b1[0]: layer-1 accumulator bound */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_RANGE);
     n = make_image(img, 1u, NULL);
-    put_le32(img + beta, 40000u); /* beta[0] outside int16 */
-    recrc(img, n, body);
+    image_edit_put_le32(img + beta, 40000u); /* beta[0] outside int16 */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_RANGE);
     n = make_image(img, 1u, NULL);
-    put_le32(img + rsqrt, 0x80000001u); /* a seed above 2^31 */
-    recrc(img, n, body);
+    image_edit_put_le32(img + rsqrt, 0x80000001u); /* a seed above 2^31 */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_RANGE);
     n = make_image(img, 1u, NULL);
-    put_le32(img + 30, 1u); /* eps_cap */
-    recrc(img, n, body);
+    image_edit_put_le32(img + SLIPEST_IMAGE_OFF_EPS_CAP, 1u);
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_RANGE && c->refused_range == 4u);
     n = make_image(img, 1u, NULL);
-    put_le32(img + f32 + 8u, 0x7FC00000u); /* a NaN float weight */
-    recrc(img, n, body);
+    image_edit_put_le32(img + f32 + 8u, 0x7FC00000u); /* a NaN float weight */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_NONFINITE && c->refused_range == 5u);
     n = make_image(img, 1u, NULL);
-    put_le32(img + f32, 0u); /* ln_eps = 0 */
-    recrc(img, n, body);
+    image_edit_put_le32(img + f32, 0u); /* ln_eps = 0 */
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_NONFINITE && c->refused_range == 6u);
     n = make_image(img, 1u, NULL);
-    img[4] = 2u; /* image format version */
-    recrc(img, n, body);
+    img[SLIPEST_IMAGE_OFF_FORMAT] = 2u;
+    image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_VERSION && c->refused_format == 1u);
     CHECK(slipest_store_model_q(&st) == NULL && c->images_accepted == 0u);
 }
@@ -403,7 +365,7 @@ static void test_activation_load_failure_and_flush_error(void)
     CHECK(upload(img, n) == SLIPEST_OK && slipest_store_activate(&st) == SLIPEST_OK);
     n = make_image(img, 2u, NULL);
     CHECK(upload(img, n) == SLIPEST_OK);
-    ram.mem[(2u + SLIPEST_STORE_SLOT_SECTORS(SECTOR)) * SECTOR + 500u] ^= 0x01u; /* slot 1 changes */
+    mem[(2u + SLIPEST_STORE_SLOT_SECTORS(SECTOR)) * SECTOR + 500u] ^= 0x01u; /* slot 1 changes */
     CHECK(slipest_store_activate(&st) == SLIPEST_E_CRC);
     CHECK(slipest_store_active_version(&st) == 1u && slipest_store_active_slot(&st) == 0);
     CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_active_version(&st) == 1u);
@@ -467,16 +429,12 @@ int main(void)
     }
     base_len = fread(base_img, 1, sizeof base_img, fp);
     fclose(fp);
-    nvm.read = r_read;
-    nvm.write = r_write;
-    nvm.erase = r_erase;
-    nvm.sector_size = SECTOR;
-    nvm.n_sectors = N_SECT;
-    nvm.ctx = &ram;
+    ram_nvm_init(&ram, mem, SECTOR, N_SECT, &nvm);
     printf("sizeof(slipest_store_t) = %u bytes\n", (unsigned)sizeof(slipest_store_t));
     test_boot_upload_activate_rollback();
     test_version_rule_and_refusals();
     test_hmac();
+    test_strict_nvm();
     test_nvm_errors_and_torn_record();
     test_parameter_refusals();
     test_activation_load_failure_and_flush_error();

@@ -24,7 +24,7 @@ SERIAL_LINK_OBJECTS = ("slipest_slcan", "slipest_cobs", "slipest_crc")
 KERNEL_AND_MODEL_OBJECTS = ("slipest_infer_q", "slipest_bundle_q", "slipest_model_hash")
 # the CANopen node with two model slots (firmware_c/target/co_node_target.c), by part
 CANOPEN_PARTS = {
-    "canopen": ("slipest_co", "slipest_co_sdo", "slipest_co_od_access", "slipest_co_od"),
+    "canopen": ("slipest_co", "slipest_co_sdo", "slipest_co_od_access", "slipest_co_model", "slipest_co_od"),
     "store": ("slipest_store", "slipest_sha256", "slipest_image", "slipest_model"),
 }
 CANOPEN_GOALS = {"ram_bytes": 4096, "flash_bytes": 12288}  # issue 20: the whole CANopen node on the reference CPU

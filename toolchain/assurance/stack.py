@@ -33,6 +33,18 @@ class StackGraph:
     frame: dict = field(default_factory=dict)      # title -> bytes
     qualifier: dict = field(default_factory=dict)  # title -> static / dynamic / dynamic,bounded
     calls: dict = field(default_factory=dict)      # title -> set of titles
+    owner: dict = field(default_factory=dict)      # title -> name of the source file that defines it
+
+    def file_edges(self, files: set[str]) -> dict[str, set[str]]:
+        """The call graph folded onto source files: which of `files` calls into which other of them."""
+        out: dict[str, set[str]] = {f: set() for f in files}
+        for src, dsts in self.calls.items():
+            a = self.owner.get(src)
+            for dst in dsts:
+                b = self.owner.get(dst)
+                if a in files and b in files and a != b:
+                    out[a].add(b)
+        return out
 
     def cycles(self) -> list[list[str]]:
         """Every back edge found by an iterative DFS, as the cycle it closes."""
@@ -113,6 +125,7 @@ def compile_graph(bundle: Path | None = None, q_only: bool = True, with_bench: b
                 if size:
                     graph.frame[m["title"]] = int(size[1])
                     graph.qualifier[m["title"]] = size[2]
+                    graph.owner[m["title"]] = src.name
             for m in _EDGE.finditer(text):
                 graph.calls.setdefault(m["src"], set()).add(m["dst"])
     return graph

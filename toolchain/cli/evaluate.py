@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from ..evaluation.mccv import BACKENDS, EvalSettings, run_mccv
+from ..evaluation.mccv import BACKENDS, EvalSettings, run_mccv, write_atomic
 from ..evaluation.methods import parse_methods, selectable
 from ..fusion.registry import Budget
 from ..models.train import EXPERT_LR
@@ -51,8 +51,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--backend", choices=BACKENDS, default="loky",
                    help="where MCCV jobs run: local processes (loky) or an existing Dask cluster (default: loky)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address, e.g. tcp://host:8786 (with --backend dask)")
+    options.device(p)
     options.json_file(p)
-    p.add_argument("--out", type=Path, metavar="DIR", help="write results.json, table.md and the plots into DIR")
+    p.add_argument("--out", type=Path, metavar="DIR",
+                   help="write results.json, table.md and the plots into DIR, and every run's result into DIR/runs/ "
+                        "as it finishes (what --resume reads)")
+    p.add_argument("--resume", type=Path, metavar="DIR",
+                   help="continue an interrupted evaluation whose --out was DIR: runs already in DIR/runs/ are read, "
+                        "the others are run (same options required); results go to DIR")
     options.no_progress(p)
 
 
@@ -64,7 +70,8 @@ def settings_from_args(args: argparse.Namespace) -> EvalSettings:
     return EvalSettings(
         protocol=args.protocol, arch=args.arch, cal_sizes=tuple(args.cal_sizes or DEFAULT_CAL_SIZES),
         runs=args.runs, seed=args.seed, epochs=args.epochs,
-        budget=Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, finetune_lr=args.finetune_lr),
+        budget=Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, finetune_lr=args.finetune_lr,
+                      device=options.resolved_device(args)),
         methods=tuple(parse_methods(args.methods)), buffer_ablation=args.buffer_ablation,
         fleet_ablation=args.fleet_ablation,
     )
@@ -76,19 +83,20 @@ def run(args: argparse.Namespace) -> int:
     from ..evaluation.tables import markdown_table
 
     settings = settings_from_args(args)
+    if args.resume and args.out and args.out.resolve() != args.resume.resolve():
+        raise ValueError("--resume DIR writes into DIR: give no other --out")
+    args.out = args.resume or args.out
     dataset = load_dataset(args.data)
     result = run_mccv(dataset, settings, n_jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
-                      progress=not args.no_progress)
+                      progress=not args.no_progress, results_dir=args.out, resume=args.resume is not None)
     result["config"]["data"] = str(args.data)
     table = markdown_table(result)
     text = json.dumps(result, indent=1)
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(text)
+        write_atomic(args.json, text)
     if args.out:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "results.json").write_text(text)
-        (args.out / "table.md").write_text(table)
+        write_atomic(args.out / "results.json", text)
+        write_atomic(args.out / "table.md", table)
         written = write_plots(result, args.out)
         print(f"wrote {args.out / 'table.md'}, results.json and {len(written)} plots", file=sys.stderr)
     sys.stdout.write(table)

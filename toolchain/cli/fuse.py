@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 import time
 from pathlib import Path
 
@@ -16,6 +17,7 @@ from ..data.calibration import calibration_set
 from ..data.dataset import load_dataset
 from ..evaluation.fuse_report import Row, scores, write_run
 from ..fusion import registry
+from ..fusion.acomerge import run_threads
 from ..fusion.baselines import model_from_flat
 from ..fusion.finetune import FINETUNE_STEPS, finetune
 from ..fusion.fitness import CalibrationFitness
@@ -50,13 +52,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--finetune-steps", type=int, default=FINETUNE_STEPS,
                    help=f"Adam steps of the Earth fine-tune reference (default: {FINETUNE_STEPS})")
     options.threads(p)
+    options.device(p)
     options.no_progress(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    options.at_least_one(args, "cal_size", "epochs", "generations", "ants", "finetune_steps", "threads")
+    options.at_least_one(args, "cal_size", "epochs", "generations", "ants", "finetune_steps")
+    if args.threads < 0:
+        raise ValueError(f"--threads must be 0 (chosen from the free cores) or more, got {args.threads}")
     previous_threads = torch.get_num_threads()
-    torch.set_num_threads(args.threads)
+    torch.set_num_threads(run_threads(args.threads))
     try:
         return _fuse(args)
     finally:
@@ -65,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _fuse(args: argparse.Namespace) -> int:
     progress = not args.no_progress
+    device = options.resolved_device(args)  # a missing GPU fails before any training
     label = registry.get(args.method).label
     seconds: dict[str, float] = {}
     dataset = load_dataset(args.data)
@@ -76,7 +82,10 @@ def _fuse(args: argparse.Namespace) -> int:
     seconds["experts"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    budget = Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, copies=args.copies, threads=args.threads)
+    budget = Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, copies=args.copies, threads=args.threads,
+                    device=device)
+    if device != "cpu" and progress:
+        print(f"{label}: searching on {options.device_label(device)}", file=sys.stderr)
     fused = fuse(args.method, src, cal.x_cal, cal.y_cal, seed=args.seed, buffer_seed=args.seed, budget=budget)
     seconds[args.method] = time.perf_counter() - t0
 

@@ -6,8 +6,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import torch
+
 from ..data.splits import PROTOCOLS
-from ..fusion.acomerge import AcoMergeConfig, default_threads
+from ..fusion.acomerge import AUTO_THREADS, MAX_THREADS, AcoMergeConfig
 from ..models import ARCHS
 from ..models.train import EXPERT_EPOCHS
 
@@ -53,9 +55,28 @@ def search_budget(p: argparse.ArgumentParser, generations_help: str, copies: boo
 
 
 def threads(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--threads", type=int, default=default_threads(),
-                   help=f"threads for training and for batched search evaluation (default: {default_threads()}, "
-                        "this machine's cores up to 4)")
+    p.add_argument("--threads", type=int, default=AUTO_THREADS,
+                   help=f"threads for training and for batched search evaluation (default: {AUTO_THREADS} = chosen "
+                        f"when the work starts: the cores no other process keeps busy then, up to {MAX_THREADS})")
+
+
+def device(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--device", default="cpu", metavar="cpu|cuda|auto",
+                   help="where AcoMerge searches: cpu (the reference, default), cuda or cuda:N (a GPU; results differ "
+                        "from the CPU's in float rounding and random stream), auto (cuda when one is present)")
+
+
+def resolved_device(args: argparse.Namespace) -> str:
+    """--device as AcoMergeConfig takes it ('cpu', 'cuda', 'cuda:N'); a one-line error without a GPU."""
+    from ..fusion.lockstep import resolve_device
+
+    return str(resolve_device(args.device))
+
+
+def device_label(device: str) -> str:
+    from ..fusion.lockstep import device_label as label
+
+    return label(torch.device(device))
 
 
 def jobs(p: argparse.ArgumentParser) -> None:

@@ -14,16 +14,34 @@ processes (loky) or an existing Dask cluster (joblib's dask backend). Every job 
 itself from (seed, cal size, run, method) and runs torch single-threaded, so results
 do not depend on the backend, the number of workers or the order of completion.
 Dask workers should run one thread each (`dask worker ADDRESS --nthreads 1`): torch
-draws dropout masks from a per-process global RNG, which threads would share.
+draws dropout masks from a per-process global RNG, which threads would share. On Dask the
+source models and the target rows are scattered once to every worker (`broadcast`), and
+each task carries only (cal size, run, method); a task whose worker is lost is run again
+on another one (`TASK_RETRIES`).
+
+On a GPU (`budget.device` not 'cpu'), the methods that can batch their runs (the AcoMerge
+family, `registry.fit_many`) run all the draws of one calibration size in one lockstep
+search in this process (one GPU); every other method runs as jobs on the CPU as above.
+
+Every finished job is written at once to RESULTS/runs/<cal>-<run>-<method>.json (atomically:
+a temporary file renamed over the name, so a crash leaves either the whole file or none);
+`resume` reads them back and runs only the jobs still missing. The jobs' results are the
+same whichever run produced them, so a resumed table equals an uninterrupted one.
 """
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
+import json
+import os
 import sys
+import tempfile
+import threading
 import time
 import zlib
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import joblib
 import numpy as np
@@ -33,7 +51,8 @@ from tqdm.auto import tqdm
 from ..data.dataset import TARGET, Dataset
 from ..data.splits import PROTOCOLS, make_split
 from ..models import ARCHS, batched_logits
-from ..fusion.pipeline import Sources, align_sources, fuse, needs_joint, train_expert_flats, train_joint_flat
+from ..fusion import registry
+from ..fusion.pipeline import Sources, align_sources, fuse_many, needs_joint, train_expert_flats, train_joint_flat
 from ..fusion.registry import Budget
 from ..models.train import EXPERT_EPOCHS
 from .methods import UNRANKED_GROUPS, buffer_methods, fleet_methods, selectable, table_groups
@@ -41,6 +60,8 @@ from .metrics import SCALAR_METRICS, classification_metrics
 from .stats import FORMS, corrected_resampled_ttest
 
 BACKENDS = ("loky", "dask")
+TASK_RETRIES = 3  # a Dask task is run again this often when its worker is lost
+RUNS_DIR = "runs"  # per-job results inside an evaluation's results folder
 ALPHA = 0.05  # significance level of the best-vs-second t-test
 
 
@@ -148,64 +169,178 @@ class Target:
 
 def run_job(cal_size: int, run: int, method: str, src: Sources, target: Target, settings: EvalSettings) -> dict:
     """Fit one method on one calibration draw and score it on that draw's test rows."""
+    return run_jobs(cal_size, [run], method, src, target, settings)[0]
+
+
+def run_jobs(cal_size: int, runs: list[int], method: str, src: Sources, target: Target,
+             settings: EvalSettings) -> list[dict]:
+    """Fit one method on several calibration draws (batched where the method batches, i.e.
+    AcoMerge on a GPU) and score each on its own test rows. `seconds` is the wall time per run."""
     with single_threaded_torch():
-        split = make_split(settings.protocol, target.y, target.groups, cal_size, seed=run)
-        x_cal, y_cal = target.x[split.cal], target.y[split.cal]
-        x_test, y_test = target.x[split.test], target.y[split.test]
+        splits = [make_split(settings.protocol, target.y, target.groups, cal_size, seed=r) for r in runs]
+        draws = [(target.x[sp.cal], target.y[sp.cal], derive_seed(settings.seed, cal_size, r, method_code(method)),
+                  derive_seed(settings.seed, cal_size, r)) for r, sp in zip(runs, splits)]
         t0 = time.perf_counter()
-        fused = fuse(
-            method, src, x_cal, y_cal,
-            seed=derive_seed(settings.seed, cal_size, run, method_code(method)),
-            buffer_seed=derive_seed(settings.seed, cal_size, run),
-            budget=settings.budget,
-        )
-        flat, history = fused.flat, fused.curve
-        seconds = time.perf_counter() - t0
-        with torch.no_grad():
-            pred = batched_logits(src.arch, flat.unsqueeze(0), torch.as_tensor(x_test))[0].argmax(dim=1).numpy()
-            pred_cal = batched_logits(src.arch, flat.unsqueeze(0), torch.as_tensor(x_cal))[0].argmax(dim=1).numpy()
-    fit = classification_metrics(y_cal, pred_cal)
-    return {
-        "method": method, "cal_size": cal_size, "run": run, "n_cal": int(len(split.cal)),
-        "n_test": int(len(split.test)), "seconds": seconds, "history": history,
-        **classification_metrics(y_test, pred),
-        # the same scores on D_Cal itself: the fit the method reached, beside what it generalises to
-        "calibration_fit": {k: fit[k] for k in SCALAR_METRICS},
-    }
+        fused_all = fuse_many(method, src, draws, budget=settings.budget)
+        seconds = (time.perf_counter() - t0) / len(runs)
+        out = []
+        for run, split, fused in zip(runs, splits, fused_all):
+            x_cal, y_cal = target.x[split.cal], target.y[split.cal]
+            x_test, y_test = target.x[split.test], target.y[split.test]
+            flat = fused.flat.cpu()
+            with torch.no_grad():
+                pred = batched_logits(src.arch, flat.unsqueeze(0), torch.as_tensor(x_test))[0].argmax(dim=1).numpy()
+                pred_cal = batched_logits(src.arch, flat.unsqueeze(0), torch.as_tensor(x_cal))[0].argmax(dim=1).numpy()
+            fit = classification_metrics(y_cal, pred_cal)
+            out.append({
+                "method": method, "cal_size": cal_size, "run": run, "n_cal": int(len(split.cal)),
+                "n_test": int(len(split.test)), "seconds": seconds, "history": fused.curve,
+                **classification_metrics(y_test, pred),
+                # the same scores on D_Cal itself: the fit the method reached, beside what it generalises to
+                "calibration_fit": {k: fit[k] for k in SCALAR_METRICS},
+            })
+    return out
+
+
+def job_file(folder: Path, cal_size: int, run: int, method: str) -> Path:
+    return Path(folder) / RUNS_DIR / f"{cal_size}-{run}-{method}.json"
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write `text` to `path` so that a crash leaves the old file or the whole new one, never a part."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def _settings_key(settings: EvalSettings) -> dict:
+    """What a saved job depends on (JSON-normalised): a resume must use the same settings."""
+    return json.loads(json.dumps(asdict(settings)))
+
+
+def load_done(folder: Path, settings: EvalSettings) -> dict[tuple[int, int, str], dict]:
+    """The jobs already finished in `folder` (written by an earlier, maybe interrupted, evaluation)."""
+    folder = Path(folder)
+    saved = folder / RUNS_DIR / "settings.json"
+    if not saved.is_file():
+        raise ValueError(f"--resume {folder}: no {RUNS_DIR}/settings.json there (not an evaluation's results folder)")
+    if json.loads(saved.read_text()) != _settings_key(settings):
+        raise ValueError(f"--resume {folder}: it was made with other settings ({saved}); use the same options")
+    done = {}
+    for c in settings.cal_sizes:
+        for r in range(settings.runs):
+            for m in settings.all_methods:
+                path = job_file(folder, c, r, m)
+                if path.is_file():
+                    done[(c, r, m)] = json.loads(path.read_text())
+    return done
+
+
+class _Progress:
+    """One bar per method (runs done of runs to do, with the time left), for any backend."""
+
+    def __init__(self, todo: dict[str, int], done: dict[str, int], device: str, enabled: bool):
+        self.bars = {m: tqdm(total=todo[m] + done.get(m, 0), initial=done.get(m, 0), position=i, leave=True,
+                             desc=f"{m} [{device}]", unit="run", disable=not enabled, dynamic_ncols=True)
+                     for i, m in enumerate(todo)}
+
+    def finished(self, job: dict) -> None:
+        bar = self.bars[job["method"]]
+        bar.set_postfix_str(f"|D_Cal|={job['cal_size']} run {job['run']}", refresh=False)
+        bar.update(1)
+
+    def close(self) -> None:
+        for bar in self.bars.values():
+            bar.close()
 
 
 def execute(
-    tasks: list, n_jobs: int, backend: str, scheduler: str | None, progress: bool, ordered: bool = False
+    tasks: list, n_jobs: int, backend: str, scheduler: str | None, progress: bool, ordered: bool = False,
+    on_result=None,
 ) -> list:
     """Run joblib `delayed` tasks locally (loky) or on a Dask cluster; results in completion
-    order, or in task order with `ordered`."""
+    order, or in task order with `ordered`. `on_result(result)` is called as each one finishes.
+
+    On Dask, arguments shared by the tasks (the sources, the target rows) are scattered once
+    to every worker; a task whose worker dies is retried on another (TASK_RETRIES)."""
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
-    bar = dict(total=len(tasks), desc="MCCV jobs", disable=not progress)
-    return_as = "generator" if ordered else "generator_unordered"
-    if backend == "loky":
-        runner = joblib.Parallel(n_jobs=min(n_jobs, len(tasks)), backend="loky", return_as=return_as)
-        return list(tqdm(runner(tasks), **bar))
-    if not scheduler:
-        raise ValueError("--backend dask needs --scheduler ADDRESS of a running Dask scheduler")
-    from dask.distributed import Client
+    if not tasks:
+        return []
+    bar = tqdm(total=len(tasks), desc="MCCV jobs", disable=not progress)
+    done = []
 
-    with Client(scheduler) as client, joblib.parallel_config(backend="dask"):
-        threads = {w["nthreads"] for w in client.scheduler_info()["workers"].values()}
-        if any(t > 1 for t in threads):
+    def finished(result):
+        done.append(result)
+        bar.update(1)
+        if on_result is not None:
+            on_result(result)
+
+    try:
+        if backend == "loky":
+            runner = joblib.Parallel(n_jobs=min(n_jobs, len(tasks)), backend="loky",
+                                     return_as="generator" if ordered else "generator_unordered")
+            for result in runner(tasks):
+                finished(result)
+            return done
+        if not scheduler:
+            raise ValueError("--backend dask needs --scheduler ADDRESS of a running Dask scheduler")
+        return _execute_dask(tasks, scheduler, ordered, finished)
+    finally:
+        bar.close()
+
+
+def _execute_dask(tasks: list, scheduler: str, ordered: bool, finished) -> list:
+    from dask.distributed import Client, as_completed
+
+    with Client(scheduler, timeout="30s") as client:
+        workers = client.scheduler_info()["workers"]
+        if not workers:
+            raise ValueError(f"the Dask scheduler at {scheduler} has no workers; start some with "
+                             f"'dask worker {scheduler} --nthreads 1'")
+        if any(w["nthreads"] > 1 for w in workers.values()):
             # torch seeds dropout through its per-process global RNG: two jobs in threads of one
             # worker would interleave their draws and the numbers would depend on timing.
             print("warning: Dask workers with more than one thread; start them with --nthreads 1 "
                   "for results identical to the local backend", file=sys.stderr)
-        runner = joblib.Parallel(n_jobs=-1, return_as=return_as)
-        return list(tqdm(runner(tasks), **bar))
+        # Arguments that are not plain numbers or strings (sources, target rows, settings) are the same
+        # objects in every task: send each to every worker once, and let the tasks refer to it.
+        shared: dict[int, object] = {}
+        for _, args, _ in tasks:
+            for a in args:
+                if not isinstance(a, (int, float, str, type(None))) and id(a) not in shared:
+                    shared[id(a)] = client.scatter(a, broadcast=True, hash=False)
+        futures = [client.submit(fn, *[shared.get(id(a), a) for a in args], pure=False, retries=TASK_RETRIES, **kw)
+                   for fn, args, kw in tasks]
+        order = {f.key: i for i, f in enumerate(futures)}
+        results: list = [None] * len(futures)
+        for future in as_completed(futures):
+            result = future.result()
+            results[order[future.key]] = result
+            finished(result)
+        return results if ordered else [r for r in results if r is not None]
 
 
 def run_mccv(
     dataset: Dataset, settings: EvalSettings, n_jobs: int = 1, backend: str = "loky",
-    scheduler: str | None = None, progress: bool = True,
+    scheduler: str | None = None, progress: bool = True, results_dir: Path | None = None, resume: bool = False,
+    batch_runs: bool | None = None,
 ) -> dict:
-    """The whole evaluation; returns the JSON-ready result (see `summarise`)."""
+    """The whole evaluation; returns the JSON-ready result (see `summarise`).
+
+    With `results_dir`, every finished job is written there as it finishes (see the module
+    docstring); with `resume`, the jobs already there are read back instead of run again.
+    `batch_runs` (default: on a GPU) runs the methods that batch their runs in this process,
+    beside the other jobs."""
     dataset.check_roles()
     x, y = dataset.xy(TARGET)
     target = Target(x=x, y=y, groups=dataset.groups(TARGET))
@@ -218,24 +353,77 @@ def run_mccv(
                 make_split(settings.protocol, y, target.groups, c, seed=r)
             except ValueError as e:
                 raise ValueError(f"{dataset.root}: run {r}, |D_Cal| = {c}: {e}") from None
+    device = _device_name(settings.budget.device)  # a missing GPU fails here, before any training
+    done = load_done(results_dir, settings) if resume else {}
+    if results_dir is not None:
+        write_atomic(Path(results_dir) / RUNS_DIR / "settings.json", json.dumps(_settings_key(settings)))
     t0 = time.perf_counter()
     src = prepare_sources(dataset, settings, n_jobs, backend, scheduler, progress)
-    call = joblib.delayed(run_job)
-    tasks = [call(c, r, m, src, target, settings) for c in settings.cal_sizes for r in range(settings.runs)
-             for m in settings.all_methods]
+    todo = [(c, r, m) for c in settings.cal_sizes for r in range(settings.runs) for m in settings.all_methods
+            if (c, r, m) not in done]
+    count = lambda keys: {m: sum(1 for k in keys if k[2] == m) for m in settings.all_methods}  # noqa: E731
+    bars = _Progress(count(todo), count(done), device, progress)
+
+    def finished(results):
+        for job in results if isinstance(results, list) else [results]:
+            if results_dir is not None:
+                write_atomic(job_file(results_dir, job["cal_size"], job["run"], job["method"]), json.dumps(job))
+            bars.finished(job)
+            done[(job["cal_size"], job["run"], job["method"])] = job
+
     t1 = time.perf_counter()
-    jobs = execute(tasks, n_jobs, backend, scheduler, progress)
+    on_gpu = device != "cpu"
+    batch = on_gpu if batch_runs is None else batch_runs
+    batched = [m for m in settings.all_methods if batch and registry.get(m).fit_many is not None]
+    call = joblib.delayed(run_job)
+    tasks = [call(c, r, m, src, target, _on_cpu(settings) if on_gpu else settings)
+             for c, r, m in todo if m not in batched]
+    try:
+        if not batched:
+            execute(tasks, n_jobs, backend, scheduler, progress=False, on_result=finished)
+        else:
+            # One GPU: the batched methods run in this process, all runs of a calibration size in one
+            # search, while the other methods' jobs run on the CPU workers beside them.
+            lock = threading.Lock()
+
+            def locked(results):
+                with lock:
+                    finished(results)
+
+            with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
+                cpu_part = pool.submit(execute, tasks, n_jobs, backend, scheduler, False, False, locked)
+                for c in settings.cal_sizes:
+                    for m in batched:
+                        runs = [r for (cc, r, mm) in todo if cc == c and mm == m]
+                        if runs:
+                            locked(run_jobs(c, runs, m, src, target, settings))
+                cpu_part.result()
+    finally:
+        bars.close()
     order = {m: i for i, m in enumerate(settings.all_methods)}
-    jobs.sort(key=lambda j: (j["cal_size"], j["run"], order[j["method"]]))
+    jobs = sorted(done.values(), key=lambda j: (j["cal_size"], j["run"], order[j["method"]]))
     out = summarise(jobs, settings)
     out["sources"] = {"roles": src.roles, "trained": "once per evaluation (independent of the calibration draws)",
                       "n_params": int(src.experts.shape[1]), "rejected_nonfinite_rows": dataset.rejected_nonfinite}
     out["timing"] = {
         "sources_s": src.seconds, "mccv_wall_s": time.perf_counter() - t1, "total_wall_s": time.perf_counter() - t0,
-        "backend": backend, "jobs": n_jobs,
+        "backend": backend, "jobs": n_jobs, "device": device, "resumed_jobs": len(jobs) - len(todo),
         "method_mean_s": {m: float(np.mean([j["seconds"] for j in jobs if j["method"] == m])) for m in settings.all_methods},
     }
     return out
+
+
+def _device_name(device: str) -> str:
+    if device == "cpu":
+        return "cpu"
+    from ..fusion.lockstep import device_label, resolve_device
+
+    return device_label(resolve_device(device))
+
+
+def _on_cpu(settings: EvalSettings) -> EvalSettings:
+    """The same settings with the budget on the CPU: the methods that do not batch their runs."""
+    return EvalSettings(**{**settings.__dict__, "budget": Budget(**{**asdict(settings.budget), "device": "cpu"})})
 
 
 def _mean_std(values: list) -> dict:

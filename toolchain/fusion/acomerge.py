@@ -79,6 +79,7 @@ import dataclasses
 import gc
 import math
 import os
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -122,8 +123,12 @@ class AcoMergeConfig:
     clip: float | None = None  # optional |value| bound on IWOA positions (paper: none)
     # execution
     chunk: int = 150  # ants per batched forward chunk (bounds the activations' memory)
-    # torch intra-op threads during the run; the result is deterministic for a seed and a thread count
+    # torch intra-op threads during the run (0: chosen at its start from the cores free then, see
+    # default_threads); the result is deterministic for a seed and a thread count
     threads: int = 1
+    # 'cpu' runs `search` (the reference); a GPU ('cuda', 'cuda:N') runs the lockstep engine
+    # (lockstep.py), whose results differ from the CPU's in float rounding and random stream
+    device: str = "cpu"
 
     def validate(self) -> None:
         bad = [p for p in self.phases if p not in PHASES]
@@ -143,8 +148,10 @@ class AcoMergeConfig:
             raise ValueError(f"buffer_kind must be one of {BUFFER_KINDS}")
         if self.iwoa_every < 1 or self.gb_every < 0 or self.deposit <= 0 or self.tau_init <= 0:
             raise ValueError("iwoa_every ≥ 1, gb_every ≥ 0, deposit > 0 and tau_init > 0 are required")
-        if self.chunk < 1 or self.threads < 1:
-            raise ValueError("chunk and threads must be at least 1")
+        if self.chunk < 1 or self.threads < 0:
+            raise ValueError("chunk must be at least 1 and threads at least 0 (0: chosen from the free cores)")
+        if self.device != "cpu" and not self.device.startswith("cuda"):
+            raise ValueError(f"device must be 'cpu' or 'cuda[:N]', got {self.device!r}")
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -223,13 +230,14 @@ def whale_update(
     p and λ are drawn per whale, r1 and r2 per coordinate; the leader keeps its position.
     """
     s, m, d = pos.shape
-    rows = torch.arange(s)
+    dev = pos.device
+    rows = torch.arange(s, device=dev)
     best = pos[rows, leader].unsqueeze(1)  # (S, 1, D)
-    p = torch.rand(s, m, 1, generator=gen)
-    lam = torch.rand(s, m, 1, generator=gen).mul_(2).sub_(1)
-    big_a = a * (2 * torch.rand(s, m, d, generator=gen) - 1)
-    big_c = 2 * torch.rand(s, m, d, generator=gen)
-    partner = torch.randint(0, m, (s, m), generator=gen)
+    p = torch.rand(s, m, 1, generator=gen, device=dev)
+    lam = torch.rand(s, m, 1, generator=gen, device=dev).mul_(2).sub_(1)
+    big_a = a * (2 * torch.rand(s, m, d, generator=gen, device=dev) - 1)
+    big_c = 2 * torch.rand(s, m, d, generator=gen, device=dev)
+    partner = torch.randint(0, m, (s, m), generator=gen, device=dev)
     other = pos[rows.unsqueeze(1), partner]  # (S, M, D) random swarm members
     encircle = best - inertia * big_a * (big_c * best - pos).abs()
     explore = other - inertia * big_a * (big_c * other - pos).abs()
@@ -241,10 +249,48 @@ def whale_update(
     return new
 
 
+MAX_THREADS = 4  # beyond this a generation's small GEMMs gain nothing from more threads
+AUTO_THREADS = 0  # `threads` value meaning: chosen at the start of each run from the cores free then
+
+
+def _cpu_times() -> tuple[float, float] | None:
+    """(idle, total) jiffies of all CPUs from /proc/stat, or None where there is none."""
+    try:
+        with open("/proc/stat") as f:
+            fields = [float(v) for v in f.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    return fields[3] + (fields[4] if len(fields) > 4 else 0.0), sum(fields[:8])
+
+
+def busy_cores(window_s: float = 0.05) -> float:
+    """How many CPUs other processes kept busy over the last `window_s` (this one sleeps meanwhile)."""
+    before = _cpu_times()
+    time.sleep(window_s)
+    after = _cpu_times()
+    if before is None or after is None or after[1] <= before[1]:
+        return 0.0
+    busy_fraction = 1.0 - (after[0] - before[0]) / (after[1] - before[1])
+    return busy_fraction * (os.cpu_count() or 1)
+
+
 def default_threads() -> int:
-    """Threads for one AcoMerge run: the cores this process may use, at most 4."""
+    """Threads for one AcoMerge run: the cores this process may use that no other process keeps
+    busy right now, at most MAX_THREADS, at least 1.
+
+    Why: a generation's intra-op threads meet at a barrier several times per generation. With a
+    core taken by another process, one of two threads waits for its time slice at every barrier,
+    and a 2-thread SN-S run took 11.3 s instead of 1.1 s on one thread (2 cores, load 6,
+    `fleetlab bench fusion --load`). So a run takes only the cores that are free when it starts.
+    """
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    return max(1, min(4, cores))
+    free = min(cores, (os.cpu_count() or 1) - busy_cores())
+    return max(1, min(MAX_THREADS, cores, int(free + 0.25)))
+
+
+def run_threads(threads: int) -> int:
+    """`threads` as given, or chosen now (`default_threads`) for AUTO_THREADS."""
+    return default_threads() if threads == AUTO_THREADS else threads
 
 
 @contextlib.contextmanager
@@ -253,7 +299,7 @@ def search_threads(threads: int):
     a few hundred short-lived tensors and no reference cycles, and the collections they would
     trigger walk every object of torch & co. (~8 % of a run)."""
     saved, gc_on = torch.get_num_threads(), gc.isenabled()
-    torch.set_num_threads(threads)
+    torch.set_num_threads(run_threads(threads))
     gc.disable()
     try:
         yield
@@ -309,6 +355,15 @@ def acomerge(
     pheromone actually held after the update), iwoa (whether an IWOA update followed).
     The whole-model IWOA ablation records only the first three.
     """
+    cfg, experts, cand = checked_inputs(experts_flat, arch, config, seed, buffer)
+    fitness = CalibrationFitness(arch, x_cal, y_cal, chunk=cfg.chunk)
+    return search(experts, cand, fitness, cfg, seed=seed, progress=progress)
+
+
+def checked_inputs(
+    experts_flat: torch.Tensor, arch: str, config: AcoMergeConfig | None, seed: int, buffer: torch.Tensor | None,
+) -> tuple[AcoMergeConfig, torch.Tensor, torch.Tensor]:
+    """(config, experts (K, T), buffer (M, T)) after the checks every AcoMerge run needs."""
     cfg = config or AcoMergeConfig()
     cfg.validate()
     experts = torch.as_tensor(experts_flat).detach().to(torch.float32)
@@ -326,8 +381,7 @@ def acomerge(
     cand = torch.as_tensor(cand).detach().to(torch.float32).clone()
     if cand.dim() != 2 or cand.shape[1] != n_t or not torch.isfinite(cand).all():
         raise ValueError(f"buffer must be a finite (M, {n_t}) tensor, got shape {tuple(cand.shape)}")
-    fitness = CalibrationFitness(arch, x_cal, y_cal, chunk=cfg.chunk)
-    return search(experts, cand, fitness, cfg, seed=seed, progress=progress)
+    return cfg, experts, cand
 
 
 def search(

@@ -20,7 +20,19 @@ Figures (one JSON object with --json):
 - every timing is the best of its repeats (the one least disturbed by other processes);
 - max_abs_fitness_diff: batched vs sequential fitness of the same ants (must be ~1e-6);
 - cpu: process CPU time of the same work (with more than one thread it adds the threads
-  up), and load_average_1min: wall-clock figures mean little on a busy machine.
+  up), and load_average_1min: wall-clock figures mean little on a busy machine;
+- busy (`--load N`, default 1): full runs with the threads chosen as a real run chooses them
+  (`default_threads`, from the cores free at its start), first as the machine is, then with N
+  extra processes spinning on a core each; beside them the same loaded runs with a fixed
+  thread count of every core (the old default, the peer that collapses), against the goals
+  (SN-S: ≤ 0.35 s idle, ≤ 0.6 s with one core busy, on 2 cores).
+
+With `--device cuda` it measures the accelerator path instead (fusion/lockstep.py):
+generation_ms (one run's generation: construction, fitness of every ant, updates, IWOA
+amortised; _eager: without the CUDA graph of the fitness), fitness_ms (one generation's fitness
+call alone; _cuda_graph: replayed, with cuda_graph_max_abs_diff against the call), full_run_s, and the same with
+`--batch-runs` runs in lockstep (batched_generation_ms for all of them, per_run_generation_ms),
+against the goals of issue 30 (SN-S generation ≤ 0.15 ms, SN-D run ≤ 0.5 s on an H100-class GPU).
 
 Calibration data: a paper-protocol draw from `--data` (the target rover's rows) or,
 without --data, a synthetic three-class set whose feature means and spreads are of
@@ -31,8 +43,12 @@ from different seeds, briefly trained on it, so the fitness landscape is not fla
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import math
 import os
+import subprocess
+import sys
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -45,13 +61,28 @@ from ..data.contracts import N_CLASSES
 from ..models import build, flatten, load_flat
 from ..models.mlp import ARCHS
 from ..models.train import class_weights
-from .acomerge import AcoMergeConfig, acomerge, construct_ants, default_threads, evaluate_ants, search_threads
+from .acomerge import (
+    AUTO_THREADS,
+    MAX_THREADS,
+    AcoMergeConfig,
+    acomerge,
+    construct_ants,
+    default_threads,
+    evaluate_ants,
+    search_threads,
+)
 from .buffer import make_buffer
 from .finetune import finetune
 from .fitness import CalibrationFitness
+from .lockstep import StackedFitness, device_label, graphed, resolve_device, search_lockstep
 
 TARGET_SPEEDUP = 50.0
 TARGET_FULL_RUN_S = 2.0
+# issue 30: SN-S on 2 cores, idle and with one core busy; on one H100-class GPU
+GOAL_IDLE_RUN_S = 0.35
+GOAL_LOADED_RUN_S = 0.6
+GOAL_GPU_GENERATION_MS = {"sn-s": 0.15}
+GOAL_GPU_RUN_S = {"sn-d": 0.5}
 REFERENCE_BATCH = 200  # the reference's D_Cal loader batch size (BATCH_SIZE_ADAPT)
 
 # Per-feature location and spread, same order of magnitude as the real windows (raw units).
@@ -78,8 +109,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="repeats of the batched timing, best kept; the sequential baselines run a tenth as often, "
                         "at least once (default: 40)")
     p.add_argument("--full-runs", type=int, default=5, help="complete runs timed, best kept (default: 5)")
-    p.add_argument("--threads", type=int, default=default_threads(),
-                   help=f"threads of the batched evaluation (default: {default_threads()}, this machine's cores up to 4)")
+    p.add_argument("--threads", type=int, default=AUTO_THREADS,
+                   help=f"threads of the batched evaluation (default: {AUTO_THREADS} = chosen as a run chooses them: "
+                        f"the cores free when it starts, up to {MAX_THREADS})")
+    p.add_argument("--load", type=int, default=1, metavar="N",
+                   help="busy processes (one spinning core each) started beside a second set of full runs, to "
+                        "measure the run time on a busy machine; 0 skips it (default: 1)")
+    p.add_argument("--device", default="cpu", metavar="cpu|cuda|auto",
+                   help="cpu (default): the reference path; cuda: the GPU path (lockstep engine)")
+    p.add_argument("--batch-runs", type=int, default=30, metavar="R",
+                   help="with --device cuda: runs stepped together in the batched measurement (default: 30)")
     p.add_argument("--seed", type=int, default=0, help="seed (default: 0)")
 
 
@@ -142,10 +181,11 @@ def measure(args) -> dict:
     tau = torch.rand(buffer.shape[1], buffer.shape[0], generator=gen) + 0.5
     paths, explorer = construct_ants(tau, None, 0.5, args.ants, gen)  # early-run pheromone: every ant explores
     ants = buffer.gather(0, paths)
-    config = AcoMergeConfig(n_ants=args.ants, generations=args.generations, threads=args.threads)
+    threads = args.threads or default_threads()
+    config = AcoMergeConfig(n_ants=args.ants, generations=args.generations, threads=threads)
 
     fitness = CalibrationFitness(args.arch, x, y, chunk=config.chunk)
-    with search_threads(args.threads):
+    with search_threads(threads):
         eval_ms, eval_cpu = _timed(lambda: evaluate_ants(paths, explorer, buffer, fitness), args.repeats)
         batched_j = evaluate_ants(paths, explorer, buffer, fitness)
 
@@ -179,7 +219,7 @@ def measure(args) -> dict:
     gen_ms, gen_cpu = run_ms / args.generations, run_cpu / args.generations
     return {
         "arch": args.arch, "ants": args.ants, "generations": args.generations, "cal_size": int(len(y)),
-        "calibration": source, "threads": args.threads,
+        "calibration": source, "threads": threads,
         "batched_ms_per_generation": round(eval_ms, 3),
         "sequential_ms_per_generation": round(seq_ms, 3),
         "speedup": round(seq_ms / eval_ms, 2),
@@ -194,20 +234,142 @@ def measure(args) -> dict:
         "load_average_1min": round(os.getloadavg()[0], 2),
         "max_abs_fitness_diff": float(np.max(np.abs(np.array(seq_j) - batched_j.numpy()))),
         "targets": {"speedup": TARGET_SPEEDUP, "full_run_s": TARGET_FULL_RUN_S},
+        **({"busy": busy_machine(experts, x, y, args)} if args.load else {}),
     }
 
 
+@contextlib.contextmanager
+def busy_processes(n: int):
+    """n processes that each keep one core busy until the block ends."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    try:
+        time.sleep(0.5)  # let the scheduler place them before anything is measured or sampled
+        yield
+    finally:
+        for p in procs:
+            p.kill()
+        for p in procs:
+            p.wait()
+
+
+def busy_machine(experts: torch.Tensor, x: np.ndarray, y: np.ndarray, args) -> dict:
+    """Full-run times (best of --full-runs) with the threads a run chooses, idle and with --load busy
+    processes, and loaded with every core as threads (the fixed choice that collapses)."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+    def runs(threads: int) -> tuple[float, int]:
+        chosen = threads or default_threads()
+        cfg = AcoMergeConfig(n_ants=args.ants, generations=args.generations, threads=chosen)
+        wall, _ = _timed(lambda: acomerge(experts, args.arch, x, y, cfg, seed=args.seed), args.full_runs,
+                         warmup=lambda: acomerge(experts, args.arch, x, y, replace(cfg, generations=2), seed=args.seed))
+        return wall / 1e3, chosen
+
+    idle_s, idle_threads = runs(args.threads)
+    with busy_processes(args.load):
+        loaded_s, loaded_threads = runs(args.threads)
+        fixed_s, _ = runs(min(MAX_THREADS, cores))
+    out = {"load": args.load, "cores": cores, "run_s_idle": round(idle_s, 3), "threads_idle": idle_threads,
+           "run_s_loaded": round(loaded_s, 3), "threads_loaded": loaded_threads,
+           "run_s_loaded_all_cores": round(fixed_s, 3), "threads_all_cores": min(MAX_THREADS, cores),
+           "load_average_1min": round(os.getloadavg()[0], 2)}
+    if args.arch == "sn-s":
+        out["goals"] = {"run_s_idle": GOAL_IDLE_RUN_S, "run_s_loaded": GOAL_LOADED_RUN_S,
+                        "met": idle_s <= GOAL_IDLE_RUN_S and loaded_s <= GOAL_LOADED_RUN_S}
+    return out
+
+
+def measure_device(args) -> dict:
+    """The accelerator path: one run's generation, its fitness call, a full run, R runs batched."""
+    device = resolve_device(args.device)
+    x, y, source = _calibration(args)
+    experts = torch.stack([flatten(finetune(build(args.arch, seed=args.seed + k), x, y, steps=30, seed=k)) for k in range(3)])
+    buffer = make_buffer(experts, 15, 0.05, args.seed)
+    config = AcoMergeConfig(n_ants=args.ants, generations=args.generations, device=str(device))
+    sync = torch.cuda.synchronize if device.type == "cuda" else (lambda: None)
+
+    def timed_runs(n_runs: int, generations: int, cuda_graph: bool = True) -> float:
+        """Best wall seconds of a lockstep search of n_runs runs (different seeds)."""
+        cfg = replace(config, generations=generations)
+        fitness = StackedFitness(args.arch, [(x, y)] * n_runs, device)
+        go = lambda: search_lockstep([experts] * n_runs, [buffer] * n_runs, fitness, cfg,  # noqa: E731
+                                     [args.seed + r for r in range(n_runs)], device, cuda_graph=cuda_graph)
+        go()  # warm-up: kernels loaded, allocator primed
+        sync()
+        best = math.inf
+        for _ in range(args.full_runs):
+            t0 = time.perf_counter()
+            go()
+            sync()
+            best = min(best, time.perf_counter() - t0)
+        return best
+
+    run_s = timed_runs(1, args.generations)
+    run_s_eager = timed_runs(1, args.generations, cuda_graph=False)
+    batched_s = timed_runs(args.batch_runs, args.generations)
+    fitness = StackedFitness(args.arch, [(x, y)], device)
+    gen = torch.Generator(device=device).manual_seed(args.seed)
+    ants = buffer.to(device)[torch.randint(0, buffer.shape[0], (1, args.ants), generator=gen, device=device)]
+    ants = ants + 0.01 * torch.randn(ants.shape, generator=gen, device=device)
+    replayed = graphed(fitness, ants)
+    graph_diff = float((replayed(ants) - fitness(ants)).abs().max())
+
+    def best_call_s(fn) -> float:
+        fn(ants)
+        sync()
+        best = math.inf
+        for _ in range(args.repeats):
+            t0 = time.perf_counter()
+            fn(ants)
+            sync()
+            best = min(best, time.perf_counter() - t0)
+        return best
+
+    fit_best, fit_graph = best_call_s(fitness), best_call_s(replayed)
+    gen_ms = 1e3 * run_s / args.generations
+    out = {
+        "arch": args.arch, "ants": args.ants, "generations": args.generations, "cal_size": int(len(y)),
+        "calibration": source, "device": device_label(device),
+        "fitness_ms": round(1e3 * fit_best, 4), "fitness_ms_cuda_graph": round(1e3 * fit_graph, 4),
+        "cuda_graph_max_abs_diff": graph_diff,
+        "generation_ms": round(gen_ms, 4), "generation_ms_eager": round(1e3 * run_s_eager / args.generations, 4),
+        "full_run_s": round(run_s, 3), "full_run_s_eager": round(run_s_eager, 3),
+        "batch_runs": args.batch_runs, "batched_generation_ms": round(1e3 * batched_s / args.generations, 4),
+        "per_run_generation_ms": round(1e3 * batched_s / args.generations / args.batch_runs, 4),
+        "batched_full_runs_s": round(batched_s, 3),
+    }
+    goals = {}
+    if args.arch in GOAL_GPU_GENERATION_MS:
+        goals["generation_ms"] = GOAL_GPU_GENERATION_MS[args.arch]
+        goals["generation_ms_met"] = gen_ms <= goals["generation_ms"]
+    if args.arch in GOAL_GPU_RUN_S:
+        goals["full_run_s"] = GOAL_GPU_RUN_S[args.arch]
+        goals["full_run_s_met"] = run_s <= goals["full_run_s"]
+    out["goals"] = goals
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
-    for name in ("ants", "generations", "cal_size", "repeats", "full_runs", "threads"):
+    for name in ("ants", "generations", "cal_size", "repeats", "full_runs", "batch_runs"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')} must be at least 1")
+    if args.threads < 0 or args.load < 0:
+        raise ValueError("--threads and --load must not be negative")
+    device = resolve_device(args.device)  # one line, before any work, where the GPU is missing
     previous_threads = torch.get_num_threads()
     try:
-        result = measure(args)
+        result = measure(args) if device.type == "cpu" else measure_device(args)
     finally:
         torch.set_num_threads(previous_threads)
     if args.json:
         print(json.dumps(result))
+        return 0
+    if device.type != "cpu":
+        print(f"AcoMerge on {result['device']}: {result['arch']}, {result['ants']} ants, |D_Cal| = {result['cal_size']}")
+        for key, unit in (("fitness_ms", "ms"), ("fitness_ms_cuda_graph", "ms"), ("generation_ms", "ms"),
+                          ("generation_ms_eager", "ms"), ("full_run_s", "s"), ("full_run_s_eager", "s"),
+                          ("batched_generation_ms", "ms"), ("per_run_generation_ms", "ms"), ("batched_full_runs_s", "s")):
+            print(f"  {key:40s} {result[key]:10.4f} {unit}")
+        print(f"  goals: {result['goals']}")
         return 0
     print(f"AcoMerge benchmark: {result['arch']}, {result['ants']} ants, |D_Cal| = {result['cal_size']} "
           f"({result['calibration']}), {result['threads']} thread(s)")
@@ -221,4 +383,12 @@ def run(args: argparse.Namespace) -> int:
           f"(target <= {TARGET_FULL_RUN_S:g})")
     print(f"  {'max |batched - sequential| fitness':40s} {result['max_abs_fitness_diff']:10.2e}")
     print(f"  machine load (1 min): {result['load_average_1min']}")
+    if "busy" in result:
+        b = result["busy"]
+        print(f"  full run as the machine is             {b['run_s_idle']:10.3f} s    ({b['threads_idle']} thread(s))")
+        print(f"  full run with {b['load']} busy process(es)        {b['run_s_loaded']:10.3f} s    "
+              f"({b['threads_loaded']} thread(s); with {b['threads_all_cores']}: {b['run_s_loaded_all_cores']:.3f} s)")
+        if "goals" in b:
+            print(f"  goals: <= {GOAL_IDLE_RUN_S} s idle, <= {GOAL_LOADED_RUN_S} s loaded: "
+                  f"{'met' if b['goals']['met'] else 'not met'}")
     return 0

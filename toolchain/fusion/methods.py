@@ -12,10 +12,11 @@ import torch
 
 from ..models import flatten
 from . import baselines as bl
-from .acomerge import AcoMergeConfig, acomerge
+from .acomerge import AcoMergeConfig
 from .buffer import make_buffer
+from .lockstep import run_acomerge_many
 from .registry import Budget, FusedModel, FusionInputs, register
-from .robust import fit_acomerge_robust
+from .robust import fit_acomerge_robust_many
 
 
 def make_run_buffer(aligned: torch.Tensor, kind: str, seed: int, sigma: float = Budget.sigma,
@@ -40,7 +41,7 @@ def fleet_ablation_buffer(method: str, aligned: torch.Tensor, seed: int, sigma: 
 def aco_config(budget: Budget, phases: tuple[str, ...] | None = None) -> AcoMergeConfig:
     """AcoMerge's configuration under `budget` (the paper's values for everything else)."""
     cfg = dataclasses.replace(AcoMergeConfig(), generations=budget.steps, n_ants=budget.ants, copies=budget.copies,
-                              sigma=budget.sigma, threads=budget.threads)
+                              sigma=budget.sigma, threads=budget.threads, device=budget.device)
     return dataclasses.replace(cfg, phases=phases) if phases else cfg
 
 
@@ -90,35 +91,53 @@ def _distill(inp: FusionInputs) -> FusedModel:
 
 
 # --- AcoMerge and its ablations ---
-def _aco_run(name: str, inp: FusionInputs, kept: torch.Tensor, buffer: torch.Tensor,
-             phases: tuple[str, ...] | None = None) -> FusedModel:
-    cfg = aco_config(inp.budget, phases)
-    res = acomerge(kept, inp.arch, inp.x_cal, inp.y_cal, config=cfg, seed=inp.seed, buffer=buffer)
-    details = {"config": dataclasses.asdict(cfg), "best_fitness": res.best_fitness, "best_origin": res.best_origin,
-               "evaluations": res.evaluations, "expert_fitness": res.expert_fitness, "history": res.history}
-    return FusedModel(method=name, arch=inp.arch, flat=torch.as_tensor(res.best_flat, dtype=torch.float32),
-                      curve=[float(v) for v in res.history.get("best_so_far", [])], details=details)
+# Each is a `fit_many` (several calibration draws of one budget at once: on a GPU their
+# generations share one batched fitness call, see lockstep.py); `fit` is the one-draw case.
+def _aco_runs(name: str, inps: list[FusionInputs], kept_buffers: list[tuple[torch.Tensor, torch.Tensor]],
+              phases: tuple[str, ...] | None = None) -> list[FusedModel]:
+    cfg = aco_config(inps[0].budget, phases)
+    runs = [(kept, inp.x_cal, inp.y_cal, inp.seed, buffer) for inp, (kept, buffer) in zip(inps, kept_buffers)]
+    out = []
+    for inp, res in zip(inps, run_acomerge_many(runs, inps[0].arch, cfg, desc=name)):
+        details = {"config": dataclasses.asdict(cfg), "best_fitness": res.best_fitness, "best_origin": res.best_origin,
+                   "evaluations": res.evaluations, "expert_fitness": res.expert_fitness, "history": res.history}
+        out.append(FusedModel(method=name, arch=inp.arch, flat=torch.as_tensor(res.best_flat, dtype=torch.float32),
+                              curve=[float(v) for v in res.history.get("best_so_far", [])], details=details))
+    return out
+
+
+def _one(fit_many):
+    """The one-draw `fit` of a `fit_many`."""
+    def fit(inp: FusionInputs) -> FusedModel:
+        return fit_many([inp])[0]
+    fit.__name__ = fit.__qualname__ = fit_many.__name__.replace("_many", "")
+    return fit
 
 
 def _aco_on_buffer(name: str, kind: str = "experts", phases: tuple[str, ...] | None = None):
-    def fit(inp: FusionInputs) -> FusedModel:
-        b = inp.budget
-        return _aco_run(name, inp, inp.aligned, make_run_buffer(inp.aligned, kind, inp.buffer_seed, b.sigma, b.copies),
-                        phases)
-    fit.__name__ = fit.__qualname__ = f"fit_{name.replace('-', '_')}"
-    return fit
+    def fit_many(inps: list[FusionInputs]) -> list[FusedModel]:
+        b = inps[0].budget
+        return _aco_runs(name, inps, [(inp.aligned, make_run_buffer(inp.aligned, kind, inp.buffer_seed, b.sigma, b.copies))
+                                      for inp in inps], phases)
+    fit_many.__name__ = fit_many.__qualname__ = f"fit_{name.replace('-', '_')}_many"
+    return fit_many
 
 
-def _acomerge_robust(inp: FusionInputs) -> FusedModel:
-    return fit_acomerge_robust(inp, aco_config(inp.budget))
+def _acomerge_robust_many(inps: list[FusionInputs]) -> list[FusedModel]:
+    return fit_acomerge_robust_many(inps, aco_config(inps[0].budget))
 
 
 def _aco_fleet_ablation(name: str):
-    def fit(inp: FusionInputs) -> FusedModel:
-        kept, buffer = fleet_ablation_buffer(name, inp.aligned, inp.buffer_seed, inp.budget.sigma, inp.budget.copies)
-        return _aco_run(name, inp, kept, buffer)
-    fit.__name__ = fit.__qualname__ = f"fit_{name.replace('-', '_')}"
-    return fit
+    def fit_many(inps: list[FusionInputs]) -> list[FusedModel]:
+        b = inps[0].budget
+        return _aco_runs(name, inps, [fleet_ablation_buffer(name, inp.aligned, inp.buffer_seed, b.sigma, b.copies)
+                                      for inp in inps])
+    fit_many.__name__ = fit_many.__qualname__ = f"fit_{name.replace('-', '_')}_many"
+    return fit_many
+
+
+def _register_many(name: str, fit_many, label: str, group: str) -> None:
+    register(name, _one(fit_many), label, group, fit_many=fit_many)
 
 
 # One line per method: name, fit, label, table group.
@@ -128,20 +147,20 @@ register("model-base", _model_base, "Model Base", "Fine-tuned")
 register("adamerging", _adamerging, "AdaMerging", "Merging")
 register("evomerge", _evomerge, "Evolutionary Merge", "Merging")
 register("modelswarm", _modelswarm, "ModelSwarm", "Merging")
-register("acomerge", _aco_on_buffer("acomerge"), "AcoMerge", "Merging")
+_register_many("acomerge", _aco_on_buffer("acomerge"), "AcoMerge", "Merging")
 # not in the paper: AcoMerge over experts fine-tuned on D_Cal first (issue 17, fusion/robust.py)
-register("acomerge-robust", _acomerge_robust, "AcoMerge-robust", "Merging")
+_register_many("acomerge-robust", _acomerge_robust_many, "AcoMerge-robust", "Merging")
 register("distill", _distill, "Ensemble distillation", "Distillation")
-register("mmas-only", _aco_on_buffer("mmas-only", phases=("mmas",)), "MMAS only", "Ablation")
+_register_many("mmas-only", _aco_on_buffer("mmas-only", phases=("mmas",)), "MMAS only", "Ablation")
 # whole-model IWOA over the buffer (ModelSwarm's search, PSO replaced)
-register("iwoa-only", _aco_on_buffer("iwoa-only", phases=("iwoa",)), "IWOA only", "Ablation")
+register("iwoa-only", _one(_aco_on_buffer("iwoa-only", phases=("iwoa",))), "IWOA only", "Ablation")
 # Buffer ablation: AcoMerge on other buffers than its own expert buffer.
-register("buffer-centroid-random", _aco_on_buffer("buffer-centroid-random", "centroid_random"),
-         "buffer: experts×3 + centroid-random×45", "Buffer ablation")
-register("buffer-random", _aco_on_buffer("buffer-random", "random"), "buffer: random×48", "Buffer ablation")
+_register_many("buffer-centroid-random", _aco_on_buffer("buffer-centroid-random", "centroid_random"),
+               "buffer: experts×3 + centroid-random×45", "Buffer ablation")
+_register_many("buffer-random", _aco_on_buffer("buffer-random", "random"), "buffer: random×48", "Buffer ablation")
 # Fleet ablation: AcoMerge with some experts left out of its buffer (same buffer size): what the
 # fleet contributes beyond the Earth expert and the search itself.
-register("acomerge-earth-only", _aco_fleet_ablation("acomerge-earth-only"), "AcoMerge, Earth expert only",
-         "Fleet ablation")
-register("acomerge-fleet-only", _aco_fleet_ablation("acomerge-fleet-only"), "AcoMerge, fleet experts only",
-         "Fleet ablation")
+_register_many("acomerge-earth-only", _aco_fleet_ablation("acomerge-earth-only"), "AcoMerge, Earth expert only",
+               "Fleet ablation")
+_register_many("acomerge-fleet-only", _aco_fleet_ablation("acomerge-fleet-only"), "AcoMerge, fleet experts only",
+               "Fleet ablation")

@@ -32,6 +32,7 @@ class Budget:
     finetune_lr: float = EXPERT_LR  # Adam rate of Earth/Joint + FullFinetune (the experts' rate)
     copies: int = _ACO.copies  # perturbed copies per expert in the buffer: 3 experts x (1 + 15) = 48
     threads: int = 1  # torch intra-op threads of a search that batches its candidates
+    device: str = "cpu"  # where AcoMerge searches: 'cpu' (the reference) or a GPU, 'cuda[:N]'
 
 
 @dataclass(frozen=True)
@@ -66,6 +67,9 @@ class FusedModel:
 
 
 FitFunction = Callable[[FusionInputs], FusedModel]
+# Several calibration draws of one budget at once (results in input order): a method that can
+# batch its runs (AcoMerge on a GPU) registers one beside its `fit`.
+FitManyFunction = Callable[[list[FusionInputs]], list[FusedModel]]
 
 
 @dataclass(frozen=True)
@@ -75,6 +79,7 @@ class MethodSpec:
     label: str  # name in tables and reports
     group: str  # table group ("Merging", ...); ablation groups are only run on request
     needs_joint: bool = False  # the joint model must be trained first
+    fit_many: FitManyFunction | None = None  # batched runs, where the method has them
 
 
 # Groups that only run through their ablation switch, never through `--methods all`.
@@ -83,13 +88,13 @@ _REGISTRY: dict[str, MethodSpec] = {}
 
 
 def register(name: str, fit: FitFunction, label: str | None = None, group: str = "Other",
-             needs_joint: bool = False) -> MethodSpec:
+             needs_joint: bool = False, fit_many: FitManyFunction | None = None) -> MethodSpec:
     """Add a method under `name` (lower-case, no commas or spaces); names are unique."""
     if not name or name != name.strip().lower() or any(c in name for c in ", "):
         raise ValueError(f"method name {name!r}: use lower-case letters, digits and dashes")
     if name in _REGISTRY and _REGISTRY[name].fit is not fit:
         raise ValueError(f"fusion method {name!r} is registered already")
-    spec = MethodSpec(name, fit, label or name, group, needs_joint)
+    spec = MethodSpec(name, fit, label or name, group, needs_joint, fit_many)
     _REGISTRY[name] = spec
     return spec
 
@@ -117,6 +122,14 @@ def selectable() -> tuple[str, ...]:
 
 def in_group(group: str) -> tuple[str, ...]:
     return tuple(n for n, s in all_methods().items() if s.group == group)
+
+
+def fit_many(name: str, inputs: list[FusionInputs]) -> list[FusedModel]:
+    """Run method `name` on several draws: batched where it registered `fit_many`, else one by one."""
+    spec = get(name)
+    if spec.needs_joint and any(i.joint is None for i in inputs):
+        raise ValueError(f"{name} needs the joint model, which was not trained")
+    return spec.fit_many(inputs) if spec.fit_many else [spec.fit(i) for i in inputs]
 
 
 def fit(name: str, inputs: FusionInputs) -> FusedModel:

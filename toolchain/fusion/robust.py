@@ -33,10 +33,11 @@ from __future__ import annotations
 import torch
 
 from ..models import flatten
-from .acomerge import AcoMergeConfig, acomerge
+from .acomerge import AcoMergeConfig
 from .baselines.common import model_from_flat
 from .buffer import make_buffer
 from .finetune import finetune
+from .lockstep import run_acomerge_many
 from .registry import FusedModel, FusionInputs
 
 NAME = "acomerge-robust"
@@ -56,13 +57,19 @@ def finetuned_experts(inp: FusionInputs) -> torch.Tensor:
     return torch.stack(tuned).to(torch.float32)
 
 
-def fit_acomerge_robust(inp: FusionInputs, config: AcoMergeConfig) -> FusedModel:
-    """Fine-tune the aligned experts on D_Cal, then AcoMerge over a buffer around them."""
-    tuned = finetuned_experts(inp)
-    buffer = make_buffer(tuned, copies=config.copies, sigma=config.sigma, seed=inp.buffer_seed)
-    res = acomerge(tuned, inp.arch, inp.x_cal, inp.y_cal, config=config, seed=inp.seed, buffer=buffer)
-    details = {"config": config.to_dict(), "best_fitness": res.best_fitness, "best_origin": res.best_origin.replace("expert", "fine-tuned expert"),
-               "evaluations": res.evaluations, "finetuned_expert_fitness": res.expert_fitness,
-               "finetune_steps_per_expert": inp.budget.steps, "history": res.history}
-    return FusedModel(method=NAME, arch=inp.arch, flat=torch.as_tensor(res.best_flat, dtype=torch.float32),
-                      curve=[float(v) for v in res.history.get("best_so_far", [])], details=details)
+def fit_acomerge_robust_many(inps: list[FusionInputs], config: AcoMergeConfig) -> list[FusedModel]:
+    """Per calibration draw, fine-tune the aligned experts on D_Cal, then AcoMerge over a buffer around
+    them: the fine-tunings one by one (CPU), the searches together (batched on a GPU, see lockstep.py)."""
+    tuned_all = [finetuned_experts(inp) for inp in inps]
+    runs = [(tuned, inp.x_cal, inp.y_cal, inp.seed,
+             make_buffer(tuned, copies=config.copies, sigma=config.sigma, seed=inp.buffer_seed))
+            for inp, tuned in zip(inps, tuned_all)]
+    out = []
+    for inp, res in zip(inps, run_acomerge_many(runs, inps[0].arch, config, desc=NAME)):
+        details = {"config": config.to_dict(), "best_fitness": res.best_fitness,
+                   "best_origin": res.best_origin.replace("expert", "fine-tuned expert"),
+                   "evaluations": res.evaluations, "finetuned_expert_fitness": res.expert_fitness,
+                   "finetune_steps_per_expert": inp.budget.steps, "history": res.history}
+        out.append(FusedModel(method=NAME, arch=inp.arch, flat=torch.as_tensor(res.best_flat, dtype=torch.float32),
+                              curve=[float(v) for v in res.history.get("best_so_far", [])], details=details))
+    return out

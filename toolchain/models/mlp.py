@@ -99,14 +99,15 @@ def _unflatten(arch: str, flat: torch.Tensor) -> list[torch.Tensor]:
 
 
 def batched_logits(arch: str, flat: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
-    """Logits of P models on the same inputs in one computation: (P, T), (N, 12) -> (P, N, 3).
+    """Logits of P models in one computation: (P, T), (N, 12) -> (P, N, 3); with x (P, N, 12),
+    model p sees its own inputs x[p] (several calibration sets in one batch).
 
     Inference semantics (dropout off), identical to SlipNet.eval() up to float rounding.
     """
     if flat.dim() == 1:
         flat = flat.unsqueeze(0)
     params = _unflatten(arch, flat)
-    h = x.unsqueeze(0).expand(flat.shape[0], *x.shape)
+    h = x if x.dim() == 3 else x.unsqueeze(0).expand(flat.shape[0], *x.shape)
     n_hidden = len(ARCHS[arch])
     for i in range(n_hidden):
         w, b, g, beta = params[4 * i : 4 * i + 4]

@@ -1,0 +1,285 @@
+"""The model image's byte layout, described once: the Python writer and reader (model_image.py), the C
+reader and the model store (through the generated firmware_c/include/slipest_image_layout.h), the upload
+faults and every test that edits an image are driven from here.
+
+    python -m fleetlab.export.image_layout c FILE     -> the C layout header (committed; a test regenerates it)
+
+Format 1 (the SN-S image) is a packed little-endian header of named fields padded with reserved zero bytes,
+a payload of little-endian arrays in a fixed order, a trailer (CRC-32, sha256) and, with flag HMAC, a tag.
+A later format adds a `Layout` to LAYOUTS under its version (for example a header that names a layer
+table); every consumer looks fields up by name, so a new format adds rows, not copies.
+
+Stdlib only, so that the build tools and the tests can read it without numpy.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import struct
+import sys
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class Field:
+    """One header field: its name, struct code (little-endian, packed) and what it holds."""
+
+    name: str
+    code: str
+    doc: str
+
+
+@dataclass(frozen=True)
+class Array:
+    """One payload array: its name, numpy little-endian dtype and element count."""
+
+    name: str
+    dtype: str
+    count: int
+
+    @property
+    def size(self) -> int:
+        return int(self.dtype[2:]) * self.count
+
+
+@dataclass(frozen=True)
+class Layout:
+    """One image format: header fields (packed from byte 0, then reserved zero bytes up to header_size),
+    the fixed-point payload arrays, the optional float32 section (flag F32: a float scalar, then arrays)
+    and the trailer fields."""
+
+    version: int
+    header_size: int
+    header: tuple[Field, ...]
+    q_arrays: tuple[Array, ...]
+    f32_scalar: str
+    f32_arrays: tuple[Array, ...]
+    trailer: tuple[Field, ...]
+
+    @property
+    def header_struct(self) -> struct.Struct:
+        return struct.Struct("<" + "".join(f.code for f in self.header))
+
+    @property
+    def trailer_struct(self) -> struct.Struct:
+        return struct.Struct("<" + "".join(f.code for f in self.trailer))
+
+    @property
+    def offsets(self) -> dict[str, int]:
+        """Byte offset of every header field."""
+        out, off = {}, 0
+        for f in self.header:
+            out[f.name] = off
+            off += struct.calcsize("<" + f.code)
+        return out
+
+    @property
+    def reserved_start(self) -> int:
+        return self.header_struct.size
+
+    @property
+    def trailer_size(self) -> int:
+        return self.trailer_struct.size
+
+    @property
+    def q_payload_size(self) -> int:
+        return sum(a.size for a in self.q_arrays)
+
+    @property
+    def f32_payload_size(self) -> int:
+        return 4 + sum(a.size for a in self.f32_arrays)
+
+    @property
+    def max_size(self) -> int:
+        return self.header_size + self.q_payload_size + self.f32_payload_size + self.trailer_size + HMAC_SIZE
+
+
+MAGIC = b"SLPM"
+ARCH_SN_S = 1  # 12 features -> Linear(30) -> LayerNorm -> GELU -> Linear(3), fixed-point scheme 1
+FLAG_F32 = 0x0001  # the float32 model follows the fixed-point one
+FLAG_HMAC = 0x0002  # an HMAC-SHA256 tag over header + payload follows the trailer
+HMAC_SIZE = 32
+
+V1 = Layout(
+    version=1,
+    header_size=64,
+    header=(
+        Field("magic", "4s", '"SLPM"'),
+        Field("format", "H", "format version"),
+        Field("arch", "H", "architecture id"),
+        Field("header_size", "H", "bytes of the header"),
+        Field("flags", "H", "FLAG_* bits"),
+        Field("n_in", "B", "input features"),
+        Field("n_hidden", "B", "hidden width"),
+        Field("n_out", "B", "classes"),
+        Field("gelu_n", "B", "GELU table entries"),
+        Field("rsqrt_seed_n", "B", "1/sqrt seed entries"),
+        Field("h_bits", "B", "hidden activation bits"),
+        Field("e_bits", "B", "LayerNorm output bits"),
+        Field("fz", "B", "layer-1 output shift"),
+        Field("fg", "B", "GELU output shift"),
+        Field("fy", "B", "head output shift"),
+        Field("gelu_step_log2", "B", "log2 of the GELU table step"),
+        Field("eps_e", "b", "LayerNorm eps exponent (int8)"),
+        Field("eps_m", "h", "LayerNorm eps mantissa (int16)"),
+        Field("c30", "i", "LayerNorm 1/n scale (int32)"),
+        Field("eps_cap", "i", "LayerNorm variance cap (int32)"),
+        Field("model_version", "I", "model version (anti-rollback)"),
+        Field("hash32", "I", "first 4 bytes (big-endian) of the content sha256"),
+        Field("payload_size", "I", "bytes between header and trailer"),
+    ),
+    q_arrays=(Array("w1", "<i2", 360), Array("b1", "<i4", 30), Array("g", "<i2", 30), Array("bb", "<i4", 30),
+              Array("w2", "<i2", 90), Array("b2", "<i4", 3), Array("gelu", "<i2", 129),
+              Array("rsqrt_seed", "<u4", 24)),
+    f32_scalar="eps",
+    f32_arrays=(Array("w1", "<f4", 360), Array("b1", "<f4", 30), Array("gamma", "<f4", 30),
+                Array("beta", "<f4", 30), Array("w2", "<f4", 90), Array("b2", "<f4", 3)),
+    trailer=(Field("crc32", "I", "CRC-32 (IEEE 802.3, zlib.crc32) of header + payload"),
+             Field("sha256", "32s", "the bundle's sha256 content hash")),
+)
+LAYOUTS = {1: V1}
+CURRENT = V1
+
+
+def header_fields(img: bytes, layout: Layout = CURRENT) -> dict[str, object]:
+    """The header fields of an image by name (no check beyond its length)."""
+    if len(img) < layout.header_size:
+        raise ValueError(f"image of {len(img)} bytes is shorter than its {layout.header_size}-byte header")
+    return dict(zip((f.name for f in layout.header), layout.header_struct.unpack_from(img, 0)))
+
+
+def body_size(img: bytes, layout: Layout = CURRENT) -> int:
+    """Bytes covered by the CRC (header + payload), from the image's length and its HMAC flag."""
+    tag = HMAC_SIZE if int(header_fields(img, layout)["flags"]) & FLAG_HMAC else 0
+    return len(img) - layout.trailer_size - tag
+
+
+def reseal(img: bytes, key: bytes | None = None, layout: Layout = CURRENT) -> bytes:
+    """The image with its CRC-32 recomputed over its (edited) header + payload, so that a reader's other
+    checks are reached; a signed image keeps its old tag unless `key` re-signs it."""
+    body = body_size(img, layout)
+    out = bytearray(img)
+    struct.pack_into("<I", out, body, zlib.crc32(bytes(img[:body])))  # the CRC opens the trailer
+    if key is not None:
+        if len(img) != body + layout.trailer_size + HMAC_SIZE:
+            raise ValueError("reseal: a key was given for an image that carries no HMAC tag")
+        out[body + layout.trailer_size:] = hmac.new(key, bytes(img[:body]), hashlib.sha256).digest()
+    return bytes(out)
+
+
+def patch_header(img: bytes, layout: Layout = CURRENT, seal: bool = True, **fields: object) -> bytes:
+    """The image with the named header fields set (`patch_header(img, arch=2)`) and, unless seal is
+    False, its CRC resealed."""
+    out = bytearray(img)
+    offsets = layout.offsets
+    codes = {f.name: f.code for f in layout.header}
+    for name, value in fields.items():
+        if name not in codes:
+            raise ValueError(f"patch_header: no header field {name!r} (fields: {', '.join(codes)})")
+        struct.pack_into("<" + codes[name], out, offsets[name], value)
+    return reseal(bytes(out), layout=layout) if seal else bytes(out)
+
+
+# --- the C header --------------------------------------------------------------------------------------------
+
+_C_NAMES = {"g": "gamma", "bb": "beta"}  # Python (QParams) names that C spells as the model struct does
+
+
+def c_header(layout: Layout = CURRENT) -> str:
+    """firmware_c/include/slipest_image_layout.h: every offset and size of `layout` as C constants."""
+    offsets = layout.offsets
+    trailer_off, off = {}, 0
+    for f in layout.trailer:
+        trailer_off[f.name] = off
+        off += struct.calcsize("<" + f.code)
+    lines = [
+        "/**",
+        " * @file slipest_image_layout.h",
+        " * @brief The model image's byte layout (docs/fixed_point.md, \"Model image\"): every offset is from",
+        " *        the start of the image, every field little-endian.",
+        " *",
+        " * Generated by export/image_layout.py (python -m fleetlab.export.image_layout c FILE): do not edit.",
+        " */",
+        "#ifndef SLIPEST_IMAGE_LAYOUT_H",
+        "#define SLIPEST_IMAGE_LAYOUT_H",
+        "",
+        "#ifdef __cplusplus",
+        'extern "C" {',
+        "#endif",
+        "",
+        f"/** Magic of a model image (\"{MAGIC.decode()}\"). */",
+        f"#define SLIPEST_IMAGE_MAGIC \"{MAGIC.decode()}\"",
+        "/** Image format version this reader understands. */",
+        f"#define SLIPEST_IMAGE_FORMAT {layout.version}u",
+        "/** Architecture id of SN-S (12 -> 30 -> LayerNorm -> GELU -> 3, fixed-point scheme 1). */",
+        f"#define SLIPEST_IMAGE_ARCH_SN_S {ARCH_SN_S}u",
+        "/** Bytes of the image header. */",
+        f"#define SLIPEST_IMAGE_HEADER_SIZE {layout.header_size}u",
+        "/** Bytes of the trailer: CRC-32 and the 32-byte sha256 content hash. */",
+        f"#define SLIPEST_IMAGE_TRAILER_SIZE {layout.trailer_size}u",
+        "/** Header flag: the image carries the float32 model after the fixed-point one. */",
+        f"#define SLIPEST_IMAGE_FLAG_F32 0x{FLAG_F32:04X}u",
+        "/** Header flag: an HMAC-SHA256 tag over header and payload follows the trailer. */",
+        f"#define SLIPEST_IMAGE_FLAG_HMAC 0x{FLAG_HMAC:04X}u",
+        "/** Bytes of the HMAC-SHA256 tag (present when SLIPEST_IMAGE_FLAG_HMAC is set). */",
+        f"#define SLIPEST_IMAGE_HMAC_SIZE {HMAC_SIZE}u",
+        "/** Largest valid image (with the float32 model and an HMAC tag), for sizing a receive buffer. */",
+        f"#define SLIPEST_IMAGE_MAX_SIZE {layout.max_size}u",
+        "",
+        "/* header fields: byte offsets */",
+    ]
+    lines += [f"#define SLIPEST_IMAGE_OFF_{f.name.upper()} {offsets[f.name]}u /**< {f.code}: {f.doc} */"
+              for f in layout.header]
+    lines += [
+        "/** First reserved (zero) header byte. */",
+        f"#define SLIPEST_IMAGE_OFF_RESERVED {layout.reserved_start}u",
+        "/* trailer fields: byte offsets from the end of the payload */",
+    ]
+    lines += [f"#define SLIPEST_IMAGE_TRAILER_OFF_{f.name.upper()} {trailer_off[f.name]}u /**< {f.doc} */"
+              for f in layout.trailer]
+    lines += ["", "/* payload: the fixed-point arrays in order (element bytes, count), then with flag F32 the",
+              " * float32 LayerNorm eps and the float32 arrays */"]
+    at = layout.header_size
+    for prefix, arrays in (("Q", layout.q_arrays), ("F32", layout.f32_arrays)):
+        if prefix == "F32":
+            lines.append(f"#define SLIPEST_IMAGE_F32_AT {at}u /**< the float section (eps first), with flag F32 */")
+            at += 4
+        for a in arrays:
+            name = _C_NAMES.get(a.name, a.name).upper()
+            width = int(a.dtype[2:])
+            lines.append(f"#define SLIPEST_IMAGE_{prefix}_{name}_N {a.count}u /**< {name.lower()}: elements */")
+            lines.append(f"#define SLIPEST_IMAGE_{prefix}_{name}_BYTES {width}u /**< {name.lower()}: bytes each */")
+            lines.append(f"#define SLIPEST_IMAGE_{prefix}_{name}_AT {at}u /**< {name.lower()}: offset of element 0 */")
+            at += a.size
+    lines += [
+        "/** Bytes of the fixed-point payload. */",
+        f"#define SLIPEST_IMAGE_Q_PAYLOAD {layout.q_payload_size}u",
+        "/** Bytes of the float32 payload (flag F32): eps and the arrays. */",
+        f"#define SLIPEST_IMAGE_F32_PAYLOAD {layout.f32_payload_size}u",
+        "",
+        "#ifdef __cplusplus",
+        "}",
+        "#endif",
+        "",
+        "#endif /* SLIPEST_IMAGE_LAYOUT_H */",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+C_HEADER = Path(__file__).resolve().parents[1] / "firmware_c" / "include" / "slipest_image_layout.h"
+
+
+def main(argv: list[str]) -> int:
+    if len(argv) != 2 or argv[0] != "c":
+        print("usage: python -m fleetlab.export.image_layout c FILE   (writes the C layout header)", file=sys.stderr)
+        return 2
+    Path(argv[1]).write_text(c_header(), encoding="utf-8", newline="\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

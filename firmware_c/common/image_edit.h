@@ -1,0 +1,16 @@
+/* Edits of a model image for the C tests (the Python tests' patch_header / reseal): a little-endian
+ * field written at an offset of slipest_image_layout.h, and the CRC-32 redone after an edit so that
+ * the reader's other checks are reached. */
+#ifndef IMAGE_EDIT_H
+#define IMAGE_EDIT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+/* v as 4 little-endian bytes at p. */
+void image_edit_put_le32(uint8_t *p, uint32_t v);
+
+/* The CRC-32 of the body (header + payload: the first body bytes) written where the trailer starts. */
+void image_edit_reseal(uint8_t *img, size_t body);
+
+#endif /* IMAGE_EDIT_H */

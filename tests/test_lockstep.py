@@ -1,0 +1,139 @@
+"""The accelerator path of AcoMerge (fusion/lockstep.py), checked on the CPU: dense ant
+construction against the reference's, the stacked fitness against CalibrationFitness, R runs
+batched against each run alone, the engine against the reference search, and `--device cuda`
+refused in one line where no GPU exists."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+
+import pytest
+import torch
+
+from fleetlab.cli import main
+from fleetlab.fusion.acomerge import AcoMergeConfig, acomerge, checked_inputs, construct_ants
+from fleetlab.fusion.bench import synthetic_calibration
+from fleetlab.fusion.finetune import finetune
+from fleetlab.fusion.fitness import CalibrationFitness
+from fleetlab.fusion.lockstep import (
+    StackedFitness,
+    construct_ants_dense,
+    resolve_device,
+    run_acomerge_many,
+    search_lockstep,
+)
+from fleetlab.models import build, flatten
+
+TINY = AcoMergeConfig(n_ants=24, generations=12, iwoa_every=4, gb_every=3)
+NO_GPU = not torch.cuda.is_available()
+
+
+@pytest.fixture(scope="module")
+def cals():
+    return [synthetic_calibration(60, seed=s) for s in range(3)]
+
+
+@pytest.fixture(scope="module")
+def experts(cals):
+    x, y = cals[0]
+    return torch.stack([flatten(finetune(build("sn-s", seed=k), x, y, steps=10, seed=k)) for k in range(3)])
+
+
+@pytest.mark.parametrize("q0", [0.3, 0.95])
+def test_dense_construction_takes_the_reference_paths(q0):
+    tau = torch.rand(200, 12, generator=torch.Generator().manual_seed(1)) + 0.2
+    eta = torch.rand(200, 12, generator=torch.Generator().manual_seed(2)) + 0.5
+    ref, _ = construct_ants(tau, eta, q0, 50, torch.Generator().manual_seed(7), alpha=1.5, beta=2.0)
+    dense = construct_ants_dense(tau.unsqueeze(0), eta.unsqueeze(0), q0, 50, [torch.Generator().manual_seed(7)],
+                                 alpha=1.5, beta=2.0)[0]
+    assert torch.equal(ref.long(), dense)
+    assert (dense != tau.argmax(dim=1)).any()  # some ants did leave the greedy path
+
+
+@pytest.mark.parametrize("arch", ["sn-s", "sn-d"])
+def test_stacked_fitness_equals_calibration_fitness(arch, cals):
+    flats = torch.stack([flatten(build(arch, seed=s)) for s in range(4)])
+    flats = flats + 0.2 * torch.randn(flats.shape, generator=torch.Generator().manual_seed(0))
+    x2, y2 = cals[1][0][:45], cals[1][1][:45]  # a shorter set: padded rows weigh nothing
+    stacked = StackedFitness(arch, [cals[0], (x2, y2)], chunk=3)(torch.stack([flats, flats]))
+    assert torch.allclose(stacked[0], CalibrationFitness(arch, *cals[0])(flats), rtol=1e-5, atol=1e-6)
+    assert torch.allclose(stacked[1], CalibrationFitness(arch, x2, y2)(flats), rtol=1e-5, atol=1e-6)
+
+
+def _checked(experts, seeds):
+    return [checked_inputs(experts, "sn-s", TINY, s, None) for s in seeds]
+
+
+@pytest.mark.parametrize("phases", [("mmas", "iwoa"), ("mmas",)])
+def test_batched_runs_equal_each_run_alone(cals, experts, phases):
+    cfg = dataclasses.replace(TINY, phases=phases)
+    seeds = [5, 6, 7]
+    chk = _checked(experts, seeds)
+    together = search_lockstep([c[1] for c in chk], [c[2] for c in chk], StackedFitness("sn-s", cals), cfg, seeds)
+    for r, seed in enumerate(seeds):
+        alone = search_lockstep([chk[r][1]], [chk[r][2]], StackedFitness("sn-s", [cals[r]]), cfg, [seed])[0]
+        assert torch.equal(alone.best_flat, together[r].best_flat)
+        assert alone.best_fitness == together[r].best_fitness and alone.history == together[r].history
+        assert alone.best_origin == together[r].best_origin
+    assert len({res.best_fitness for res in together}) == 3  # three different draws, three results
+
+
+def test_engine_follows_the_reference_search(cals, experts):
+    """Same seed, same uniforms: the engine walks the reference's path, to float rounding."""
+    for r, (x, y) in enumerate(cals):
+        ref = acomerge(experts, "sn-s", x, y, TINY, seed=r)
+        (eng,) = search_lockstep([experts], [checked_inputs(experts, "sn-s", TINY, r, None)[2]],
+                                 StackedFitness("sn-s", [(x, y)]), TINY, [r])
+        assert eng.best_fitness == pytest.approx(ref.best_fitness, rel=1e-5)
+        assert torch.allclose(eng.best_flat, ref.best_flat, atol=1e-6)
+        assert eng.best_origin == ref.best_origin
+        assert eng.best_fitness <= min(eng.expert_fitness)
+        assert all(b <= a for a, b in zip(eng.history["best_so_far"], eng.history["best_so_far"][1:]))
+        for key in ("iteration_best", "tau_max", "tau_highest"):
+            assert eng.history[key] == pytest.approx(ref.history[key], rel=1e-4)
+        assert eng.history["iwoa"] == ref.history["iwoa"] and eng.history["q0"] == ref.history["q0"]
+
+
+def test_cpu_runs_go_through_the_reference(cals, experts):
+    runs = [(experts, x, y, s, None) for s, (x, y) in enumerate(cals[:2])]
+    out = run_acomerge_many(runs, "sn-s", TINY)
+    for (e, x, y, s, _), res in zip(runs, out):
+        assert res.best_fitness == acomerge(e, "sn-s", x, y, TINY, seed=s).best_fitness
+
+
+@pytest.mark.skipif(not NO_GPU, reason="this machine has a GPU; the refusal is for machines without one")
+def test_device_cuda_is_a_one_line_error_without_a_gpu(capsys, tmp_path):
+    with pytest.raises(ValueError, match="no CUDA GPU is available"):
+        resolve_device("cuda")
+    assert resolve_device("auto").type == "cpu"
+    with pytest.raises(ValueError, match="device must be"):
+        AcoMergeConfig(device="tpu").validate()
+    rc = main(["bench", "fusion", "--device", "cuda", "--json"])
+    err = capsys.readouterr().err.strip()
+    assert rc != 0 and len(err.splitlines()) == 1 and "no CUDA GPU" in err and "Traceback" not in err
+
+
+# --- a busy machine (issue 30, item 2) ----------------------------------------------------
+
+def test_threads_follow_the_free_cores():
+    """With every core taken by a spinning process, a run gets one thread (not a barrier per core)."""
+    from fleetlab.fusion.acomerge import busy_cores, default_threads
+    from fleetlab.fusion.bench import busy_processes
+
+    cores = os.cpu_count() or 1
+    with busy_processes(cores):
+        assert busy_cores(0.2) >= cores - 0.5
+        assert default_threads() == 1
+
+
+def test_bench_reports_idle_and_loaded_runs(capsys):
+    rc = main(["bench", "fusion", "--json", "--ants", "20", "--generations", "3", "--repeats", "1",
+               "--full-runs", "1", "--load", "1"])
+    assert rc == 0
+    busy = json.loads(capsys.readouterr().out)["busy"]
+    assert busy["load"] == 1 and busy["run_s_idle"] > 0 and busy["run_s_loaded"] > 0
+    assert busy["run_s_loaded_all_cores"] > 0 and 1 <= busy["threads_loaded"] <= busy["threads_all_cores"]
+    assert busy["goals"] == {"run_s_idle": 0.35, "run_s_loaded": 0.6,
+                             "met": busy["run_s_idle"] <= 0.35 and busy["run_s_loaded"] <= 0.6}

@@ -1,0 +1,356 @@
+"""AcoMerge for accelerators: R independent runs stepped in lockstep, with no host round trip.
+
+`acomerge.search` is the reference (and the fastest path on a CPU): it reads values back
+every generation (`float(j[i])`, `nonzero`) to skip work the data says is not needed, e.g.
+the ants that rebuilt the greedy path share one evaluation. On a GPU every such read stops
+the host until the device has caught up, and one generation is a few hundred microseconds of
+GPU work, so the waiting would dominate. This engine does the same algorithm with every
+decision kept on the device as a tensor:
+
+- ant construction is dense (`construct_ants_dense`): every decision's search is done, and
+  the departures are picked out with `torch.where` (same distribution as `construct_ants`;
+  for the same uniforms the same paths, tested on CPU);
+- all ants are evaluated (no greedy-ant sharing, which needs a data-dependent shape);
+- the best-so-far model, its path, the MMAS bounds and the global-best deposit are
+  selected with `torch.where` per run; the history is kept on the device and read once
+  at the end.
+
+Several MCCV runs of one method share the shapes (same architecture, ants and buffer size),
+so their generations go into one batched fitness call (`StackedFitness`): on one GPU this is
+where the accelerator pays off, since a single SN-S generation is far too small to fill it.
+Every run keeps its own torch.Generator, seeded as `acomerge.search` seeds it, so a run's
+result does not depend on which runs it was batched with (tested on CPU: R runs together give
+the same results as each run alone).
+
+Results on a GPU differ from the CPU reference: other float rounding (GPU GEMMs), and the CUDA
+generator gives another random stream than the CPU one for the same seed. Both paths draw
+from the same distributions; scores agree within the spread over MCCV runs (docs/paper_table.md).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable, Sequence
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from tqdm.auto import tqdm
+
+from ..data.contracts import N_CLASSES
+from ..models import batched_logits
+from ..models.train import class_weights
+from .acomerge import AcoMergeConfig, AcoMergeResult, _schedule, acomerge, checked_inputs, mmas_bounds, whale_update
+
+DEVICES = ("cpu", "cuda", "auto")
+
+
+def resolve_device(name: str) -> torch.device:
+    """'cpu', 'cuda' (or 'cuda:N') or 'auto' -> a torch.device; a clear error where there is no GPU."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cpu":
+        return torch.device("cpu")
+    if name.startswith("cuda"):
+        if not torch.cuda.is_available():
+            build = "a CPU-only torch build" if torch.version.cuda is None else f"torch built for CUDA {torch.version.cuda}"
+            raise ValueError(f"--device {name}: no CUDA GPU is available here ({build}); use --device cpu or auto")
+        dev = torch.device(name)
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise ValueError(f"--device {name}: this machine has {torch.cuda.device_count()} CUDA device(s)")
+        return dev
+    raise ValueError(f"unknown device {name!r}; choose one of {', '.join(DEVICES)}")
+
+
+def device_label(device: torch.device) -> str:
+    """A human name for progress bars and reports, e.g. 'cuda:0 (NVIDIA H100 80GB HBM3)'."""
+    if device.type == "cuda":
+        index = device.index if device.index is not None else torch.cuda.current_device()
+        return f"cuda:{index} ({torch.cuda.get_device_name(index)})"
+    return "cpu"
+
+
+def run_acomerge_many(
+    runs: Sequence[tuple[torch.Tensor, np.ndarray, np.ndarray, int, torch.Tensor | None]], arch: str,
+    config: AcoMergeConfig, progress: bool = False, desc: str = "AcoMerge",
+) -> list[AcoMergeResult]:
+    """Several runs (experts, x_cal, y_cal, seed, buffer or None) of one configuration.
+
+    On the CPU (and for the whole-model IWOA ablation) they run one after the other through
+    the reference; on a GPU all of them go through one lockstep search, their ants evaluated
+    together in one fitness call per generation.
+    """
+    config.validate()
+    if config.device == "cpu" or "mmas" not in config.phases:
+        return [acomerge(e, arch, x, y, config, seed=s, progress=progress, buffer=b) for e, x, y, s, b in runs]
+    dev = resolve_device(config.device)
+    checked = [checked_inputs(e, arch, config, s, b) for e, _, _, s, b in runs]
+    fitness = StackedFitness(arch, [(x, y) for _, x, y, _, _ in runs], dev)
+    return search_lockstep([c[1] for c in checked], [c[2] for c in checked], fitness, config,
+                           [s for _, _, _, s, _ in runs], dev, progress=progress,
+                           desc=f"{desc} x{len(runs)} on {device_label(dev)}")
+
+
+class StackedFitness:
+    """Class-weighted CE of R runs' candidates on each run's own D_Cal, in one batched call.
+
+    (R, P, T) flats -> (R, P). Calibration sets of different sizes are padded with rows of
+    weight 0, so the padding adds nothing. Per run the loss is the same J as
+    `CalibrationFitness` (torch's weighted CE, 'mean' reduction), to float rounding.
+    """
+
+    def __init__(self, arch: str, cal: Sequence[tuple[np.ndarray, np.ndarray]], device: torch.device | str = "cpu",
+                 chunk: int = 0):
+        if not cal:
+            raise ValueError("StackedFitness needs at least one calibration set")
+        self.arch, self.device = arch, torch.device(device)
+        self.chunk = chunk  # candidates per forward pass (0: all of them at once)
+        n = max(len(y) for _, y in cal)
+        xs = np.zeros((len(cal), n, cal[0][0].shape[1]), dtype=np.float32)
+        ys = np.zeros((len(cal), n), dtype=np.int64)
+        ws = np.zeros((len(cal), n), dtype=np.float32)
+        for r, (x, y) in enumerate(cal):
+            x, y = np.asarray(x, dtype=np.float32), np.asarray(y, dtype=np.int64)
+            if x.ndim != 2 or len(x) != len(y) or len(y) == 0 or not np.isfinite(x).all():
+                raise ValueError(f"calibration set {r}: need finite (N, features) rows with N labels")
+            if y.min() < 0 or y.max() >= N_CLASSES:
+                raise ValueError(f"calibration set {r}: labels must be classes 0..{N_CLASSES - 1}")
+            w = class_weights(y).numpy()[y]
+            xs[r, : len(y)], ys[r, : len(y)], ws[r, : len(y)] = x, y, w / w.sum()
+        self.x = torch.from_numpy(xs).to(self.device)  # (R, N, F)
+        self.y = torch.from_numpy(ys).to(self.device)  # (R, N)
+        self.w = torch.from_numpy(ws).to(self.device)  # (R, N), each row sums to 1
+
+    @property
+    def runs(self) -> int:
+        return self.x.shape[0]
+
+    def __call__(self, flats: torch.Tensor) -> torch.Tensor:
+        r, p, t = flats.shape
+        step = self.chunk or p
+        with torch.no_grad():
+            parts = [self._loss(flats[:, i : i + step]) for i in range(0, p, step)]
+        return torch.cat(parts, dim=1)
+
+    def _loss(self, flats: torch.Tensor) -> torch.Tensor:
+        r, p, t = flats.shape
+        x = self.x.unsqueeze(1).expand(r, p, *self.x.shape[1:]).reshape(r * p, *self.x.shape[1:])
+        logp = F.log_softmax(batched_logits(self.arch, flats.reshape(r * p, t), x), dim=-1)  # (R·P, N, C)
+        y = self.y.unsqueeze(1).expand(r, p, -1).reshape(r * p, -1, 1)
+        picked = logp.gather(-1, y).squeeze(-1)  # (R·P, N)
+        return -(picked.view(r, p, -1) * self.w.unsqueeze(1)).sum(dim=-1)
+
+
+class GraphedFitness:
+    """A fitness replayed from one CUDA graph for inputs of one shape (every generation's ants).
+
+    Why: an SN-S fitness call is about twenty small kernels, and on a GPU launching them one by
+    one from Python costs more than running them. The graph launches all of them at once. The
+    fitness draws no random numbers, so a replay computes exactly what a call would (bench
+    fusion --device cuda reports the difference, 0 expected). Other shapes fall back to the call.
+    """
+
+    def __init__(self, fitness: Callable[[torch.Tensor], torch.Tensor], example: torch.Tensor):
+        self.fitness = fitness
+        self.static_in = example.clone()
+        side = torch.cuda.Stream(device=example.device)
+        side.wait_stream(torch.cuda.current_stream(example.device))
+        with torch.cuda.stream(side):
+            for _ in range(2):  # warm-up outside the graph: kernels chosen, workspaces allocated
+                fitness(self.static_in)
+        torch.cuda.current_stream(example.device).wait_stream(side)
+        self.graph = torch.cuda.CUDAGraph()
+        with torch.cuda.graph(self.graph, capture_error_mode="thread_local"):  # CPU jobs may run beside it
+            self.static_out = fitness(self.static_in)
+
+    def __call__(self, flats: torch.Tensor) -> torch.Tensor:
+        if flats.shape != self.static_in.shape:
+            return self.fitness(flats)
+        self.static_in.copy_(flats)
+        self.graph.replay()
+        return self.static_out.clone()
+
+
+def graphed(fitness: Callable[[torch.Tensor], torch.Tensor], example: torch.Tensor
+            ) -> Callable[[torch.Tensor], torch.Tensor]:
+    """`fitness` as a CUDA graph on a GPU (see GraphedFitness); as it is elsewhere, or where the
+    capture fails (then with one warning on stderr)."""
+    if example.device.type != "cuda":
+        return fitness
+    try:
+        return GraphedFitness(fitness, example)
+    except RuntimeError as e:
+        print(f"warning: CUDA graph capture of the fitness failed ({str(e).splitlines()[0]}); running it eagerly",
+              file=sys.stderr)
+        return fitness
+
+
+def construct_ants_dense(
+    tau: torch.Tensor, eta: torch.Tensor | None, q0: float, n_ants: int, gens: Sequence[torch.Generator],
+    alpha: float = 1.0, beta: float = 1.0,
+) -> torch.Tensor:
+    """Paths (R, n_ants, T) int64 of R runs over pheromones tau (R, T, M), without reading back.
+
+    The rule and the uniforms are those of `acomerge.construct_ants` (one uniform per
+    decision, (T, n_ants) per run from that run's generator): u < π_t departs, and u/π_t is
+    inverted in the cumulative weights of the non-greedy candidates. Here the inversion is
+    done for every decision and kept only where the ant departs.
+    """
+    r, n_idx, m = tau.shape
+    greedy = tau.argmax(dim=2, keepdim=True)  # (R, T, 1)
+    weight = tau if alpha == 1.0 else tau.pow(alpha)
+    if eta is not None:
+        weight = weight * (eta if beta == 1.0 else eta.pow(beta))
+    weight = weight.to(torch.float64)
+    w_greedy = weight.gather(2, greedy)
+    w_others = weight.sum(dim=2, keepdim=True) - w_greedy
+    leave = ((1.0 - q0) * w_others / (w_others + w_greedy)).to(torch.float32)  # (R, T, 1): π_t
+    cdf = weight.scatter(2, greedy, 0.0).cumsum_(dim=2).div_(w_others)
+    cdf[..., -1] = 1.0
+    u = torch.stack([torch.rand(n_idx, n_ants, generator=g, device=tau.device) for g in gens])  # (R, T, P)
+    depart = u < leave
+    v = u.to(torch.float64) / leave
+    pick = torch.searchsorted(cdf, v.contiguous(), right=True).clamp_(max=m - 1)
+    return torch.where(depart, pick, greedy).transpose(1, 2)
+
+
+def _heuristic(cfg: AcoMergeConfig, cand_t: torch.Tensor, best: torch.Tensor) -> torch.Tensor | None:
+    """η (R, T, M), or None for the paper's η ≡ 1."""
+    if cfg.heuristic == "constant":
+        return None
+    return torch.exp(-(cand_t - best.unsqueeze(2)).abs())
+
+
+def search_lockstep(
+    experts: Sequence[torch.Tensor],
+    cands: Sequence[torch.Tensor],
+    fitness: Callable[[torch.Tensor], torch.Tensor],
+    config: AcoMergeConfig,
+    seeds: Sequence[int],
+    device: torch.device | str = "cpu",
+    progress: bool = False,
+    desc: str = "AcoMerge",
+    cuda_graph: bool = True,
+) -> list[AcoMergeResult]:
+    """R AcoMerge runs (MMAS + IWOA, or MMAS only) in lockstep on `device`.
+
+    experts[r] (K, T) and cands[r] (M, T) are run r's experts and buffer (the same K, M and
+    T for every run); `fitness` maps (R, P, T) to (R, P); run r's draws come from its own
+    generator seeded with seeds[r] as in `acomerge.search`. The whole-model IWOA ablation is
+    not batched: it runs through `acomerge.search`. On a GPU the ants' fitness is replayed from
+    a CUDA graph (`cuda_graph`, see GraphedFitness).
+    """
+    config.validate()
+    if "mmas" not in config.phases:
+        raise ValueError("the lockstep engine runs the MMAS phases; the IWOA-only ablation uses acomerge.search")
+    dev = torch.device(device)
+    n_runs = len(seeds)
+    if not (len(experts) == len(cands) == n_runs) or n_runs == 0:
+        raise ValueError("one expert set, one buffer and one seed per run are required")
+    ex = torch.stack([torch.as_tensor(e, dtype=torch.float32) for e in experts]).to(dev)  # (R, K, T)
+    cand = torch.stack([torch.as_tensor(c, dtype=torch.float32) for c in cands]).to(dev)  # (R, M, T)
+    m, n_t = cand.shape[1:]
+    gens = [torch.Generator(device=dev).manual_seed(s + 1_000_003) for s in seeds]
+    rows_r = torch.arange(n_runs, device=dev)
+    cfg = config
+
+    j_ex = torch.nan_to_num(fitness(ex), nan=math.inf)  # (R, K)
+    best_k = j_ex.argmin(dim=1)
+    best_fit = j_ex.gather(1, best_k.unsqueeze(1)).squeeze(1)  # (R,)
+    best_flat = ex[rows_r, best_k]  # (R, T)
+    best_gen = torch.zeros(n_runs, dtype=torch.long, device=dev)  # 0 = an expert, g = generation g
+    # The best expert's path exists when it is in the buffer (the first buffer row equal to it).
+    same = (cand == best_flat.unsqueeze(1)).all(dim=2)  # (R, M)
+    has_path = same.any(dim=1)
+    best_path = same.to(torch.int8).argmax(dim=1, keepdim=True).expand(n_runs, n_t).clone()  # (R, T)
+
+    if cuda_graph:
+        fitness = graphed(fitness, torch.zeros(n_runs, cfg.n_ants, n_t, device=dev))
+    pdec_factor = mmas_bounds(1.0, 1.0, m, n_t, cfg.p_best)[0]  # τ_min / τ_max, a constant of (M, T, p_best)
+
+    def bounds(bf: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        tau_max = cfg.deposit / bf.clamp(min=1e-12)
+        return tau_max * pdec_factor, tau_max
+
+    tmin, tmax = bounds(best_fit)
+    tau = torch.full((n_runs, n_t, m), cfg.tau_init, device=dev)
+    tau = torch.minimum(torch.maximum(tau, tmin.view(-1, 1, 1)), tmax.view(-1, 1, 1))
+    cand_t = cand.transpose(1, 2).contiguous()  # (R, T, M)
+    eta = _heuristic(cfg, cand_t, best_flat)
+    with_iwoa = "iwoa" in cfg.phases
+    n_outer = max(1, cfg.generations // cfg.iwoa_every)
+    n_calls = 0
+    hist: dict[str, list[torch.Tensor]] = {k: [] for k in ("best_so_far", "iteration_best", "ants", "tau_lowest",
+                                                           "tau_highest")}
+    q0s, iwoa_flags = [], []
+    bar = tqdm(range(cfg.generations), desc=desc, disable=not progress, leave=False, unit="gen")
+    for g in bar:
+        q0 = cfg.q0_start + (cfg.q0_end - cfg.q0_start) * (g / max(1, cfg.generations - 1))
+        paths = construct_ants_dense(tau, eta, q0, cfg.n_ants, gens, cfg.alpha, cfg.beta)  # (R, P, T)
+        flats = cand.gather(1, paths)  # (R, P, T)
+        j = torch.nan_to_num(fitness(flats), nan=math.inf)  # (R, P)
+        ib = j.argmin(dim=1)
+        jb = j.gather(1, ib.unsqueeze(1)).squeeze(1)
+        ib_path = paths[rows_r, ib]  # (R, T)
+        better = jb < best_fit
+        best_fit = torch.where(better, jb, best_fit)
+        best_flat = torch.where(better.unsqueeze(1), flats[rows_r, ib], best_flat)
+        best_path = torch.where(better.unsqueeze(1), ib_path, best_path)
+        best_gen = torch.where(better, g + 1, best_gen)
+        has_path = has_path | better
+        if cfg.heuristic != "constant":
+            eta = _heuristic(cfg, cand_t, best_flat)
+        gb_turn = cfg.gb_every > 0 and (g + 1) % cfg.gb_every == 0
+        use_gb = has_path if gb_turn else torch.zeros_like(has_path)
+        path = torch.where(use_gb.unsqueeze(1), best_path, ib_path)
+        j_dep = torch.where(use_gb, best_fit, jb)
+        amount = torch.where(torch.isfinite(j_dep), (1.0 - cfg.evaporation) * cfg.deposit / j_dep,
+                             torch.zeros_like(j_dep))
+        tau.mul_(cfg.evaporation)
+        tau.scatter_add_(2, path.unsqueeze(2), amount.view(-1, 1, 1).expand(n_runs, n_t, 1))
+        tmin, tmax = bounds(best_fit)
+        tau = torch.minimum(torch.maximum(tau, tmin.view(-1, 1, 1)), tmax.view(-1, 1, 1))
+        did_iwoa = with_iwoa and (g + 1) % cfg.iwoa_every == 0 and n_calls < n_outer
+        if did_iwoa:
+            a, inertia = _schedule(n_calls, n_outer)
+            leader = tau.argmax(dim=2)  # (R, T)
+            cand_t = torch.stack([
+                whale_update(cand_t[r].unsqueeze(-1), leader[r], a, inertia, cfg.spiral_b, gens[r], cfg.clip).squeeze(-1)
+                for r in range(n_runs)])
+            cand = cand_t.transpose(1, 2).contiguous()
+            n_calls += 1
+            if cfg.heuristic != "constant":
+                eta = _heuristic(cfg, cand_t, best_flat)
+        # per generation only what is needed later; the statistics are computed once, after the run
+        for key, value in (("best_so_far", best_fit), ("iteration_best", jb), ("ants", j),
+                           ("tau_lowest", tau.amin(dim=(1, 2))), ("tau_highest", tau.amax(dim=(1, 2)))):
+            hist[key].append(value)
+        q0s.append(q0)
+        iwoa_flags.append(did_iwoa)
+    bar.close()
+    stacked = {k: torch.stack(v, dim=1) for k, v in hist.items()}  # (R, G), "ants" (R, G, P)
+    ants = stacked.pop("ants")
+    finite = torch.isfinite(ants)
+    mean = torch.where(finite, ants, torch.zeros_like(ants)).sum(dim=2) / finite.sum(dim=2)
+    stacked["iteration_mean"] = torch.where(finite.any(dim=2), mean, torch.full_like(mean, math.inf))
+    stacked["tau_min"], stacked["tau_max"] = bounds(stacked["best_so_far"])
+    return _results(stacked, q0s, iwoa_flags, best_flat, best_fit, best_gen, best_k, j_ex, cfg)
+
+
+def _results(hist, q0s, iwoa_flags, best_flat, best_fit, best_gen, best_k, j_ex, cfg) -> list[AcoMergeResult]:
+    """Read everything back from the device once and split it per run."""
+    per_key = {k: v.double().cpu().tolist() for k, v in hist.items()}  # (R, G) each
+    flat, fit = best_flat.cpu(), best_fit.double().cpu().tolist()
+    gens, ks, jx = best_gen.cpu().tolist(), best_k.cpu().tolist(), j_ex.double().cpu().tolist()
+    out = []
+    for r in range(len(fit)):
+        history = {k: per_key[k][r] for k in ("best_so_far", "iteration_best", "iteration_mean")}
+        history.update(q0=list(q0s), tau_min=per_key["tau_min"][r], tau_max=per_key["tau_max"][r],
+                       tau_lowest=per_key["tau_lowest"][r], tau_highest=per_key["tau_highest"][r],
+                       iwoa=list(iwoa_flags))
+        origin = f"generation {gens[r]}" if gens[r] else f"expert {ks[r]}"
+        out.append(AcoMergeResult(best_flat=flat[r].clone(), best_fitness=fit[r], history=history,
+                                  evaluations=len(jx[r]) + cfg.n_ants * cfg.generations, best_origin=origin,
+                                  expert_fitness=jx[r]))
+    return out

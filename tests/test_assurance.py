@@ -87,7 +87,7 @@ def test_misra_checker_fails_on_an_unrecorded_deviation(tmp_path, misra_findings
     """The checker can fail: drop one permit's rows and its section from a copy of the record."""
     from fleetlab.assurance import misra
 
-    text = misra.DEVIATIONS.read_text()
+    text = misra.deviations_file().read_text()
     trimmed = "\n".join(line for line in text.splitlines()
                         if not line.startswith("| 13.4 |") and not line.startswith("### MD-13.4"))
     record = tmp_path / "MISRA_DEVIATIONS.md"
@@ -144,8 +144,9 @@ def test_frama_c_eva_finds_an_overflow(tmp_path):
     """The kernel's zero is not vacuous: without the saturation that states |e| < 2^14 (a bound that holds
     only through e's relation to max|d|), EVA reports the possible overflow of e * e."""
     from fleetlab.assurance import analysers
-    from fleetlab.assurance.sources import FW
+    from fleetlab.assurance.sources import fw
 
+    FW = fw()
     src = (FW / "src" / "slipest_infer_q.c").read_text()
     with_sat = "int32_t e = SAT(rsr_h(NH * SAT(h[i], 25) - sum, k2_half, k2), 14);"
     assert with_sat in src

@@ -245,7 +245,10 @@ def test_python_ram_nvm_keeps_the_strict_nvm_rules() -> None:
     short or out-of-range write is refused (SLIPEST_E_NVM) and changes nothing; after an erase it is taken."""
     import ctypes
 
-    from fleetlab.host_tools.canopen_node import SLIPEST_E_NVM, SLIPEST_OK, RamNvm
+    from fleetlab.host_tools.canopen_node import RamNvm
+    from fleetlab.host_tools.status_codes import status
+
+    SLIPEST_OK, SLIPEST_E_NVM = status()["SLIPEST_OK"], status()["SLIPEST_E_NVM"]
 
     nvm = RamNvm(sector_size=64, n_sectors=4)
     buf = (ctypes.c_uint8 * 64)(*([0x5A] * 64))

@@ -10,22 +10,16 @@ from __future__ import annotations
 import shutil
 from functools import lru_cache
 
+from .errors import MissingTool
 from .paths import repo_root
 
+__all__ = ["MissingTool", "INSTALL_HINT", "need", "package_of", "packages"]
 INSTALL_HINT = "scripts/setup.sh installs it (scripts/apt-packages.txt)"
-
-
-class MissingTool(RuntimeError):
-    """A command is not on PATH; `package` is the Debian package that provides it (or "unknown")."""
-
-    def __init__(self, command: str, package: str):
-        self.command, self.package = command, package
-        super().__init__(f"{command} not found on PATH: install the Debian package {package} ({INSTALL_HINT})")
 
 
 @lru_cache(maxsize=1)
 def packages() -> dict[str, str]:
-    """command -> package, from scripts/apt-packages.txt."""
+    """command -> package, from scripts/apt-packages.txt (the wheel carries it in its C tree too)."""
     out = {}
     for line in (repo_root() / "scripts" / "apt-packages.txt").read_text().splitlines():
         words = line.split()
@@ -40,9 +34,9 @@ def package_of(command: str) -> str:
     return packages().get(command, "unknown (add it to scripts/apt-packages.txt)")
 
 
-def need(command: str) -> str:
-    """Full path of `command`, or MissingTool naming its package."""
+def need(command: str, needed_for: str = "fleetlab") -> str:
+    """Full path of `command`, or errors.MissingTool naming what needs it and its Debian package."""
     path = shutil.which(command)
     if path is None:
-        raise MissingTool(command, package_of(command))
+        raise MissingTool(command, needed_for, package_of(command))
     return path

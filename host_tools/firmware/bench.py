@@ -34,25 +34,23 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import sys
 from pathlib import Path
 
-from fleetlab.paths import default_bundle, repo_root
+from fleetlab.system_tools import need
+from fleetlab.paths import build_root, default_bundle, repo_root
 
 from . import targets as target_registry
 from .build import cmake_build
 from .figures import bench_figures, target_figures
 from .measure import host_timings, target_costs
 
-REPO = repo_root()
-DEFAULT_BUNDLE = default_bundle()
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--bundle", type=Path, default=DEFAULT_BUNDLE, help="export bundle (default: the example bundle)")
-    parser.add_argument("--build-dir", type=Path, default=REPO / "build" / "bench",
-                        help="where the host and target builds go (reused when present)")
+    parser.add_argument("--bundle", type=Path, default=None, help="export bundle (default: the example bundle)")
+    parser.add_argument("--build-dir", type=Path, default=None,
+                        help="where the host and target builds go, reused when present (default: bench/ under "
+                             "the build root: build/ in a clone, else the user's cache folder)")
     parser.add_argument("--iterations", type=int, default=2000,
                         help="onnxruntime/torch inferences per timing round (3 rounds, interleaved with the C bench)")
     parser.add_argument("--target", default=None,
@@ -73,7 +71,8 @@ def _list_targets(as_json: bool) -> int:
         return 0
     for name, t in found.items():
         flags = ", ".join([t.endian + "-endian", "FPU" if t.fpu else "no FPU"] + (["integer-only"] if t.integer_only else []))
-        print(f"{name:14s} {t.description} [{flags}] -- {t.emulator}  ({t.file.relative_to(REPO) if t.file.is_relative_to(REPO) else t.file})")
+        tree = repo_root()
+        print(f"{name:14s} {t.description} [{flags}] -- {t.emulator}  ({t.file.relative_to(tree) if t.file.is_relative_to(tree) else t.file})")
     return 0
 
 
@@ -89,15 +88,13 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"target {names[-1]} is link-only (no emulator): nothing to measure")
     if ref.name not in names:
         names.insert(0, ref.name)  # the reference figures (and the figures) are always measured
-    bundle = Path(args.bundle)
+    bundle = Path(args.bundle or default_bundle())
     if not (bundle / "vectors.bin").is_file():
         raise FileNotFoundError(f"{bundle}: no vectors.bin (not an export bundle?)")
-    if shutil.which("cmake") is None:
-        raise OSError("cmake not found (scripts/setup.sh installs it)")
+    args.build_dir = Path(args.build_dir or build_root() / "bench")
+    need("cmake", "fleetlab bench c")
     for name in names:
-        for tool in found[name].tools:
-            if shutil.which(tool) is None:
-                raise OSError(f"{tool} not found for target {name} (scripts/setup.sh installs it)")
+        found[name].need_tools(f"fleetlab bench c --target {name}")
     compare = Path(args.compare) if args.compare is not None else None
     if compare is not None and not (compare / "vectors.bin").is_file():
         raise FileNotFoundError(f"{compare}: no vectors.bin (not an export bundle?)")

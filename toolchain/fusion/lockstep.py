@@ -22,9 +22,14 @@ Every run keeps its own torch.Generator, seeded as `acomerge.search` seeds it, s
 result does not depend on which runs it was batched with (tested on CPU: R runs together give
 the same results as each run alone).
 
-Results on a GPU differ from the CPU reference: other float rounding (GPU GEMMs), and the CUDA
-generator gives another random stream than the CPU one for the same seed. Both paths draw
-from the same distributions; scores agree within the spread over MCCV runs (docs/paper_table.md).
+On a GPU a whole generation is one CUDA graph, replayed (see _Lockstep and _Replayed): the
+state lives in tensors changed only in place, and the host only says "next generation".
+
+Results on a GPU differ from the CPU reference: other float rounding (GPU GEMMs), and by
+default (rng 'device') the CUDA generator gives another random stream than the CPU one for the
+same seed. Both draw from the same distributions. With rng 'host' the CPU generators of the
+reference are used and their numbers uploaded, so a GPU run differs from the CPU's by float
+rounding only (docs/scaling.md).
 """
 
 from __future__ import annotations

@@ -50,6 +50,7 @@ from .acomerge import AcoMergeConfig, AcoMergeResult, _schedule, acomerge, check
 
 DEVICES = ("cpu", "cuda", "auto")
 RNGS = ("device", "host")  # where the search's random numbers are drawn, see `generators`
+HISTORY = ("best_so_far", "iteration_best", "tau_lowest", "tau_highest")  # per run and generation, on the device
 
 
 def resolve_device(name: str) -> torch.device:
@@ -290,8 +291,9 @@ class _Lockstep:
         self.iwoa_w = torch.tensor([w for _, w in sched], dtype=torch.float32, device=dev)
         self.g = torch.zeros(1, dtype=torch.long, device=dev)  # the generation being run (0-based)
         self.c = torch.zeros(1, dtype=torch.long, device=dev)  # IWOA calls done
-        self.hist = {k: torch.zeros(n_runs, n_gen, device=dev)
-                     for k in ("best_so_far", "iteration_best", "tau_lowest", "tau_highest")}
+        # the per-generation scalars of a run side by side, so one kernel writes all of them
+        self.scalars = torch.zeros(n_runs, n_gen, len(HISTORY), device=dev)
+        self.hist = {k: self.scalars[..., i] for i, k in enumerate(HISTORY)}
         self.hist["ants"] = torch.zeros(n_runs, n_gen, cfg.n_ants, device=dev)
 
     def bounds(self, bf: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -309,26 +311,27 @@ class _Lockstep:
         jb = j.gather(1, ib.unsqueeze(1)).squeeze(1)
         ib_path = paths[rows, ib]  # (R, T)
         better = jb < self.best_fit
-        self.best_fit.copy_(torch.where(better, jb, self.best_fit))
-        self.best_flat.copy_(torch.where(better.unsqueeze(1), flats[rows, ib], self.best_flat))
-        self.best_path.copy_(torch.where(better.unsqueeze(1), ib_path, self.best_path))
-        self.best_gen.copy_(torch.where(better, self.g + 1, self.best_gen))
+        torch.where(better, jb, self.best_fit, out=self.best_fit)
+        torch.where(better.unsqueeze(1), flats[rows, ib], self.best_flat, out=self.best_flat)
+        torch.where(better.unsqueeze(1), ib_path, self.best_path, out=self.best_path)
+        torch.where(better, self.g + 1, self.best_gen, out=self.best_gen)
         self.has_path.logical_or_(better)
         if self.eta is not None:
             self.eta.copy_(_heuristic(cfg, self.cand_t, self.best_flat))
         use_gb = self.has_path & self.gb_dev.index_select(0, self.g)
         path = torch.where(use_gb.unsqueeze(1), self.best_path, ib_path)
         j_dep = torch.where(use_gb, self.best_fit, jb)
-        amount = torch.where(torch.isfinite(j_dep), (1.0 - cfg.evaporation) * cfg.deposit / j_dep,
-                             torch.zeros_like(j_dep))
+        # J >= 0, and +inf only where it was NaN (nan_to_num turns an infinite loss into the largest
+        # float): Q(1 - ρ)/J is then 0, the reference's "no deposit", without a test of its own
+        amount = (1.0 - cfg.evaporation) * cfg.deposit / j_dep
         self.tau.mul_(cfg.evaporation)
         self.tau.scatter_add_(2, path.unsqueeze(2), amount.view(-1, 1, 1).expand(*path.shape, 1))
         tmin, tmax = self.bounds(self.best_fit)
-        self.tau.copy_(torch.minimum(torch.maximum(self.tau, tmin.view(-1, 1, 1)), tmax.view(-1, 1, 1)))
+        torch.clamp(self.tau, tmin.view(-1, 1, 1), tmax.view(-1, 1, 1), out=self.tau)  # = min(max(τ, τ_min), τ_max)
         # per generation only what is needed later; the statistics are computed once, after the run
-        for key, value in (("best_so_far", self.best_fit), ("iteration_best", jb), ("ants", j),
-                           ("tau_lowest", self.tau.amin(dim=(1, 2))), ("tau_highest", self.tau.amax(dim=(1, 2)))):
-            self.hist[key].index_copy_(1, self.g, value.unsqueeze(1))
+        now = torch.stack([self.best_fit, jb, self.tau.amin(dim=(1, 2)), self.tau.amax(dim=(1, 2))], dim=1)
+        self.scalars.index_copy_(1, self.g, now.unsqueeze(1))
+        self.hist["ants"].index_copy_(1, self.g, j.unsqueeze(1))
         self.g.add_(1)
 
     def iwoa(self) -> None:

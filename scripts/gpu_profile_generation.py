@@ -1,7 +1,8 @@
 """Where an SN-S AcoMerge generation spends its GPU time: kernels per generation and the
 heaviest kernels, from torch's profiler over an eager lockstep run (the kernels a replayed
-graph runs are the same). Run on a GPU machine with the gpu_check.sh shim on PYTHONPATH, or
-with fleetlab installed: `python3 scripts/gpu_profile_generation.py [--arch sn-s]`."""
+graph runs are the same). Run on a GPU machine with fleetlab installed, or after
+scripts/gpu_check.sh with its shim: `PYTHONPATH=$S:$S/site python3 scripts/gpu_profile_generation.py`
+where S is the /tmp/fleetlab_shim.* folder it left."""
 
 from __future__ import annotations
 

@@ -226,7 +226,8 @@ def test_host_rng_draws_the_cpu_references_numbers():
     host = generators([4, 9], torch.device("cuda"), "host")  # made on the CPU, no GPU needed
     assert all(g.device.type == "cpu" for g in host)
     for g, seed in zip(host, [4, 9]):
-        assert torch.equal(torch.rand(5, generator=g), torch.rand(5, generator=torch.Generator().manual_seed(seed + 1_000_003)))
+        reference = torch.Generator().manual_seed(seed + 1_000_003)
+        assert torch.equal(torch.rand(5, generator=g), torch.rand(5, generator=reference))
     with pytest.raises(ValueError, match="rng must be"):
         generators([1], torch.device("cpu"), "gpu")
     with pytest.raises(ValueError, match="rng must be"):

@@ -377,9 +377,11 @@ def run(args: argparse.Namespace) -> int:
     if device.type != "cpu":
         print(f"AcoMerge on {result['device']}: {result['arch']}, {result['ants']} ants, |D_Cal| = {result['cal_size']}")
         for key, unit in (("fitness_ms", "ms"), ("fitness_ms_cuda_graph", "ms"), ("generation_ms", "ms"),
-                          ("generation_ms_eager", "ms"), ("generation_ms_steady", "ms"), ("full_run_s", "s"), ("full_run_s_eager", "s"),
+                          ("generation_ms_eager", "ms"), ("generation_ms_steady", "ms"), ("full_run_s", "s"),
+                          ("full_run_s_eager", "s"),
                           ("batched_generation_ms", "ms"), ("per_run_generation_ms", "ms"), ("batched_full_runs_s", "s")):
             print(f"  {key:40s} {result[key]:10.4f} {unit}")
+        print(f"  the graph-replayed run is the eager run's search: {result['cuda_graph_same_search']}")
         print(f"  goals: {result['goals']}")
         return 0
     print(f"AcoMerge benchmark: {result['arch']}, {result['ants']} ants, |D_Cal| = {result['cal_size']} "

@@ -217,7 +217,8 @@ def construct_ants_dense(
     leave = ((1.0 - q0) * w_others / (w_others + w_greedy)).to(torch.float32)  # (R, T, 1): π_t
     cdf = weight.scatter(2, greedy, 0.0).cumsum_(dim=2).div_(w_others)
     cdf[..., -1] = 1.0
-    u = torch.stack([torch.rand(n_idx, n_ants, generator=g, device=g.device) for g in gens]).to(tau.device)  # (R, T, P)
+    u = torch.stack([torch.rand(n_idx, n_ants, generator=g, device=g.device) for g in gens])
+    u = u.to(tau.device)  # (R, T, P)
     depart = u < leave
     v = u.to(torch.float64) / leave
     pick = torch.searchsorted(cdf, v.contiguous(), right=True).clamp_(max=m - 1)

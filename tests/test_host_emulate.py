@@ -163,9 +163,11 @@ def test_realtime_pacing_measures_the_estimator_latency(bundle, sim):
     # there is, so a node that waited for a 101st would send no estimate at all
     assert s["windows"] == s["bit_exact"] == 1 and s["realtime"] and s["frames_sent"] == 300 + 2  # + CONTROL reset, status
     # pacing can only make the run longer than the schedule (the 100th sample is due 1.98 s after the
-    # first), never shorter, whatever the load; the latency is a figure of fleetlab bench link
+    # first), never shorter, whatever the load; the latency is a figure of fleetlab bench link, not an
+    # assertion (its value is the machine's: under load the interpolated send time of the window's last
+    # item can fall after the answer's arrival, and the figure is clamped to 0)
     assert res.stream_s >= 99 / 50 - 0.05
-    assert len(res.latencies_us) == 1 and res.latencies_us[0] > 0
+    assert len(res.latencies_us) == 1 and res.latencies_us[0] >= 0
 
 
 def test_bench_link_prints_its_figures(bundle, capsys):

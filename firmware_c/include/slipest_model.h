@@ -39,6 +39,7 @@ extern "C" {
 #define SLIPEST_MAX_LAYERS 4
 #endif
 #ifndef SLIPEST_MAX_WIDTH
+/** Build cap on the units of any hidden layer (2..256; see SLIPEST_MAX_LAYERS). */
 #define SLIPEST_MAX_WIDTH 256
 #endif
 /** 1: the kernels serve layer-table models; 0: SN-S only (a table model is refused with SLIPEST_E_ARCH,

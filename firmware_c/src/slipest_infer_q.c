@@ -416,6 +416,54 @@ HOT int32_t dot16(const int16_t *w, const int16_t *x, unsigned n, int32_t acc)
     return acc;
 }
 
+#if SLIPEST_DUAL_MAC
+/* acc[r] + sum_j w[r n + j] x[j] for the four rows r = 0..3 of a row-major block of n columns: each
+ * pair of inputs is loaded once for four rows, so one 32-bit load of weights and one SMLAD per two
+ * multiply-accumulates, plus a quarter of the input load (several rows per pass, as CMSIS-NN does for its
+ * int16 matrix-vector products). A row of odd n starts at an odd element: the 32-bit loads are unaligned,
+ * which ARMv7E-M allows for LDR (memcpy lets the compiler pick it). The sums are exact, so the order of the
+ * products does not change them; every partial sum is inside the row's bound (any subset of its terms). */
+HOT void dot16_rows4(const int16_t *w, unsigned n, const int16_t *x, int32_t acc[4])
+{
+    const int16_t *w0 = w;
+    const int16_t *w1 = w0 + n;
+    const int16_t *w2 = w1 + n;
+    const int16_t *w3 = w2 + n;
+    int32_t a0 = acc[0], a1 = acc[1], a2 = acc[2], a3 = acc[3];
+    unsigned j = 0u;
+
+    for (; j + 3u < n; j += 4u) { /* two input pairs per pass: the loop's own cost over 8 SMLADs */
+        const uint32_t xa = pair16(&x[j]);
+        const uint32_t xb = pair16(&x[j + 2u]);
+        a0 = __smlad(pair16(&w0[j]), xa, a0);
+        a1 = __smlad(pair16(&w1[j]), xa, a1);
+        a2 = __smlad(pair16(&w2[j]), xa, a2);
+        a3 = __smlad(pair16(&w3[j]), xa, a3);
+        a0 = __smlad(pair16(&w0[j + 2u]), xb, a0);
+        a1 = __smlad(pair16(&w1[j + 2u]), xb, a1);
+        a2 = __smlad(pair16(&w2[j + 2u]), xb, a2);
+        a3 = __smlad(pair16(&w3[j + 2u]), xb, a3);
+    }
+    for (; j + 1u < n; j += 2u) {
+        const uint32_t xa = pair16(&x[j]);
+        a0 = __smlad(pair16(&w0[j]), xa, a0);
+        a1 = __smlad(pair16(&w1[j]), xa, a1);
+        a2 = __smlad(pair16(&w2[j]), xa, a2);
+        a3 = __smlad(pair16(&w3[j]), xa, a3);
+    }
+    if (j < n) {
+        a0 += w0[j] * x[j];
+        a1 += w1[j] * x[j];
+        a2 += w2[j] * x[j];
+        a3 += w3[j] * x[j];
+    }
+    acc[0] = a0;
+    acc[1] = a1;
+    acc[2] = a2;
+    acc[3] = a3;
+}
+#endif
+
 /* One Linear -> LayerNorm -> GELU block (docs/fixed_point.md, "A general block"): the n_in int16 inputs
  * in io -> the block's width int16 outputs in Q(fy), written over io (the inputs are dead once the
  * accumulators are in h). Every bound quoted is the proof's, for this block's width H. */
@@ -428,7 +476,23 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     uint32_t s = 0u, usum = 0u, v;
     unsigned i, nb, k1, k2, u_shift, to_q15;
 
-    for (i = 0u; i < n; ++i) {
+    i = 0u;
+#if SLIPEST_DUAL_MAC
+    for (; i + 3u < n; i += 4u) { /* four rows per pass (dot16_rows4), the rest one by one below */
+        unsigned r;
+        int32_t a4[4];
+        for (r = 0u; r < 4u; ++r) {
+            a4[r] = l->b[i + r];
+        }
+        dot16_rows4(&l->w[i * n_in], n_in, x, a4);
+        for (r = 0u; r < 4u; ++r) {
+            h[i + r] = a4[r];
+            hmax = a4[r] > hmax ? a4[r] : hmax;
+            hmin = a4[r] < hmin ? a4[r] : hmin;
+        }
+    }
+#endif
+    for (; i < n; ++i) {
         int32_t a = dot16(&l->w[i * n_in], x, n_in, l->b[i]); /* <= 2^31 - 1 - 2^(32 - h_bits) */
         h[i] = a;
         hmax = a > hmax ? a : hmax;

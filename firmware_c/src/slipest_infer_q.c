@@ -432,30 +432,25 @@ HOT void dot16_rows4(const int16_t *w, unsigned n, const int16_t *x, int32_t acc
     int32_t a0 = acc[0], a1 = acc[1], a2 = acc[2], a3 = acc[3];
     unsigned j = 0u;
 
-    for (; j + 3u < n; j += 4u) { /* two input pairs per pass: the loop's own cost over 8 SMLADs */
-        const uint32_t xa = pair16(&x[j]);
-        const uint32_t xb = pair16(&x[j + 2u]);
-        a0 = __smlad(pair16(&w0[j]), xa, a0);
-        a1 = __smlad(pair16(&w1[j]), xa, a1);
-        a2 = __smlad(pair16(&w2[j]), xa, a2);
-        a3 = __smlad(pair16(&w3[j]), xa, a3);
-        a0 = __smlad(pair16(&w0[j + 2u]), xb, a0);
-        a1 = __smlad(pair16(&w1[j + 2u]), xb, a1);
-        a2 = __smlad(pair16(&w2[j + 2u]), xb, a2);
-        a3 = __smlad(pair16(&w3[j + 2u]), xb, a3);
-    }
+    /* one input pair per pass, the pointers walking the rows: GCC then uses post-indexed loads (11
+     * instructions per 8 products on the M4; unrolled, it falls back to offsets plus four adds) */
     for (; j + 1u < n; j += 2u) {
-        const uint32_t xa = pair16(&x[j]);
-        a0 = __smlad(pair16(&w0[j]), xa, a0);
-        a1 = __smlad(pair16(&w1[j]), xa, a1);
-        a2 = __smlad(pair16(&w2[j]), xa, a2);
-        a3 = __smlad(pair16(&w3[j]), xa, a3);
+        const uint32_t xa = pair16(x);
+        a0 = __smlad(pair16(w0), xa, a0);
+        a1 = __smlad(pair16(w1), xa, a1);
+        a2 = __smlad(pair16(w2), xa, a2);
+        a3 = __smlad(pair16(w3), xa, a3);
+        x += 2;
+        w0 += 2;
+        w1 += 2;
+        w2 += 2;
+        w3 += 2;
     }
     if (j < n) {
-        a0 += w0[j] * x[j];
-        a1 += w1[j] * x[j];
-        a2 += w2[j] * x[j];
-        a3 += w3[j] * x[j];
+        a0 += *w0 * *x;
+        a1 += *w1 * *x;
+        a2 += *w2 * *x;
+        a3 += *w3 * *x;
     }
     acc[0] = a0;
     acc[1] = a1;

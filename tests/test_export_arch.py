@@ -41,9 +41,9 @@ def arch_bundle(request, tmp_path_factory):
 def test_bundle_is_complete_and_reads_back(arch_bundle):
     arch, out = arch_bundle
     m = json.loads((out / "manifest.json").read_text())
-    assert m["arch"] == arch and m["headers"]["layer_table"] and m["model_image"] is None
-    assert not (out / "model.img").exists()  # image format 1 carries SN-S only (issue 28 item 4)
-    for name in ("model.onnx", "slipest_model_q.h", "slipest_model_f32.h", "vectors.npz", "vectors.bin"):
+    assert m["arch"] == arch and m["headers"]["layer_table"]
+    assert m["model_image"]["format_version"] == 2 and m["model_image"]["arch_id"] == 2  # the layer table
+    for name in ("model.onnx", "slipest_model_q.h", "slipest_model_f32.h", "model.img", "vectors.npz", "vectors.bin"):
         assert name in m["files"]
     b = load_bundle(out)
     assert isinstance(b.qparams, QNet) and ",".join(map(str, b.qparams.hidden)) in (arch, "128,64,32")

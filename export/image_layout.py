@@ -440,6 +440,8 @@ def c_header(layout: Layout = CURRENT) -> str:
         "/** Bytes of the float32 payload (flag F32): eps and the arrays. */",
         f"#define SLIPEST_IMAGE_F32_PAYLOAD {layout.f32_payload_size}u",
         "",
+    ] + _c_table_lines(V2) + [
+        "",
         "#ifdef __cplusplus",
         "}",
         "#endif",
@@ -448,6 +450,55 @@ def c_header(layout: Layout = CURRENT) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def _c_table_lines(t: TableLayout) -> list[str]:
+    """The format-2 part of the C header: the header fields that format 1 lacks or places elsewhere, the
+    layer-table record and the payload's sizes per weight, per unit and per block (its size formula)."""
+    per_w_q = sum(int(a.dtype[2:]) for a in t.block_q if a.count == "in*width")
+    per_u_q = sum(int(a.dtype[2:]) for a in t.block_q if a.count == "width")
+    per_w_f = sum(int(a.dtype[2:]) for a in t.block_f32 if a.count == "in*width")
+    per_u_f = sum(int(a.dtype[2:]) for a in t.block_f32 if a.count == "width")
+    gelu = sum(a.size for a in t.block_q if isinstance(a.count, int))
+    tail = sum(a.size for a in t.tail_q)
+    lines = [
+        f"/* format {t.version}: any architecture, the layer table in the header (same frame as format 1:",
+        " * magic, format, arch, header size and flags at the offsets above, the same trailer and tag) */",
+        f"#define SLIPEST_IMAGE_V2_FORMAT {t.version}u",
+        "/** Architecture id of a layer-table model (1..4 Linear -> LayerNorm -> GELU blocks, scheme 1). */",
+        f"#define SLIPEST_IMAGE_ARCH_TABLE {ARCH_TABLE}u",
+        f"#define SLIPEST_IMAGE_V2_HEADER_SIZE {t.header_size}u",
+    ]
+    lines += [f"#define SLIPEST_IMAGE_V2_OFF_{f.name.upper()} {t.offsets[f.name]}u /**< {f.code}: {f.doc} */"
+              for f in t.header]
+    lines += [
+        "/** First reserved (zero) byte before the layer table. */",
+        f"#define SLIPEST_IMAGE_V2_OFF_RESERVED {t.reserved_start}u",
+        f"#define SLIPEST_IMAGE_V2_TABLE_AT {t.table_at}u /**< the layer table: one record per block */",
+        f"#define SLIPEST_IMAGE_V2_RECORD_SIZE {t.record_size}u /**< bytes per record (zero padded) */",
+        f"#define SLIPEST_IMAGE_V2_RECORDS {t.max_layers}u /**< records in the table (unused ones zero) */",
+    ]
+    lines += [f"#define SLIPEST_IMAGE_V2_REC_{f.name.upper()} {t.record_offsets[f.name]}u /**< {f.code}: {f.doc} */"
+              for f in t.record]
+    lines += [
+        f"#define SLIPEST_IMAGE_V2_REC_END {t.record_struct.size}u /**< first padding byte of a record */",
+        "/* payload: per block w [width * n_in], b, gamma, beta [width], gelu [129]; the head w [3 * width],",
+        " * b [3]; the 1/sqrt seeds [24]; with flag F32: eps, per block w, b, gamma, beta, the head w, b */",
+        f"#define SLIPEST_IMAGE_V2_Q_PER_WEIGHT {per_w_q}u /**< fixed-point bytes per weight */",
+        f"#define SLIPEST_IMAGE_V2_Q_PER_UNIT {per_u_q}u /**< fixed-point bytes per unit (b, gamma, beta) */",
+        f"#define SLIPEST_IMAGE_V2_Q_PER_BLOCK {gelu}u /**< fixed-point bytes per block (the GELU table) */",
+        f"#define SLIPEST_IMAGE_V2_Q_TAIL {tail}u /**< the 1/sqrt seeds after the head */",
+        f"#define SLIPEST_IMAGE_V2_F32_PER_WEIGHT {per_w_f}u /**< float bytes per weight */",
+        f"#define SLIPEST_IMAGE_V2_F32_PER_UNIT {per_u_f}u /**< float bytes per unit (b, gamma, beta) */",
+        "/** Bytes of a format-2 image with `weights` weights (every block and the head), `units` biases (every",
+        " *  block's units and the 3 classes; gamma and beta of the head's 3 do not exist, hence - 3), `blocks`",
+        " *  blocks, the float model and an HMAC tag: the largest image a build's caps admit. */",
+        "#define SLIPEST_IMAGE_V2_SIZE(weights, units, blocks) \\",
+        f"    ({t.header_size}u + ((weights) * {per_w_q + per_w_f}u) + (((units) - 3u) * {per_u_q + per_u_f}u) + "
+        f"3u * {4 + 4}u + ((blocks) * {gelu}u) + {tail}u + 4u + \\",
+        f"     {t.trailer_size}u + {HMAC_SIZE}u)",
+    ]
+    return lines
 
 
 C_HEADER = Path(__file__).resolve().parents[1] / "firmware_c" / "include" / "slipest_image_layout.h"

@@ -171,3 +171,19 @@ def test_unknown_format_is_refused_by_its_version() -> None:
     data = (EXAMPLE / "model.img").read_bytes()
     with pytest.raises(ValueError, match="format version 3; this reader knows 1, 2"):
         model_image.read_image(image_layout.patch_header(data, format=3))
+
+
+def test_c_size_formula_of_format2_is_the_layouts() -> None:
+    """SLIPEST_IMAGE_V2_SIZE in the generated C header (it sizes the C reader's largest image from the build's
+    caps) gives the size the Python layout computes, for SN-D and for an irregular shape."""
+    import re
+
+    text = image_layout.c_header()
+    body = re.search(r"#define SLIPEST_IMAGE_V2_SIZE\(weights, units, blocks\) \\\n(.*?\))\n\n", text + "\n", re.S)
+    assert body is not None
+    expr = re.sub(r"(\d)u\b", r"\1", body[1].replace("\\\n", " "))
+    for hidden in [(128, 64, 32), (24, 9), (256, 256, 256, 256)]:
+        widths = (image_layout.N_IN,) + hidden
+        weights = sum(a * b for a, b in zip(widths[1:], widths[:-1])) + image_layout.N_OUT * hidden[-1]
+        size = eval(expr, {}, {"weights": weights, "units": sum(hidden) + 3, "blocks": len(hidden)})  # noqa: S307
+        assert size == image_layout.V2.image_size(hidden), hidden

@@ -196,23 +196,22 @@ class TableLayout:
         counts = {"in*width": n_in * width, "width": width}
         return [Array(a.name, a.dtype, counts.get(a.count, a.count)) for a in arrays]  # type: ignore[arg-type]
 
+    def _payload(self, block: tuple[Array, ...], head: tuple[Array, ...],
+                 widths: tuple[int, ...]) -> list[tuple[int | None, Array]]:
+        out: list[tuple[int | None, Array]] = []
+        n_in = N_IN
+        for i, w in enumerate(widths):
+            out += [(i, a) for a in self._sized(block, n_in, w)]
+            n_in = w
+        return out + [(None, a) for a in self._sized(head, n_in, N_OUT)]
+
     def q_arrays_for(self, widths: tuple[int, ...]) -> list[tuple[int | None, Array]]:
         """(block index or None for the head and tail, array) in payload order for these widths."""
-        out: list[tuple[int | None, Array]] = []
-        n_in = N_IN
-        for i, w in enumerate(widths):
-            out += [(i, a) for a in self._sized(self.block_q, n_in, w)]
-            n_in = w
-        out += [(None, a) for a in self._sized(self.head_q + self.tail_q, n_in, N_OUT)]
-        return out
+        return self._payload(self.block_q, self.head_q + self.tail_q, widths)
 
     def f32_arrays_for(self, widths: tuple[int, ...]) -> list[tuple[int | None, Array]]:
-        out: list[tuple[int | None, Array]] = []
-        n_in = N_IN
-        for i, w in enumerate(widths):
-            out += [(i, a) for a in self._sized(self.block_f32, n_in, w)]
-            n_in = w
-        return out + [(None, a) for a in self._sized(self.head_f32, n_in, N_OUT)]
+        """The same for the float section (after its eps)."""
+        return self._payload(self.block_f32, self.head_f32, widths)
 
     def q_payload_size(self, widths: tuple[int, ...]) -> int:
         return sum(a.size for _, a in self.q_arrays_for(widths))
@@ -225,12 +224,10 @@ class TableLayout:
         return (self.header_size + self.q_payload_size(widths) + (self.f32_payload_size(widths) if f32 else 0)
                 + self.trailer_size + (HMAC_SIZE if tag else 0))
 
-    def per_unit_bytes(self) -> tuple[int, int, int]:
-        """(bytes per weight, per unit, per block) of the q + f32 payload: the C header's size formula."""
-        w = sum(int(a.dtype[2:]) for a in self.block_q + self.block_f32 if a.count == "in*width")
-        u = sum(int(a.dtype[2:]) for a in self.block_q + self.block_f32 if a.count == "width")
-        b = sum(a.size for a in self.block_q + self.block_f32 if isinstance(a.count, int))
-        return w, u, b
+    @staticmethod
+    def bytes_per(arrays: tuple[Array, ...], count: str) -> int:
+        """Bytes that each weight ("in*width") or each unit ("width") adds to these block arrays."""
+        return sum(int(a.dtype[2:]) for a in arrays if a.count == count)
 
 
 V2 = TableLayout(
@@ -455,10 +452,8 @@ def c_header(layout: Layout = CURRENT) -> str:
 def _c_table_lines(t: TableLayout) -> list[str]:
     """The format-2 part of the C header: the header fields that format 1 lacks or places elsewhere, the
     layer-table record and the payload's sizes per weight, per unit and per block (its size formula)."""
-    per_w_q = sum(int(a.dtype[2:]) for a in t.block_q if a.count == "in*width")
-    per_u_q = sum(int(a.dtype[2:]) for a in t.block_q if a.count == "width")
-    per_w_f = sum(int(a.dtype[2:]) for a in t.block_f32 if a.count == "in*width")
-    per_u_f = sum(int(a.dtype[2:]) for a in t.block_f32 if a.count == "width")
+    per_w_q, per_u_q = t.bytes_per(t.block_q, "in*width"), t.bytes_per(t.block_q, "width")
+    per_w_f, per_u_f = t.bytes_per(t.block_f32, "in*width"), t.bytes_per(t.block_f32, "width")
     gelu = sum(a.size for a in t.block_q if isinstance(a.count, int))
     tail = sum(a.size for a in t.tail_q)
     lines = [

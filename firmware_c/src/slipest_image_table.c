@@ -26,29 +26,6 @@ uint16_t slipest_image_format_of(const uint8_t *img, size_t len)
     return (img == NULL || len < SLIPEST_IMAGE_V2_OFF_FORMAT + 2u) ? 0u : le16(img + SLIPEST_IMAGE_V2_OFF_FORMAT);
 }
 
-static void get_i16(const uint8_t *img, size_t *off, int16_t *dst, size_t n)
-{
-    size_t i;
-    for (i = 0; i < n; ++i, *off += 2u) dst[i] = s16(le16(img + *off));
-}
-
-static void get_i32(const uint8_t *img, size_t *off, int32_t *dst, size_t n)
-{
-    size_t i;
-    for (i = 0; i < n; ++i, *off += 4u) dst[i] = s32(slipest_image_le32(img + *off));
-}
-
-#ifndef SLIPEST_Q_ONLY
-static void get_f32(const uint8_t *img, size_t *off, float *dst, size_t n)
-{
-    size_t i;
-    for (i = 0; i < n; ++i, *off += 4u) {
-        uint32_t bits = slipest_image_le32(img + *off);
-        memcpy(&dst[i], &bits, sizeof bits); /* IEEE-754 binary32 from its byte-order-independent pattern */
-    }
-}
-#endif
-
 /* The table's widths (checked against the caps) and the payload size they give; SLIPEST_OK or a status. */
 static slipest_status_t table_sizes(const uint8_t *img, unsigned n_layers, uint16_t *width, size_t *q_bytes,
                                     size_t *f_bytes)
@@ -159,11 +136,11 @@ slipest_status_t slipest_image_read_table(const uint8_t *img, size_t len, uint32
         l->eps_e = s8(img[REC(k, EPS_E)]);
         l->eps_m = s16(le16(img + REC(k, EPS_M)));
         l->c = s32(slipest_image_le32(img + REC(k, C)));
-        get_i16(img, &off, &qs->w[w_at], (size_t)width[k] * n_in);
-        get_i32(img, &off, &qs->b[u_at], width[k]);
-        get_i16(img, &off, &qs->gamma[u_at], width[k]);
-        get_i32(img, &off, &qs->beta[u_at], width[k]);
-        get_i16(img, &off, &qs->gelu[k * SLIPEST_Q_GELU_N], SLIPEST_Q_GELU_N);
+        slipest_image_get_i16(img, &off, &qs->w[w_at], (size_t)width[k] * n_in);
+        slipest_image_get_i32(img, &off, &qs->b[u_at], width[k]);
+        slipest_image_get_i16(img, &off, &qs->gamma[u_at], width[k]);
+        slipest_image_get_i32(img, &off, &qs->beta[u_at], width[k]);
+        slipest_image_get_i16(img, &off, &qs->gelu[k * SLIPEST_Q_GELU_N], SLIPEST_Q_GELU_N);
         l->w = &qs->w[w_at];
         l->b = &qs->b[u_at];
         l->gamma = &qs->gamma[u_at];
@@ -173,8 +150,8 @@ slipest_status_t slipest_image_read_table(const uint8_t *img, size_t len, uint32
         u_at += width[k];
         n_in = width[k];
     }
-    get_i16(img, &off, &qs->w[w_at], (size_t)SLIPEST_N_CLASSES * n_in);
-    get_i32(img, &off, &qs->b[u_at], SLIPEST_N_CLASSES);
+    slipest_image_get_i16(img, &off, &qs->w[w_at], (size_t)SLIPEST_N_CLASSES * n_in);
+    slipest_image_get_i32(img, &off, &qs->b[u_at], SLIPEST_N_CLASSES);
     for (k = 0u; k < SLIPEST_Q_RSQRT_SEED_N; ++k, off += 4u) qs->rsqrt_seed[k] = slipest_image_le32(img + off);
     q.w2 = &qs->w[w_at];
     q.b2 = &qs->b[u_at];
@@ -185,21 +162,19 @@ slipest_status_t slipest_image_read_table(const uint8_t *img, size_t len, uint32
 #ifndef SLIPEST_Q_ONLY
     if (mf != NULL) {
         slipest_model_f32_t f;
-        uint32_t bits = slipest_image_le32(img + off);
         memset(&f, 0, sizeof f);
         memset(fs->layers, 0, sizeof fs->layers);
-        memcpy(&f.ln_eps, &bits, sizeof bits);
-        off += 4u;
+        slipest_image_get_f32(img, &off, &f.ln_eps, 1u);
         w_at = 0u;
         u_at = 0u;
         n_in = SLIPEST_N_FEATURES;
         for (k = 0u; k < q.n_layers; ++k) {
             slipest_layer_f32_t *l = &fs->layers[k];
             l->width = width[k];
-            get_f32(img, &off, &fs->w[w_at], (size_t)width[k] * n_in);
-            get_f32(img, &off, &fs->b[u_at], width[k]);
-            get_f32(img, &off, &fs->gamma[u_at], width[k]);
-            get_f32(img, &off, &fs->beta[u_at], width[k]);
+            slipest_image_get_f32(img, &off, &fs->w[w_at], (size_t)width[k] * n_in);
+            slipest_image_get_f32(img, &off, &fs->b[u_at], width[k]);
+            slipest_image_get_f32(img, &off, &fs->gamma[u_at], width[k]);
+            slipest_image_get_f32(img, &off, &fs->beta[u_at], width[k]);
             l->w = &fs->w[w_at];
             l->b = &fs->b[u_at];
             l->gamma = &fs->gamma[u_at];
@@ -208,8 +183,8 @@ slipest_status_t slipest_image_read_table(const uint8_t *img, size_t len, uint32
             u_at += width[k];
             n_in = width[k];
         }
-        get_f32(img, &off, &fs->w[w_at], (size_t)SLIPEST_N_CLASSES * n_in);
-        get_f32(img, &off, &fs->b[u_at], SLIPEST_N_CLASSES);
+        slipest_image_get_f32(img, &off, &fs->w[w_at], (size_t)SLIPEST_N_CLASSES * n_in);
+        slipest_image_get_f32(img, &off, &fs->b[u_at], SLIPEST_N_CLASSES);
         f.w2 = &fs->w[w_at];
         f.b2 = &fs->b[u_at];
         f.layers = fs->layers;

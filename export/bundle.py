@@ -39,6 +39,15 @@ ROUNDING = {
 }
 
 
+def _image_entry(qp: QParams | QNet, hmac_key: bytes | None) -> dict:
+    """manifest.json `model_image`: format 1 for an SN-S, format 2 (the layer table) for any other."""
+    table = isinstance(qp, QNet)
+    return {"file": model_image.IMAGE_FILE,
+            "format_version": model_image.layout.V2.version if table else model_image.FORMAT_VERSION,
+            "arch_id": model_image.layout.ARCH_TABLE if table else model_image.ARCH_SN_S,
+            "byte_order": "little-endian", "hmac_sha256": hmac_key is not None}
+
+
 @dataclass
 class Bundle:
     path: Path
@@ -115,13 +124,12 @@ def export_bundle(
         names += [p.name for p in headers.write_headers(out, qp, fp, content, c_name, model_version)]
         names.append(model_image.write_image(out, qp, fp, content, model_version, hmac_key).name)
         steps.update()
-    else:  # any other architecture: the layer-table headers; model images (format 1) carry SN-S only
+    else:  # any other architecture: the layer-table headers and a format-2 image (the layer table)
         fp = FloatNet.from_model(model)
         qp = quantize_net(fp)
         content = manifest.content_hash_net(qp, fp)
         names += [p.name for p in headers.write_net_headers(out, qp, fp, content, c_name, model_version)]
-        tqdm.write(f"{arch}: no {model_image.IMAGE_FILE} (model image format {model_image.FORMAT_VERSION} carries "
-                   "SN-S only); the C headers build this model into the library (-DSLIPEST_BUNDLE=)")
+        names.append(model_image.write_image(out, qp, fp, content, model_version, hmac_key).name)
         steps.update()
     if not onnx_only:
         v = vectors.make_vectors(model, qp, inputs)
@@ -166,7 +174,7 @@ def export_bundle(
         m["headers"] = {"fixed_point": headers.Q_HEADER, "float": headers.F32_HEADER,
                         "model_q": f"slipest_{c_name}_q", "model_f32": f"slipest_{c_name}_f32", "layer_table": True}
         m["model_version"] = int(model_version)
-        m["model_image"] = None
+        m["model_image"] = _image_entry(qp, hmac_key)
         m["vectors"] = vec_info
     elif qp is not None:
         m["quantization"] = {
@@ -180,9 +188,7 @@ def export_bundle(
         m["headers"] = {"fixed_point": headers.Q_HEADER, "float": headers.F32_HEADER,
                         "model_q": f"slipest_{c_name}_q", "model_f32": f"slipest_{c_name}_f32"}
         m["model_version"] = int(model_version)
-        m["model_image"] = {"file": model_image.IMAGE_FILE, "format_version": model_image.FORMAT_VERSION,
-                            "arch_id": model_image.ARCH_SN_S, "byte_order": "little-endian",
-                            "hmac_sha256": hmac_key is not None}
+        m["model_image"] = _image_entry(qp, hmac_key)
         m["vectors"] = vec_info
     m["files"] = manifest.file_entries(out, names)
     manifest.write_manifest(out, m)
@@ -292,10 +298,8 @@ def check_bundle(path: Path | str, model: torch.nn.Module | None = None) -> list
     done.append(f"fixed-point vs float class agreement on the vectors: {np.mean(v.q_class == v.f_class):.4%}")
     if model_image.IMAGE_FILE in b.manifest["files"]:
         img = model_image.read_image((b.path / model_image.IMAGE_FILE).read_bytes())
-        same = img.content_hash == b.content_hash and all(
-            np.array_equal(img.qparams_arrays[a], np.asarray(getattr(b.qparams, a))) for a, _, _ in model_image.Q_LAYOUT)
-        if not same:
+        if img.content_hash != b.content_hash or not model_image.same_model(img, b.qparams):
             raise ValueError(f"{b.path / model_image.IMAGE_FILE}: parameters or hash differ from the headers")
-        done.append(f"model.img (format {model_image.FORMAT_VERSION}, model version {img.model_version}) holds "
+        done.append(f"model.img (format {img.format_version}, model version {img.model_version}) holds "
                     "the headers' parameters")
     return done

@@ -6,8 +6,10 @@ faults and every test that edits an image are driven from here.
 
 Format 1 (the SN-S image) is a packed little-endian header of named fields padded with reserved zero bytes,
 a payload of little-endian arrays in a fixed order, a trailer (CRC-32, sha256) and, with flag HMAC, a tag.
-A later format adds a `Layout` to LAYOUTS under its version (for example a header that names a layer
-table); every consumer looks fields up by name, so a new format adds rows, not copies.
+Format 2 (any architecture) has the same frame (magic, format, arch, header size and flags at the same
+offsets, the same trailer and tag) and carries the layer table in its header: one fixed-size record per
+hidden block (width and the block's shifts), so the payload's array sizes follow from the header. Every
+consumer looks fields up by name, so a format adds rows, not copies.
 
 Stdlib only, so that the build tools and the tests can read it without numpy.
 """
@@ -45,6 +47,14 @@ class Array:
         return int(self.dtype[2:]) * self.count
 
 
+def _offsets(fields: tuple[Field, ...]) -> dict[str, int]:
+    out, off = {}, 0
+    for f in fields:
+        out[f.name] = off
+        off += struct.calcsize("<" + f.code)
+    return out
+
+
 @dataclass(frozen=True)
 class Layout:
     """One image format: header fields (packed from byte 0, then reserved zero bytes up to header_size),
@@ -70,11 +80,7 @@ class Layout:
     @property
     def offsets(self) -> dict[str, int]:
         """Byte offset of every header field."""
-        out, off = {}, 0
-        for f in self.header:
-            out[f.name] = off
-            off += struct.calcsize("<" + f.code)
-        return out
+        return _offsets(self.header)
 
     @property
     def reserved_start(self) -> int:
@@ -140,26 +146,196 @@ V1 = Layout(
     trailer=(Field("crc32", "I", "CRC-32 (IEEE 802.3, zlib.crc32) of header + payload"),
              Field("sha256", "32s", "the bundle's sha256 content hash")),
 )
-LAYOUTS = {1: V1}
-CURRENT = V1
+
+# --- format 2: the layer table ------------------------------------------------------------------------------
+
+ARCH_TABLE = 2  # 12 features -> 1..MAX_LAYERS Linear -> LayerNorm -> GELU blocks -> Linear(3), scheme 1
+MAX_LAYERS = 4  # records in the header's layer table (the scheme's cap; a build may accept fewer)
+MAX_WIDTH = 256  # units of one block (the scheme's cap)
+N_IN, N_OUT, GELU_N, RSQRT_SEED_N = 12, 3, 129, 24  # fixed by the flight interface and scheme 1
 
 
-def header_fields(img: bytes, layout: Layout = CURRENT) -> dict[str, object]:
-    """The header fields of an image by name (no check beyond its length)."""
+@dataclass(frozen=True)
+class TableLayout:
+    """Format 2: the frame of format 1 (header fields from byte 0, reserved zeros, trailer, tag) with a
+    table of `max_layers` records of `record_size` bytes at `table_at` in the header (unused records
+    zero). The payload: per block the arrays of `block_q` (counts "in*width", "width" or a number),
+    then `head_q` and `tail_q`; with flag F32 the float eps, per block `block_f32`, then `head_f32`."""
+
+    version: int
+    header_size: int
+    header: tuple[Field, ...]
+    table_at: int
+    record: tuple[Field, ...]
+    record_size: int
+    max_layers: int
+    block_q: tuple[Array, ...]
+    head_q: tuple[Array, ...]
+    tail_q: tuple[Array, ...]
+    f32_scalar: str
+    block_f32: tuple[Array, ...]
+    head_f32: tuple[Array, ...]
+    trailer: tuple[Field, ...]
+
+    header_struct = Layout.header_struct
+    trailer_struct = Layout.trailer_struct
+    offsets = Layout.offsets
+    reserved_start = Layout.reserved_start
+    trailer_size = Layout.trailer_size
+
+    @property
+    def record_struct(self) -> struct.Struct:
+        return struct.Struct("<" + "".join(f.code for f in self.record))
+
+    @property
+    def record_offsets(self) -> dict[str, int]:
+        return _offsets(self.record)
+
+    @staticmethod
+    def _sized(arrays: tuple[Array, ...], n_in: int, width: int) -> list[Array]:
+        counts = {"in*width": n_in * width, "width": width}
+        return [Array(a.name, a.dtype, counts.get(a.count, a.count)) for a in arrays]  # type: ignore[arg-type]
+
+    def _payload(self, block: tuple[Array, ...], head: tuple[Array, ...],
+                 widths: tuple[int, ...]) -> list[tuple[int | None, Array]]:
+        out: list[tuple[int | None, Array]] = []
+        n_in = N_IN
+        for i, w in enumerate(widths):
+            out += [(i, a) for a in self._sized(block, n_in, w)]
+            n_in = w
+        return out + [(None, a) for a in self._sized(head, n_in, N_OUT)]
+
+    def q_arrays_for(self, widths: tuple[int, ...]) -> list[tuple[int | None, Array]]:
+        """(block index or None for the head and tail, array) in payload order for these widths."""
+        return self._payload(self.block_q, self.head_q + self.tail_q, widths)
+
+    def f32_arrays_for(self, widths: tuple[int, ...]) -> list[tuple[int | None, Array]]:
+        """The same for the float section (after its eps)."""
+        return self._payload(self.block_f32, self.head_f32, widths)
+
+    def q_payload_size(self, widths: tuple[int, ...]) -> int:
+        return sum(a.size for _, a in self.q_arrays_for(widths))
+
+    def f32_payload_size(self, widths: tuple[int, ...]) -> int:
+        return 4 + sum(a.size for _, a in self.f32_arrays_for(widths))
+
+    def image_size(self, widths: tuple[int, ...], f32: bool = True, tag: bool = True) -> int:
+        """Bytes of an image of these widths (with the float model and an HMAC tag by default)."""
+        return (self.header_size + self.q_payload_size(widths) + (self.f32_payload_size(widths) if f32 else 0)
+                + self.trailer_size + (HMAC_SIZE if tag else 0))
+
+    @staticmethod
+    def bytes_per(arrays: tuple[Array, ...], count: str) -> int:
+        """Bytes that each weight ("in*width") or each unit ("width") adds to these block arrays."""
+        return sum(int(a.dtype[2:]) for a in arrays if a.count == count)
+
+
+V2 = TableLayout(
+    version=2,
+    header_size=112,
+    header=(
+        Field("magic", "4s", '"SLPM"'),
+        Field("format", "H", "format version"),
+        Field("arch", "H", "architecture id (ARCH_TABLE)"),
+        Field("header_size", "H", "bytes of the header"),
+        Field("flags", "H", "FLAG_* bits"),
+        Field("n_in", "B", "input features"),
+        Field("n_out", "B", "classes"),
+        Field("n_layers", "B", "hidden blocks (records used in the layer table)"),
+        Field("gelu_n", "B", "GELU table entries (per block)"),
+        Field("rsqrt_seed_n", "B", "1/sqrt seed entries"),
+        Field("gelu_step_log2", "B", "log2 of the GELU table step"),
+        Field("eps_cap", "i", "LayerNorm variance cap (int32)"),
+        Field("model_version", "I", "model version (anti-rollback)"),
+        Field("hash32", "I", "first 4 bytes (big-endian) of the content sha256"),
+        Field("payload_size", "I", "bytes between header and trailer"),
+    ),
+    table_at=48,
+    record=(
+        Field("width", "H", "units of the block"),
+        Field("h_bits", "B", "bits kept of the accumulators"),
+        Field("e_bits", "B", "bits kept of the centred values"),
+        Field("fz", "B", "fraction bits of z"),
+        Field("fg", "B", "fraction bits of gamma"),
+        Field("fy", "B", "fraction bits of the block output"),
+        Field("eps_e", "b", "LayerNorm eps exponent (int8)"),
+        Field("eps_m", "h", "LayerNorm eps mantissa (int16)"),
+        Field("c", "i", "normalisation constant (int32)"),
+    ),
+    record_size=16,
+    max_layers=MAX_LAYERS,
+    block_q=(Array("w", "<i2", "in*width"), Array("b", "<i4", "width"), Array("g", "<i2", "width"),  # type: ignore[arg-type]
+             Array("bb", "<i4", "width"), Array("gelu", "<i2", GELU_N)),
+    head_q=(Array("w_out", "<i2", "in*width"), Array("b_out", "<i4", "width")),  # type: ignore[arg-type]
+    tail_q=(Array("rsqrt_seed", "<u4", RSQRT_SEED_N),),
+    f32_scalar="eps",
+    block_f32=(Array("w", "<f4", "in*width"), Array("b", "<f4", "width"), Array("gamma", "<f4", "width"),  # type: ignore[arg-type]
+               Array("beta", "<f4", "width")),
+    head_f32=(Array("w_out", "<f4", "in*width"), Array("b_out", "<f4", "width")),  # type: ignore[arg-type]
+    trailer=V1.trailer,
+)
+assert V2.record_struct.size <= V2.record_size and V2.header_struct.size <= V2.table_at
+assert V2.table_at + V2.max_layers * V2.record_size <= V2.header_size
+assert all(V1.offsets[k] == V2.offsets[k] for k in ("magic", "format", "arch", "header_size", "flags"))
+
+LAYOUTS: dict[int, Layout | TableLayout] = {1: V1, 2: V2}
+CURRENT = V1  # the layout the C reader and the store are generated from (format 2: the C reader is to come)
+
+
+def layout_of(img: bytes) -> Layout | TableLayout:
+    """The layout named by an image's format field (at the same offset in every format)."""
+    if len(img) < V1.offsets["format"] + 2:
+        raise ValueError(f"image of {len(img)} bytes has no format field")
+    (version,) = struct.unpack_from("<H", img, V1.offsets["format"])
+    if version not in LAYOUTS:
+        raise ValueError(f"model image format version {version}; this reader knows {', '.join(map(str, LAYOUTS))}")
+    return LAYOUTS[version]
+
+
+def layer_records(img: bytes, layout: TableLayout = V2) -> list[dict[str, object]]:
+    """The used records of a format-2 image's layer table, by name."""
+    n = int(header_fields(img, layout)["n_layers"])
+    if not 1 <= n <= layout.max_layers:
+        raise ValueError(f"layer table of {n} blocks (1 to {layout.max_layers})")
+    names = [f.name for f in layout.record]
+    return [dict(zip(names, layout.record_struct.unpack_from(img, layout.table_at + i * layout.record_size)))
+            for i in range(n)]
+
+
+AnyLayout = Layout | TableLayout
+
+
+def _frame(img: bytes, layout: AnyLayout | None) -> AnyLayout:
+    """The given layout, else the one the image's format field names (format 1 when it names none we
+    know: the frame fields, magic to flags, are at the same offsets in every format)."""
+    if layout is not None:
+        return layout
+    try:
+        return layout_of(img)
+    except ValueError:
+        return V1
+
+
+def header_fields(img: bytes, layout: AnyLayout | None = None) -> dict[str, object]:
+    """The header fields of an image by name (no check beyond its length); the layout is the image's own
+    unless one is given."""
+    layout = _frame(img, layout)
     if len(img) < layout.header_size:
         raise ValueError(f"image of {len(img)} bytes is shorter than its {layout.header_size}-byte header")
     return dict(zip((f.name for f in layout.header), layout.header_struct.unpack_from(img, 0)))
 
 
-def body_size(img: bytes, layout: Layout = CURRENT) -> int:
+def body_size(img: bytes, layout: AnyLayout | None = None) -> int:
     """Bytes covered by the CRC (header + payload), from the image's length and its HMAC flag."""
+    layout = _frame(img, layout)
     tag = HMAC_SIZE if int(header_fields(img, layout)["flags"]) & FLAG_HMAC else 0
     return len(img) - layout.trailer_size - tag
 
 
-def reseal(img: bytes, key: bytes | None = None, layout: Layout = CURRENT) -> bytes:
+def reseal(img: bytes, key: bytes | None = None, layout: AnyLayout | None = None) -> bytes:
     """The image with its CRC-32 recomputed over its (edited) header + payload, so that a reader's other
     checks are reached; a signed image keeps its old tag unless `key` re-signs it."""
+    layout = _frame(img, layout)
     body = body_size(img, layout)
     out = bytearray(img)
     struct.pack_into("<I", out, body, zlib.crc32(bytes(img[:body])))  # the CRC opens the trailer
@@ -170,9 +346,10 @@ def reseal(img: bytes, key: bytes | None = None, layout: Layout = CURRENT) -> by
     return bytes(out)
 
 
-def patch_header(img: bytes, layout: Layout = CURRENT, seal: bool = True, **fields: object) -> bytes:
+def patch_header(img: bytes, layout: AnyLayout | None = None, seal: bool = True, **fields: object) -> bytes:
     """The image with the named header fields set (`patch_header(img, arch=2)`) and, unless seal is
     False, its CRC resealed."""
+    layout = _frame(img, layout)
     out = bytearray(img)
     offsets = layout.offsets
     codes = {f.name: f.code for f in layout.header}
@@ -260,6 +437,8 @@ def c_header(layout: Layout = CURRENT) -> str:
         "/** Bytes of the float32 payload (flag F32): eps and the arrays. */",
         f"#define SLIPEST_IMAGE_F32_PAYLOAD {layout.f32_payload_size}u",
         "",
+    ] + _c_table_lines(V2) + [
+        "",
         "#ifdef __cplusplus",
         "}",
         "#endif",
@@ -268,6 +447,53 @@ def c_header(layout: Layout = CURRENT) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def _c_table_lines(t: TableLayout) -> list[str]:
+    """The format-2 part of the C header: the header fields that format 1 lacks or places elsewhere, the
+    layer-table record and the payload's sizes per weight, per unit and per block (its size formula)."""
+    per_w_q, per_u_q = t.bytes_per(t.block_q, "in*width"), t.bytes_per(t.block_q, "width")
+    per_w_f, per_u_f = t.bytes_per(t.block_f32, "in*width"), t.bytes_per(t.block_f32, "width")
+    gelu = sum(a.size for a in t.block_q if isinstance(a.count, int))
+    tail = sum(a.size for a in t.tail_q)
+    lines = [
+        f"/* format {t.version}: any architecture, the layer table in the header (same frame as format 1:",
+        " * magic, format, arch, header size and flags at the offsets above, the same trailer and tag) */",
+        f"#define SLIPEST_IMAGE_V2_FORMAT {t.version}u",
+        "/** Architecture id of a layer-table model (1..4 Linear -> LayerNorm -> GELU blocks, scheme 1). */",
+        f"#define SLIPEST_IMAGE_ARCH_TABLE {ARCH_TABLE}u",
+        f"#define SLIPEST_IMAGE_V2_HEADER_SIZE {t.header_size}u",
+    ]
+    lines += [f"#define SLIPEST_IMAGE_V2_OFF_{f.name.upper()} {t.offsets[f.name]}u /**< {f.code}: {f.doc} */"
+              for f in t.header]
+    lines += [
+        "/** First reserved (zero) byte before the layer table. */",
+        f"#define SLIPEST_IMAGE_V2_OFF_RESERVED {t.reserved_start}u",
+        f"#define SLIPEST_IMAGE_V2_TABLE_AT {t.table_at}u /**< the layer table: one record per block */",
+        f"#define SLIPEST_IMAGE_V2_RECORD_SIZE {t.record_size}u /**< bytes per record (zero padded) */",
+        f"#define SLIPEST_IMAGE_V2_RECORDS {t.max_layers}u /**< records in the table (unused ones zero) */",
+    ]
+    lines += [f"#define SLIPEST_IMAGE_V2_REC_{f.name.upper()} {t.record_offsets[f.name]}u /**< {f.code}: {f.doc} */"
+              for f in t.record]
+    lines += [
+        f"#define SLIPEST_IMAGE_V2_REC_END {t.record_struct.size}u /**< first padding byte of a record */",
+        "/* payload: per block w [width * n_in], b, gamma, beta [width], gelu [129]; the head w [3 * width],",
+        " * b [3]; the 1/sqrt seeds [24]; with flag F32: eps, per block w, b, gamma, beta, the head w, b */",
+        f"#define SLIPEST_IMAGE_V2_Q_PER_WEIGHT {per_w_q}u /**< fixed-point bytes per weight */",
+        f"#define SLIPEST_IMAGE_V2_Q_PER_UNIT {per_u_q}u /**< fixed-point bytes per unit (b, gamma, beta) */",
+        f"#define SLIPEST_IMAGE_V2_Q_PER_BLOCK {gelu}u /**< fixed-point bytes per block (the GELU table) */",
+        f"#define SLIPEST_IMAGE_V2_Q_TAIL {tail}u /**< the 1/sqrt seeds after the head */",
+        f"#define SLIPEST_IMAGE_V2_F32_PER_WEIGHT {per_w_f}u /**< float bytes per weight */",
+        f"#define SLIPEST_IMAGE_V2_F32_PER_UNIT {per_u_f}u /**< float bytes per unit (b, gamma, beta) */",
+        "/** Bytes of a format-2 image with `weights` weights (every block and the head), `units` biases (every",
+        " *  block's units and the 3 classes; gamma and beta of the head's 3 do not exist, hence - 3), `blocks`",
+        " *  blocks, the float model and an HMAC tag: the largest image a build's caps admit. */",
+        "#define SLIPEST_IMAGE_V2_SIZE(weights, units, blocks) \\",
+        f"    ({t.header_size}u + ((weights) * {per_w_q + per_w_f}u) + (((units) - 3u) * {per_u_q + per_u_f}u) + "
+        f"3u * {4 + 4}u + ((blocks) * {gelu}u) + {tail}u + 4u + \\",
+        f"     {t.trailer_size}u + {HMAC_SIZE}u)",
+    ]
+    return lines
 
 
 C_HEADER = Path(__file__).resolve().parents[1] / "firmware_c" / "include" / "slipest_image_layout.h"

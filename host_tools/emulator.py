@@ -20,14 +20,21 @@ import threading
 import time
 from pathlib import Path
 
-from fleetlab.system_tools import need
+from fleetlab.export import image_layout
 from fleetlab.paths import build_root, default_bundle
+from fleetlab.system_tools import need
 from .wire.dbc import DBC_PATH, dbc_path
 from .firmware.build import build_command, configure_command
 
 EMULATOR_TARGET = "slipest_emu"
 HOST_LIBRARY_TARGET = "slipest_host"
 PTY_RE = re.compile(rb"(/dev/pts/\d+|/dev/tty\w+)")
+
+
+def _is_table_image(data: bytes) -> bool:
+    """Whether a model image is format 2 (a layer table): its format field sits at the same offset in every format."""
+    at = image_layout.V1.offsets["format"]
+    return len(data) >= at + 2 and int.from_bytes(data[at:at + 2], "little") == image_layout.V2.version
 
 
 def build_dir_for(bundle: Path, dbc: Path | None = None) -> Path:
@@ -121,10 +128,12 @@ class EmulatorProcess:
     @classmethod
     def for_bundle(cls, bundle: Path | str | None, link: str) -> "EmulatorProcess":
         img = Path(bundle or default_bundle()) / "model.img"
-        if img.is_file():
-            # one emulator build serves every bundle: it reads the bundle's model image at run time
+        if img.is_file() and not _is_table_image(img.read_bytes()):
+            # one emulator build serves every SN-S bundle: it reads the bundle's model image at run time
             return cls(find_artifact(build(None), EMULATOR_TARGET), link, model=img)
-        bdir = build(bundle)  # a bundle without model.img (exported before it existed): built in
+        # a layer-table bundle (format-2 image: the default build has no layer-table kernels) or one without
+        # model.img (exported before it existed): built in
+        bdir = build(bundle)
         return cls(find_artifact(bdir, EMULATOR_TARGET), link)
 
     def start(self) -> str:

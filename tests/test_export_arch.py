@@ -41,9 +41,9 @@ def arch_bundle(request, tmp_path_factory):
 def test_bundle_is_complete_and_reads_back(arch_bundle):
     arch, out = arch_bundle
     m = json.loads((out / "manifest.json").read_text())
-    assert m["arch"] == arch and m["headers"]["layer_table"] and m["model_image"] is None
-    assert not (out / "model.img").exists()  # image format 1 carries SN-S only (issue 28 item 4)
-    for name in ("model.onnx", "slipest_model_q.h", "slipest_model_f32.h", "vectors.npz", "vectors.bin"):
+    assert m["arch"] == arch and m["headers"]["layer_table"]
+    assert m["model_image"]["format_version"] == 2 and m["model_image"]["arch_id"] == 2  # the layer table
+    for name in ("model.onnx", "slipest_model_q.h", "slipest_model_f32.h", "model.img", "vectors.npz", "vectors.bin"):
         assert name in m["files"]
     b = load_bundle(out)
     assert isinstance(b.qparams, QNet) and ",".join(map(str, b.qparams.hidden)) in (arch, "128,64,32")
@@ -172,6 +172,32 @@ def test_emulator_serves_an_sn_d_bundle_bit_exact_over_slcan(snd_bundle):
     s = emulate(snd_bundle, sim, "slcan", progress=False).summary()
     assert s["windows"] == sim.n_windows and s["bit_exact"] == s["windows"], s["first_problems"]
     assert s["mismatches"] == 0 and s["unexplained_windows"] == 0
+
+
+def test_emulator_reads_an_sn_d_model_image_bit_exact(snd_bundle, tmp_path):
+    """The C format-2 reader (slipest_image_table.c): the emulator loads the SN-D model.img at run time and
+    is bit-exact on every vector (fixed point) and within 1e-5 (float); a flipped byte and a layer table that
+    disagrees with the payload are refused with their statuses."""
+    from fleetlab.export import image_layout
+    from fleetlab.host_tools.emulator import EMULATOR_TARGET, build, find_artifact
+
+    emu = find_artifact(build(snd_bundle), EMULATOR_TARGET)
+    img = (snd_bundle / "model.img").read_bytes()
+    res = subprocess.run([str(emu), "--model", str(snd_bundle / "model.img"), "--vectors",
+                          str(snd_bundle / "vectors.bin")], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0 and re.search(r"vectors=(\d+) q_exact=\1 f32_within_1e-5=\1 .*PASS", res.stdout), \
+        res.stdout + res.stderr
+    V2 = image_layout.V2
+    width_at = V2.table_at + V2.record_offsets["width"]
+    flipped = img[:500] + bytes([img[500] ^ 1]) + img[501:]
+    wider = bytearray(img)
+    wider[width_at] += 1
+    for name, data, status in (("crc", flipped, "CRC mismatch"),
+                               ("table", image_layout.reseal(bytes(wider)), "wrong length")):
+        (tmp_path / f"{name}.img").write_bytes(data)
+        res = subprocess.run([str(emu), "--model", str(tmp_path / f"{name}.img"), "--vectors",
+                              str(snd_bundle / "vectors.bin")], capture_output=True, text=True, timeout=300)
+        assert res.returncode == 2 and f"model image rejected: {status}" in res.stderr, (name, res.stderr)
 
 
 def _runnable_targets() -> list[str]:

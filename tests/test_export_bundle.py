@@ -201,15 +201,15 @@ def test_edited_vectors_fail_the_check(exported, tmp_path) -> None:
 
 
 def test_sn_d_exports_the_whole_bundle_from_the_cli(tmp_path) -> None:
-    """Issue 28: an SN-D goes to the C path too (layer-table headers, vectors, manifest); model.img is
-    skipped with a message that says why; --onnx-only still writes ONNX alone."""
+    """Issue 28: an SN-D goes to the C path too (layer-table headers, a format-2 model.img, vectors,
+    manifest), and the check reads the image back; --onnx-only still writes ONNX alone."""
     p = save_model(tmp_path / "d.pt", build("sn-d", seed=0))
     res = fleetlab("export", str(p), "--out", str(tmp_path / "bd"), "--builtin-vectors", "--check")
     assert res.returncode == 0, res.stderr
-    assert "no model.img" in res.stderr + res.stdout and "bit for bit" in res.stdout
-    for name in ("model.onnx", "slipest_model_q.h", "slipest_model_f32.h", "vectors.bin", "manifest.json"):
+    assert "bit for bit" in res.stdout and "model.img (format 2" in res.stdout
+    for name in ("model.onnx", "slipest_model_q.h", "slipest_model_f32.h", "model.img", "vectors.bin",
+                 "manifest.json"):
         assert (tmp_path / "bd" / name).is_file(), name
-    assert not (tmp_path / "bd" / "model.img").exists()
     res = fleetlab("export", str(p), "--out", str(tmp_path / "bo"), "--onnx-only", "--check")
     assert res.returncode == 0, res.stderr
     assert (tmp_path / "bo" / "model.onnx").is_file() and not (tmp_path / "bo" / "slipest_model_q.h").exists()

@@ -100,3 +100,90 @@ def test_patch_header_names_fields_and_reseals() -> None:
     assert image_layout.patch_header(patched, model_version=1) == data
     with pytest.raises(ValueError, match="no header field 'archh'"):
         image_layout.patch_header(data, archh=2)
+
+
+# --- format 2: the layer table (issue 28 item 4) ---------------------------------------------------------------
+
+def _net(hidden: tuple[int, ...], seed: int = 0):
+    import torch
+
+    from fleetlab.export import manifest
+    from fleetlab.export.quant import FloatNet, quantize_net
+    from fleetlab.models.mlp import SlipNet
+
+    torch.manual_seed(seed)
+    fn = FloatNet.from_model(SlipNet(hidden).eval())
+    qn = quantize_net(fn)
+    return qn, fn, manifest.content_hash_net(qn, fn)
+
+
+@pytest.mark.parametrize("hidden", [(128, 64, 32), (24, 9), (2, 256, 3, 5)])
+def test_format2_roundtrips_any_architecture(hidden) -> None:
+    """A format-2 image carries the layer table: every block's arrays and shifts, the head and the float
+    model read back unchanged, and its size is the one the layout computes for these widths."""
+    qn, fn, h = _net(hidden)
+    data = model_image.image_bytes(qn, fn, h, model_version=4)
+    f = image_layout.header_fields(data)
+    assert (f["format"], f["arch"], f["n_layers"]) == (2, image_layout.ARCH_TABLE, len(hidden))
+    assert [r["width"] for r in image_layout.layer_records(data)] == list(hidden)
+    assert len(data) == image_layout.V2.image_size(hidden, tag=False)
+    img = model_image.read_image(data)
+    assert img.format_version == 2 and img.model_version == 4 and img.content_hash == h
+    assert model_image.same_model(img, qn) and img.fparams.hidden == hidden
+    for a, b in zip(img.fparams.blocks, fn.blocks):
+        assert all(np.array_equal(getattr(a, k), getattr(b, k)) for k in ("w", "b", "gamma", "beta"))
+    assert np.array_equal(img.fparams.w_out, fn.w_out) and img.fparams.eps == np.float32(fn.eps)
+    # explicit little-endian: block 1's w[0][0] right after the header, low byte first
+    assert struct.unpack_from("<h", data, image_layout.V2.header_size)[0] == int(qn.blocks[0].w[0, 0])
+    q_only = model_image.image_bytes(qn, None, h)
+    assert len(q_only) == image_layout.V2.image_size(hidden, f32=False, tag=False)
+    assert model_image.read_image(q_only).fparams is None
+
+
+def test_format2_signed_and_refusals() -> None:
+    """The frame's checks hold for format 2 (HMAC, CRC, lengths), and the table is checked: a width that
+    does not match the payload, a shift that is not the scheme's, a nonzero unused record."""
+    qn, fn, h = _net((24, 9))
+    data = model_image.image_bytes(qn, fn, h)
+    signed = model_image.image_bytes(qn, fn, h, hmac_key=KEY)
+    assert model_image.read_image(signed, hmac_key=KEY).content_hash == h
+    with pytest.raises(ValueError, match="does not verify"):
+        model_image.read_image(signed, hmac_key=bytes(32))
+    with pytest.raises(ValueError, match="CRC"):
+        model_image.read_image(data[:200] + bytes([data[200] ^ 1]) + data[201:])
+    with pytest.raises(ValueError, match="disagree"):
+        model_image.read_image(data[:-1])
+    V2 = image_layout.V2
+    rec = V2.table_at + V2.record_offsets["width"]
+    fz = V2.table_at + V2.record_offsets["fz"]
+    for at, value, match in ((rec, 25, "disagree"), (fz, data[fz] + 1, "not the scheme's"),
+                             (V2.table_at + 3 * V2.record_size, 1, "reserved")):
+        edited = bytearray(data)
+        edited[at] = value
+        with pytest.raises(ValueError, match=match):
+            model_image.read_image(image_layout.reseal(bytes(edited)))
+    with pytest.raises(ValueError, match="layer table of 5"):
+        model_image.read_image(image_layout.patch_header(data, n_layers=5))
+
+
+def test_unknown_format_is_refused_by_its_version() -> None:
+    """A format this reader does not know is refused with an error that names the version."""
+    data = (EXAMPLE / "model.img").read_bytes()
+    with pytest.raises(ValueError, match="format version 3; this reader knows 1, 2"):
+        model_image.read_image(image_layout.patch_header(data, format=3))
+
+
+def test_c_size_formula_of_format2_is_the_layouts() -> None:
+    """SLIPEST_IMAGE_V2_SIZE in the generated C header (it sizes the C reader's largest image from the build's
+    caps) gives the size the Python layout computes, for SN-D and for an irregular shape."""
+    import re
+
+    text = image_layout.c_header()
+    body = re.search(r"#define SLIPEST_IMAGE_V2_SIZE\(weights, units, blocks\) \\\n(.*?\))\n\n", text + "\n", re.S)
+    assert body is not None
+    expr = re.sub(r"(\d)u\b", r"\1", body[1].replace("\\\n", " "))
+    for hidden in [(128, 64, 32), (24, 9), (256, 256, 256, 256)]:
+        widths = (image_layout.N_IN,) + hidden
+        weights = sum(a * b for a, b in zip(widths[1:], widths[:-1])) + image_layout.N_OUT * hidden[-1]
+        size = eval(expr, {}, {"weights": weights, "units": sum(hidden) + 3, "blocks": len(hidden)})  # noqa: S307
+        assert size == image_layout.V2.image_size(hidden), hidden

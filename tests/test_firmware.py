@@ -567,7 +567,7 @@ def test_c_reader_rejects_bad_images(builds, tmp_path, case, status) -> None:
     img = (BUNDLE / "model.img").read_bytes()
     hdr = header_fields(img)
     # header edits are resealed with a valid CRC by patch_header: the check under test must catch them
-    edits = {"magic": {"magic": b"SLPX"}, "format version": {"format": 2}, "architecture": {"arch": 2},
+    edits = {"magic": {"magic": b"SLPX"}, "format version": {"format": 3}, "architecture": {"arch": 2},
              "hidden width": {"n_hidden": 29}, "shift out of range": {"fy": 40},
              "hash32": {"hash32": int(hdr["hash32"]) ^ 0xFF}, "length field": {"payload_size": 0xFFFFFFF0}}
     if case == "truncated":

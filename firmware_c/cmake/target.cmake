@@ -158,7 +158,8 @@ slipest_qemu_test(vectors_q_${SLIPEST_CPU} slipest_test_q)
 
 # --- the model store: an image uploaded through a RAM NVM, activated, every vector bit-exact (not on the
 # 16 KB-RAM parts that link their vectors into flash: the RAM NVM alone takes 8 KB) ---
-if(NOT SLIPEST_TARGET_VECTORS STREQUAL "embed" AND EXISTS "${SLIPEST_BUNDLE}/model.img")
+# the model store and the CANopen node take format-1 images (SN-S): a layer-table bundle's format 2 is not streamed yet
+if(NOT SLIPEST_TARGET_VECTORS STREQUAL "embed" AND EXISTS "${SLIPEST_BUNDLE}/model.img" AND NOT _slipest_table)
   slipest_image(slipest_store_target slipest_q ${TGT}/store_target.c)
   target_compile_definitions(slipest_store_target PRIVATE SLIPEST_STORE_IMAGE_PATH="${SLIPEST_BUNDLE}/model.img")
   set_source_files_properties(${TGT}/store_target.c PROPERTIES OBJECT_DEPENDS "${SLIPEST_BUNDLE}/model.img")
@@ -179,7 +180,7 @@ endif()
 # --- the CANopen node with two model slots (slipest_co.h + slipest_store.h): the bundle's model.img
 # arrives by SDO block download, is validated and activated, then one window of RPDOs gives its
 # TPDOs; bench c reads the node's RAM and flash from this image ---
-if(EXISTS "${SLIPEST_BUNDLE}/model.img")
+if(EXISTS "${SLIPEST_BUNDLE}/model.img" AND NOT _slipest_table)
   file(READ "${SLIPEST_BUNDLE}/model.img" co_img HEX)
   string(REGEX REPLACE "([0-9a-f][0-9a-f])" "0x\\1u," co_img "${co_img}")
   file(WRITE "${CMAKE_CURRENT_BINARY_DIR}/co_image.c"

@@ -35,6 +35,9 @@
 #include "slipest_bundle.h"
 #include "slipest_codec.h"
 #include "slipest_image.h"
+#if SLIPEST_LAYER_TABLE
+#include "slipest_image_table.h"
+#endif
 #include "slipest_infer.h"
 #include "slipest_node.h"
 #include "slipest_store.h"
@@ -88,7 +91,15 @@ static int read_image_file(const char *path, uint8_t *buf, size_t cap, size_t *n
  * node would read a received image from its buffer). Returns 0, or 2 with a message. */
 static int load_model_image(const char *path)
 {
-    static uint8_t buf[SLIPEST_IMAGE_MAX_SIZE + 1u]; /* one byte more: a longer file is refused */
+    /* one byte more than the largest image this build reads: a longer file is refused */
+#if SLIPEST_LAYER_TABLE
+    static uint8_t buf[(SLIPEST_IMAGE_TABLE_MAX_SIZE > SLIPEST_IMAGE_MAX_SIZE ? SLIPEST_IMAGE_TABLE_MAX_SIZE
+                                                                              : SLIPEST_IMAGE_MAX_SIZE) + 1u];
+    static slipest_image_table_q_t tqs; /* format 2: the layer table */
+    static slipest_image_table_f32_t tfs;
+#else
+    static uint8_t buf[SLIPEST_IMAGE_MAX_SIZE + 1u]; /* format 1 only: format 2 is refused by its version */
+#endif
     static slipest_image_q_storage_t qs;
     static slipest_image_f32_storage_t fs;
     static slipest_model_q_t mq;
@@ -98,7 +109,14 @@ static int load_model_image(const char *path)
     if (read_image_file(path, buf, sizeof buf, &n) != 0) {
         return 2;
     }
-    st = slipest_image_read(buf, n, 0u, &mq, &qs, &mf, &fs);
+#if SLIPEST_LAYER_TABLE
+    if (slipest_image_format_of(buf, n) == SLIPEST_IMAGE_V2_FORMAT) {
+        st = slipest_image_read_table(buf, n, 0u, &mq, &tqs, &mf, &tfs);
+    } else
+#endif
+    {
+        st = slipest_image_read(buf, n, 0u, &mq, &qs, &mf, &fs);
+    }
     if (st != SLIPEST_OK) {
         fprintf(stderr, "slipest_emu: %s: model image rejected: %s (%d)\n", path, slipest_status_str(st), st);
         return 2;

@@ -111,6 +111,57 @@ extern "C" {
 /** Bytes of the float32 payload (flag F32): eps and the arrays. */
 #define SLIPEST_IMAGE_F32_PAYLOAD 2176u
 
+/* format 2: any architecture, the layer table in the header (same frame as format 1:
+ * magic, format, arch, header size and flags at the offsets above, the same trailer and tag) */
+#define SLIPEST_IMAGE_V2_FORMAT 2u
+/** Architecture id of a layer-table model (1..4 Linear -> LayerNorm -> GELU blocks, scheme 1). */
+#define SLIPEST_IMAGE_ARCH_TABLE 2u
+#define SLIPEST_IMAGE_V2_HEADER_SIZE 112u
+#define SLIPEST_IMAGE_V2_OFF_MAGIC 0u /**< 4s: "SLPM" */
+#define SLIPEST_IMAGE_V2_OFF_FORMAT 4u /**< H: format version */
+#define SLIPEST_IMAGE_V2_OFF_ARCH 6u /**< H: architecture id (ARCH_TABLE) */
+#define SLIPEST_IMAGE_V2_OFF_HEADER_SIZE 8u /**< H: bytes of the header */
+#define SLIPEST_IMAGE_V2_OFF_FLAGS 10u /**< H: FLAG_* bits */
+#define SLIPEST_IMAGE_V2_OFF_N_IN 12u /**< B: input features */
+#define SLIPEST_IMAGE_V2_OFF_N_OUT 13u /**< B: classes */
+#define SLIPEST_IMAGE_V2_OFF_N_LAYERS 14u /**< B: hidden blocks (records used in the layer table) */
+#define SLIPEST_IMAGE_V2_OFF_GELU_N 15u /**< B: GELU table entries (per block) */
+#define SLIPEST_IMAGE_V2_OFF_RSQRT_SEED_N 16u /**< B: 1/sqrt seed entries */
+#define SLIPEST_IMAGE_V2_OFF_GELU_STEP_LOG2 17u /**< B: log2 of the GELU table step */
+#define SLIPEST_IMAGE_V2_OFF_EPS_CAP 18u /**< i: LayerNorm variance cap (int32) */
+#define SLIPEST_IMAGE_V2_OFF_MODEL_VERSION 22u /**< I: model version (anti-rollback) */
+#define SLIPEST_IMAGE_V2_OFF_HASH32 26u /**< I: first 4 bytes (big-endian) of the content sha256 */
+#define SLIPEST_IMAGE_V2_OFF_PAYLOAD_SIZE 30u /**< I: bytes between header and trailer */
+/** First reserved (zero) byte before the layer table. */
+#define SLIPEST_IMAGE_V2_OFF_RESERVED 34u
+#define SLIPEST_IMAGE_V2_TABLE_AT 48u /**< the layer table: one record per block */
+#define SLIPEST_IMAGE_V2_RECORD_SIZE 16u /**< bytes per record (zero padded) */
+#define SLIPEST_IMAGE_V2_RECORDS 4u /**< records in the table (unused ones zero) */
+#define SLIPEST_IMAGE_V2_REC_WIDTH 0u /**< H: units of the block */
+#define SLIPEST_IMAGE_V2_REC_H_BITS 2u /**< B: bits kept of the accumulators */
+#define SLIPEST_IMAGE_V2_REC_E_BITS 3u /**< B: bits kept of the centred values */
+#define SLIPEST_IMAGE_V2_REC_FZ 4u /**< B: fraction bits of z */
+#define SLIPEST_IMAGE_V2_REC_FG 5u /**< B: fraction bits of gamma */
+#define SLIPEST_IMAGE_V2_REC_FY 6u /**< B: fraction bits of the block output */
+#define SLIPEST_IMAGE_V2_REC_EPS_E 7u /**< b: LayerNorm eps exponent (int8) */
+#define SLIPEST_IMAGE_V2_REC_EPS_M 8u /**< h: LayerNorm eps mantissa (int16) */
+#define SLIPEST_IMAGE_V2_REC_C 10u /**< i: normalisation constant (int32) */
+#define SLIPEST_IMAGE_V2_REC_END 14u /**< first padding byte of a record */
+/* payload: per block w [width * n_in], b, gamma, beta [width], gelu [129]; the head w [3 * width],
+ * b [3]; the 1/sqrt seeds [24]; with flag F32: eps, per block w, b, gamma, beta, the head w, b */
+#define SLIPEST_IMAGE_V2_Q_PER_WEIGHT 2u /**< fixed-point bytes per weight */
+#define SLIPEST_IMAGE_V2_Q_PER_UNIT 10u /**< fixed-point bytes per unit (b, gamma, beta) */
+#define SLIPEST_IMAGE_V2_Q_PER_BLOCK 258u /**< fixed-point bytes per block (the GELU table) */
+#define SLIPEST_IMAGE_V2_Q_TAIL 96u /**< the 1/sqrt seeds after the head */
+#define SLIPEST_IMAGE_V2_F32_PER_WEIGHT 4u /**< float bytes per weight */
+#define SLIPEST_IMAGE_V2_F32_PER_UNIT 12u /**< float bytes per unit (b, gamma, beta) */
+/** Bytes of a format-2 image with `weights` weights (every block and the head), `units` biases (every
+ *  block's units and the 3 classes; gamma and beta of the head's 3 do not exist, hence - 3), `blocks`
+ *  blocks, the float model and an HMAC tag: the largest image a build's caps admit. */
+#define SLIPEST_IMAGE_V2_SIZE(weights, units, blocks) \
+    (112u + ((weights) * 6u) + (((units) - 3u) * 22u) + 3u * 8u + ((blocks) * 258u) + 96u + 4u + \
+     36u + 32u)
+
 #ifdef __cplusplus
 }
 #endif

@@ -236,3 +236,12 @@ slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t exp
     *mq = q;
     return SLIPEST_OK;
 }
+
+#if SLIPEST_LAYER_TABLE
+/* The element readers for the format-2 reader (slipest_image_table.c), one copy for both formats. */
+void slipest_image_get_i16(const uint8_t *img, size_t *off, int16_t *dst, size_t n) { get_i16(img, off, dst, n); }
+void slipest_image_get_i32(const uint8_t *img, size_t *off, int32_t *dst, size_t n) { get_i32(img, off, dst, n); }
+#ifndef SLIPEST_Q_ONLY
+void slipest_image_get_f32(const uint8_t *img, size_t *off, float *dst, size_t n) { get_f32(img, off, dst, n); }
+#endif
+#endif /* SLIPEST_LAYER_TABLE */

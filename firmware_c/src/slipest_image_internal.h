@@ -30,4 +30,14 @@ slipest_status_t slipest_image_check_hash32(const uint8_t *hdr, const uint8_t *t
  * slipest_crc32_update(0xFFFFFFFF, ...) ^ 0xFFFFFFFF), for streaming. */
 uint32_t slipest_crc32_update(uint32_t crc, const uint8_t *data, size_t len);
 
+/* n consecutive little-endian elements of img from *off (advanced past them) into dst; the caller has
+ * checked that they lie inside the image. */
+#if SLIPEST_LAYER_TABLE /* slipest_image_table.c, compiled with the layer-table kernels */
+void slipest_image_get_i16(const uint8_t *img, size_t *off, int16_t *dst, size_t n);
+void slipest_image_get_i32(const uint8_t *img, size_t *off, int32_t *dst, size_t n);
+#ifndef SLIPEST_Q_ONLY
+void slipest_image_get_f32(const uint8_t *img, size_t *off, float *dst, size_t n);
+#endif
+#endif
+
 #endif /* SLIPEST_IMAGE_INTERNAL_H */

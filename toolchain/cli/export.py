@@ -13,10 +13,10 @@ DEFAULT_VECTORS = 1200
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = (
         "Export a fleetlab model (.pt from training or fusion) into a bundle directory: model.onnx, "
-        "slipest_model_f32.h, slipest_model_q.h (fixed point), model.img (SN-S: the run-time model image), "
+        "slipest_model_f32.h, slipest_model_q.h (fixed point), model.img (the run-time model image), "
         "vectors.npz/.bin (inputs, torch float and integer-reference logits) and manifest.json (scheme parameters, "
         "versions, hashes). Any architecture (sn-s, sn-d, hidden sizes such as 64,32) exports; other than SN-S its "
-        "headers carry a layer table, and model.img is not written yet (image format 1 carries SN-S only). "
+        "headers carry a layer table and model.img is image format 2 (the layer table; SN-S keeps format 1). "
         "With --data, also writes accuracy.md/json: fixed-point vs float agreement on those windows."
     )
     p.add_argument("model", nargs="?", type=Path, help="model file written by fleetlab (save_model)")

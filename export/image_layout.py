@@ -459,10 +459,10 @@ def _c_table_lines(t: TableLayout) -> list[str]:
     lines = [
         f"/* format {t.version}: any architecture, the layer table in the header (same frame as format 1:",
         " * magic, format, arch, header size and flags at the offsets above, the same trailer and tag) */",
-        f"#define SLIPEST_IMAGE_V2_FORMAT {t.version}u",
+        f"#define SLIPEST_IMAGE_V2_FORMAT {t.version}u /**< format version of a layer-table image */",
         "/** Architecture id of a layer-table model (1..4 Linear -> LayerNorm -> GELU blocks, scheme 1). */",
         f"#define SLIPEST_IMAGE_ARCH_TABLE {ARCH_TABLE}u",
-        f"#define SLIPEST_IMAGE_V2_HEADER_SIZE {t.header_size}u",
+        f"#define SLIPEST_IMAGE_V2_HEADER_SIZE {t.header_size}u /**< bytes of a format-2 header, layer table included */",
     ]
     lines += [f"#define SLIPEST_IMAGE_V2_OFF_{f.name.upper()} {t.offsets[f.name]}u /**< {f.code}: {f.doc} */"
               for f in t.header]

@@ -113,10 +113,10 @@ extern "C" {
 
 /* format 2: any architecture, the layer table in the header (same frame as format 1:
  * magic, format, arch, header size and flags at the offsets above, the same trailer and tag) */
-#define SLIPEST_IMAGE_V2_FORMAT 2u
+#define SLIPEST_IMAGE_V2_FORMAT 2u /**< format version of a layer-table image */
 /** Architecture id of a layer-table model (1..4 Linear -> LayerNorm -> GELU blocks, scheme 1). */
 #define SLIPEST_IMAGE_ARCH_TABLE 2u
-#define SLIPEST_IMAGE_V2_HEADER_SIZE 112u
+#define SLIPEST_IMAGE_V2_HEADER_SIZE 112u /**< bytes of a format-2 header, layer table included */
 #define SLIPEST_IMAGE_V2_OFF_MAGIC 0u /**< 4s: "SLPM" */
 #define SLIPEST_IMAGE_V2_OFF_FORMAT 4u /**< H: format version */
 #define SLIPEST_IMAGE_V2_OFF_ARCH 6u /**< H: architecture id (ARCH_TABLE) */

@@ -30,6 +30,7 @@ extern "C" {
 #define SLIPEST_IMAGE_MAX_WEIGHTS 12288u
 #endif
 #ifndef SLIPEST_IMAGE_MAX_UNITS
+/** Build cap on the hidden units of all blocks of a format-2 image together (see SLIPEST_IMAGE_MAX_WEIGHTS). */
 #define SLIPEST_IMAGE_MAX_UNITS 256u
 #endif
 /** Largest format-2 image the caps admit (with the float model and an HMAC tag). */
@@ -77,6 +78,9 @@ slipest_status_t slipest_image_read_table(const uint8_t *img, size_t len, uint32
 /**
  * @brief The format version of an image (its bytes 4..5, little-endian, in every format), or 0 when
  *        len is too short to hold it: a caller that reads both formats picks its reader with it.
+ * @param img the image's first bytes (NULL gives 0)
+ * @param len bytes readable at img
+ * @return the format version, or 0 when img is NULL or len < 6
  */
 uint16_t slipest_image_format_of(const uint8_t *img, size_t len);
 

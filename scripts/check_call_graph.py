@@ -12,16 +12,19 @@ from __future__ import annotations
 
 import sys
 
-from fleetlab.assurance.sources import FW
+from fleetlab.assurance.sources import fw
 from fleetlab.assurance.stack import StackGraph, compile_graph
 
-CO_FILES = {p.name for p in (FW / "src").glob("slipest_co*.c")
-            if p.stem == "slipest_co" or p.stem.startswith("slipest_co_")}  # not slipest_cobs.c
+
+
+def co_files() -> set[str]:
+    """The CANopen sources: slipest_co.c and slipest_co_*.c (not slipest_cobs.c)."""
+    return {p.name for p in (fw() / "src").glob("slipest_co*.c") if p.stem == "slipest_co" or p.stem.startswith("slipest_co_")}
 
 
 def co_file_cycles(graph: StackGraph) -> tuple[dict[str, set[str]], list[list[str]]]:
     """(file -> files it calls, cycles) among the slipest_co*.c files."""
-    edges = graph.file_edges(CO_FILES)
+    edges = graph.file_edges(co_files())
     return edges, StackGraph(calls=edges).cycles()
 
 

@@ -104,7 +104,7 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
         if (st != SLIPEST_OK) {
             return st;
         }
-        /* the tag covers header and payload; the first sector holds the whole header, so w.body is known */
+        /* the tag covers header and payload: w.body bytes (len until the header is complete) */
         if ((s->auth != NULL) && (pos < w.body)) {
             s->auth->update(&mac, s->buf, (w.body - pos < n) ? w.body - pos : n);
         }

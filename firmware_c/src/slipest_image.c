@@ -203,7 +203,7 @@ static void visit(slipest_image_stream_t *w, unsigned seg, unsigned i, uint32_t 
     if (seg >= K_FEPS) {
         /* the float model: finite parameters, a positive finite LayerNorm eps */
         bad = SLIPEST_E_NONFINITE;
-        ok = (w->check_f32 == 0) ||
+        ok = (w->check_f32 == 0u) ||
              ((f32_bits_finite(raw) != 0) && ((seg != K_FEPS) || ((raw != 0u) && (raw <= 0x7F7FFFFFu))));
 #ifndef SLIPEST_Q_ONLY
         if (seg == K_FEPS) {
@@ -257,17 +257,17 @@ static void payload_byte(slipest_image_stream_t *w, uint8_t b)
      * the float model); this bound only keeps the table reads inside the tables */
     if (w->seg >= K_END) return;
     w->acc |= (uint32_t)b << (8u * w->nb);
-    w->nb += 1u;
+    w->nb = (uint8_t)(w->nb + 1u);
     if (w->nb < seg_size[w->seg]) {
         return;
     }
     visit(w, w->seg, w->idx, w->acc, seg_size[w->seg]);
     w->acc = 0u;
     w->nb = 0u;
-    w->idx += 1u;
+    w->idx = (uint16_t)(w->idx + 1u); /* < seg_n[seg] <= SLIPEST_IMAGE_F32_W1_N */
     if (w->idx == seg_n[w->seg]) {
         w->idx = 0u;
-        w->seg += 1u;
+        w->seg = (uint8_t)(w->seg + 1u); /* <= K_END */
     }
 }
 
@@ -281,8 +281,12 @@ slipest_status_t slipest_image_stream_init(slipest_image_stream_t *w, size_t len
     w->len = len;
     w->body = len; /* until the header gives it: every header byte is covered */
     w->qs = qs;
+#ifndef SLIPEST_Q_ONLY
     w->fs = fs;
-    w->check_f32 = check_f32;
+#else
+    (void)fs; /* no float model in this build */
+#endif
+    w->check_f32 = (check_f32 != 0) ? 1u : 0u;
     w->crc = 0xFFFFFFFFu;
     return SLIPEST_OK;
 }

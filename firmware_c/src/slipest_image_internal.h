@@ -11,22 +11,27 @@
 #include "slipest_model.h"
 #include "slipest_status.h"
 
-/* One image being read byte by byte: every check of slipest_image_read(), element by element. */
+/* One image being read in runs of bytes: every check of slipest_image_read(), element by element.
+ * It lives on the caller's stack (the store's slot walk is the CANopen node's deepest call), so the
+ * fixed-point-only build leaves out what only the float model needs. */
 typedef struct {
     uint8_t hdr[SLIPEST_IMAGE_HEADER_SIZE];
     uint8_t tail[SLIPEST_IMAGE_TRAILER_SIZE + SLIPEST_IMAGE_HMAC_SIZE];
     slipest_image_q_storage_t *qs;   /* where the fixed-point arrays go, or NULL: check only */
+#ifndef SLIPEST_Q_ONLY
     slipest_image_f32_storage_t *fs; /* where the float arrays go, or NULL */
+    uint32_t ln_eps_bits;            /* the float model's LayerNorm eps */
+#endif
     size_t len;                      /* bytes of the image */
     size_t pos;                      /* bytes fed so far */
-    size_t body;                     /* header + payload bytes (0 until the header is complete) */
+    size_t body;                     /* header + payload bytes (len until the header is complete) */
     uint32_t crc;                    /* running CRC-32 register over the body */
     uint32_t row_abs[SLIPEST_N_HIDDEN + SLIPEST_N_CLASSES]; /* sum |w| per layer-1 row, then head row */
     uint32_t acc;                    /* the element being assembled: its little-endian bytes */
-    uint32_t ln_eps_bits;            /* the float model's LayerNorm eps */
-    unsigned seg, idx, nb;           /* ... its array, index and bytes so far */
-    int check_f32;                   /* non-zero: the float parameters must be finite */
     uint16_t flags;                  /* header flags (once the header is complete) */
+    uint16_t idx;                    /* the element's index in its array, */
+    uint8_t seg, nb;                 /* ... the array and the element's bytes so far */
+    uint8_t check_f32;               /* 1: the float parameters must be finite */
     slipest_status_t deferred;       /* first parameter check that failed (reported after CRC/HMAC) */
 } slipest_image_stream_t;
 

@@ -632,3 +632,11 @@ const slipest_store_counters_t *slipest_store_counters(const slipest_store_t *st
 {
     return store == NULL ? NULL : &store->c;
 }
+
+uint32_t slipest_store_nvm_sectors(uint32_t sector_size)
+{
+    if ((sector_size < SLIPEST_STORE_SECTOR_MIN) || (sector_size > SLIPEST_STORE_SECTOR_MAX)) {
+        return 0u;
+    }
+    return SLIPEST_STORE_NVM_SECTORS(sector_size);
+}

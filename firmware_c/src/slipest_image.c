@@ -153,9 +153,6 @@ static void header_scalars(const uint8_t *img, slipest_model_q_t *q)
 #define K_FB2 14u
 #define K_END 15u
 
-
-#define N_ROWS (SLIPEST_N_HIDDEN + SLIPEST_N_CLASSES)
-
 static uint32_t abs16(int16_t v) { return v < 0 ? (uint32_t)(-(int32_t)v) : (uint32_t)v; }
 
 static int f32_bits_finite(uint32_t b) { return (b & 0x7F800000u) != 0x7F800000u; }

@@ -46,7 +46,8 @@ slipest_status_t slipest_image_stream_init(slipest_image_stream_t *w, size_t len
  * and payload); before, it is len. */
 slipest_status_t slipest_image_stream_feed(slipest_image_stream_t *w, const uint8_t *p, size_t n);
 
-/* After all len bytes: SLIPEST_E_CRC or SLIPEST_E_HASH (header hash32 against the trailer), else OK. */
+/* After all len bytes (both callers feed exactly len: the count is not checked again here, 14 bytes of
+ * the CANopen node's flash): SLIPEST_E_CRC or SLIPEST_E_HASH (header hash32 against the trailer), else OK. */
 slipest_status_t slipest_image_stream_seal(const slipest_image_stream_t *w);
 
 /* After a seal that passed: the scalars' model check, then the first parameter check that failed;

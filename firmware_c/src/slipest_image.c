@@ -200,8 +200,10 @@ static void visit(slipest_image_stream_t *w, unsigned seg, unsigned i, uint32_t 
     if (seg >= K_FEPS) {
         /* the float model: finite parameters, a positive finite LayerNorm eps */
         bad = SLIPEST_E_NONFINITE;
-        ok = (w->check_f32 == 0u) ||
-             ((f32_bits_finite(raw) != 0) && ((seg != K_FEPS) || ((raw != 0u) && (raw <= 0x7F7FFFFFu))));
+        if ((w->check_f32 != 0u) &&
+            ((f32_bits_finite(raw) == 0) || ((seg == K_FEPS) && ((raw == 0u) || (raw > 0x7F7FFFFFu))))) {
+            ok = 0;
+        }
 #ifndef SLIPEST_Q_ONLY
         if (seg == K_FEPS) {
             w->ln_eps_bits = raw;
@@ -222,7 +224,9 @@ static void visit(slipest_image_stream_t *w, unsigned seg, unsigned i, uint32_t 
         ok = slipest_model_row_ok((int64_t)w->row_abs[row], v,
                                   (seg == K_B1) ? SLIPEST_Q_ACC1_LIMIT : SLIPEST_Q_ACC2_LIMIT);
     } else if (seg == K_BETA) {
-        ok = (v >= -32768) && (v <= 32767);
+        if ((v < -32768) || (v > 32767)) {
+            ok = 0; /* the LayerNorm bias must fit int16 */
+        }
     } else if (seg == K_RSQRT) {
         ok = slipest_model_seed_ok(raw, (int)i);
     } else {

@@ -30,7 +30,8 @@ typedef struct {
     uint32_t acc;                    /* the element being assembled: its little-endian bytes */
     uint16_t flags;                  /* header flags (once the header is complete) */
     uint16_t idx;                    /* the element's index in its array, */
-    uint8_t seg, nb;                 /* ... the array and the element's bytes so far */
+    uint8_t seg;                     /* ... its array */
+    uint8_t nb;                      /* ... and its bytes so far */
     uint8_t check_f32;               /* 1: the float parameters must be finite */
     slipest_status_t deferred;       /* first parameter check that failed (reported after CRC/HMAC) */
 } slipest_image_stream_t;

@@ -98,9 +98,10 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
     while (pos < len) {
         n = (len - pos < S) ? len - pos : S;
         st = nvm_read(s, base + pos, s->buf, n);
-        if (st == SLIPEST_OK) {
-            st = slipest_image_stream_feed(&w, s->buf, n);
+        if (st != SLIPEST_OK) {
+            return st;
         }
+        st = slipest_image_stream_feed(&w, s->buf, n);
         if (st != SLIPEST_OK) {
             return st;
         }
@@ -149,7 +150,8 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
 /* Load slot's image as the active model; on failure no model is active. */
 static slipest_status_t load_slot(slipest_store_t *s, unsigned slot)
 {
-    image_id_t id;
+    image_id_t id = {0u, 0u, 0u}; /* set by a walk that passed; gcc -fanalyzer cannot follow the status out of
+                                     the image stream's calls in another file */
     slipest_status_t st;
     s->have_model = 0u;
     st = walk_slot(s, slot, s->rec.length[slot], 1, &id);

@@ -98,12 +98,11 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
     while (pos < len) {
         n = (len - pos < S) ? len - pos : S;
         st = nvm_read(s, base + pos, s->buf, n);
-        if (st != SLIPEST_OK) {
-            return st;
+        if (st == SLIPEST_OK) {
+            st = slipest_image_stream_feed(&w, s->buf, n);
         }
-        st = slipest_image_stream_feed(&w, s->buf, n);
         if (st != SLIPEST_OK) {
-            return st;
+            return st; /* the NVM's failure or the image's first refusal */
         }
         /* the tag covers header and payload: w.body bytes (len until the header is complete) */
         if ((s->auth != NULL) && (pos < w.body)) {

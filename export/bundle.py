@@ -24,7 +24,7 @@ from fleetlab.data.features_int import FEATURE_LSB, quantize_features
 from fleetlab.models.mlp import arch_of
 
 from . import headers, manifest, model_image, onnx_export, vectors
-from .quant import FloatParams, QParams, quantize
+from .quant import FloatNet, FloatParams, QNet, QParams, quantize, quantize_net
 
 ONNX_FILE = "model.onnx"
 # Every file a bundle can hold; an export removes the ones it does not rewrite (never other files).
@@ -43,8 +43,8 @@ ROUNDING = {
 class Bundle:
     path: Path
     manifest: dict[str, Any]
-    fparams: FloatParams | None
-    qparams: QParams | None
+    fparams: FloatParams | FloatNet | None  # FloatNet / QNet: any architecture but SN-S (a layer table)
+    qparams: QParams | QNet | None
 
     @property
     def content_hash(self) -> str:
@@ -95,11 +95,6 @@ def export_bundle(
     for name in BUNDLE_FILES:
         (out / name).unlink(missing_ok=True)
     arch = arch_of(model)
-    if arch != "sn-s" and not onnx_only:
-        raise ValueError(
-            f"{model_path or 'model'}: architecture {arch} cannot go to the fixed-point C path (SN-S only: "
-            "12->30->3 with one LayerNorm); use --onnx-only to export ONNX alone"
-        )
     model.eval()
     steps = tqdm(total=5, desc="export", leave=False)
     names = [ONNX_FILE]
@@ -113,13 +108,22 @@ def export_bundle(
         onnx_diff = onnx_export.check_onnx(out / ONNX_FILE, inputs, tl)
         content = _flat_hash(model)
         vec_info = None
-    else:
+    elif arch == "sn-s":
         fp = FloatParams.from_model(model)
         qp = quantize(fp)
         content = manifest.content_hash(qp, fp)
         names += [p.name for p in headers.write_headers(out, qp, fp, content, c_name, model_version)]
         names.append(model_image.write_image(out, qp, fp, content, model_version, hmac_key).name)
         steps.update()
+    else:  # any other architecture: the layer-table headers; model images (format 1) carry SN-S only
+        fp = FloatNet.from_model(model)
+        qp = quantize_net(fp)
+        content = manifest.content_hash_net(qp, fp)
+        names += [p.name for p in headers.write_net_headers(out, qp, fp, content, c_name, model_version)]
+        tqdm.write(f"{arch}: no {model_image.IMAGE_FILE} (model image format {model_image.FORMAT_VERSION} carries "
+                   "SN-S only); the C headers build this model into the library (-DSLIPEST_BUNDLE=)")
+        steps.update()
+    if not onnx_only:
         v = vectors.make_vectors(model, qp, inputs)
         names += [p.name for p in vectors.write_vectors(out, v)]
         onnx_diff = onnx_export.check_onnx(out / ONNX_FILE, v.inputs, v.torch_logits)
@@ -157,7 +161,14 @@ def export_bundle(
         "content_hash": content,
         "content_hash32": f"0x{content[:8]}",
     }
-    if qp is not None:
+    if isinstance(qp, QNet):
+        m["quantization"] = {**qp.scalars(), "rounding": ROUNDING}
+        m["headers"] = {"fixed_point": headers.Q_HEADER, "float": headers.F32_HEADER,
+                        "model_q": f"slipest_{c_name}_q", "model_f32": f"slipest_{c_name}_f32", "layer_table": True}
+        m["model_version"] = int(model_version)
+        m["model_image"] = None
+        m["vectors"] = vec_info
+    elif qp is not None:
         m["quantization"] = {
             **qp.scalars(),
             "rounding": ROUNDING,
@@ -187,8 +198,10 @@ def load_bundle(path: Path | str) -> Bundle:
         raise FileNotFoundError(f"{path}: not a bundle directory")
     m = manifest.read_manifest(path)
     manifest.verify_files(path, m)
-    if "quantization" not in m:  # ONNX-only bundle (SN-D)
+    if "quantization" not in m:  # ONNX-only bundle
         return Bundle(path, m, None, None)
+    if m.get("headers", {}).get("layer_table"):
+        return _load_net_bundle(path, m)
 
     qfile, ffile = path / headers.Q_HEADER, path / headers.F32_HEADER
     for f in (qfile, ffile):
@@ -207,13 +220,39 @@ def load_bundle(path: Path | str) -> Bundle:
         eps_e=qsc["eps_e"], s1=float(msc["s1"]), s2=float(msc["s2"]),
     )
     qp.check_bounds()
-    content = manifest.content_hash(qp, fp)
-    for where, h, h32 in ((qfile, qhash, qhash32), (ffile, fhash, fhash32)):
+    _check_hashes(path, m, manifest.content_hash(qp, fp), ((qfile, qhash, qhash32), (ffile, fhash, fhash32)))
+    return Bundle(path, m, fp, qp)
+
+
+def _check_hashes(path: Path, m: dict, content: str, named: tuple) -> None:
+    """Both headers name the manifest's content hash, and their parameters hash to it."""
+    for where, h, h32 in named:
         if h != m["content_hash"] or h32 != manifest.hash32(h):
             raise ValueError(f"{where}: model hash {h[:16]}... disagrees with manifest.json {m['content_hash'][:16]}...")
     if content != m["content_hash"]:
         raise ValueError(f"{path}: parameters in the headers hash to {content[:16]}..., manifest.json says {m['content_hash'][:16]}...")
-    return Bundle(path, m, fp, qp)
+
+
+def _load_net_bundle(path: Path, m: dict) -> Bundle:
+    """A layer-table bundle (any architecture but SN-S): both headers, checked against the manifest."""
+    qfile, ffile = path / headers.Q_HEADER, path / headers.F32_HEADER
+    for f in (qfile, ffile):
+        if f.name not in m["files"]:
+            raise ValueError(f"{path / manifest.MANIFEST}: does not list {f.name}")
+    net, qhash, qhash32 = headers.read_q_net_header(qfile)
+    fn, fhash, fhash32 = headers.read_f32_net_header(ffile)
+    msc = m["quantization"]
+    if list(net.hidden) != msc.get("hidden") or len(msc.get("blocks", [])) != len(net.blocks):
+        raise ValueError(f"{qfile}: hidden blocks {list(net.hidden)}, manifest.json says {msc.get('hidden')}")
+    for blk, entry in zip(net.blocks, msc["blocks"]):  # the scales are information the headers do not carry
+        blk.s = float(entry["s"])
+    net.s_out = float(msc["s_out"])
+    net.check_bounds()
+    for key, value in net.scalars().items():
+        if msc.get(key) != value:
+            raise ValueError(f"{qfile}: {key} = {value}, manifest.json says {msc.get(key)}")
+    _check_hashes(path, m, manifest.content_hash_net(net, fn), ((qfile, qhash, qhash32), (ffile, fhash, fhash32)))
+    return Bundle(path, m, fn, net)
 
 
 def check_bundle(path: Path | str, model: torch.nn.Module | None = None) -> list[str]:

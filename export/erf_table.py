@@ -8,6 +8,12 @@ beyond 4, erf is 1 in float32. Each row is the Chebyshev interpolant of erf on i
 fit) in the offset from the row's centre. Row 0 is centred on 0 and has no constant term, so that erf(x)
 keeps its relative accuracy for tiny x.
 
+The coefficients are computed in 50-digit arithmetic (mpmath), never with numpy's least-squares fit: a
+BLAS solve picks its kernel by CPU, and the last bit of a float32 coefficient then depends on the machine
+(issue 26). The interpolant at N Chebyshev nodes has a closed form, a cosine sum per coefficient (the
+discrete orthogonality of T_j on the nodes), so no solve is needed at all; the only rounding that reaches
+the header is the final one to float32, the same on every machine.
+
     python -m fleetlab.export.erf_table [--check]   (prints the header; --check prints the max error)
 
 The committed header is `firmware_c/src/slipest_erf_f32.h`; tests/test_erf_table.py checks that it
@@ -18,21 +24,53 @@ from __future__ import annotations
 
 import argparse
 
+import mpmath
 import numpy as np
-from numpy.polynomial import Chebyshev, Polynomial
 from scipy.special import erf
 
 WIDTH = 0.5  # interval width (the kernel indexes rows by (int)(|x| * 2))
 TOP = 4.0  # erf(4) = 1 - 1.5e-8 rounds to 1.0f: the table ends there
 TERMS = 8  # Horner terms per row (degree 7)
 _NODES = 256
+_DIGITS = 50  # working precision of the fit: every coefficient is exact far below float32's last bit
 
 
-def _interpolant(f, lo: float, hi: float, degree: int) -> np.ndarray:
-    """Monomial coefficients (lowest power first) of f's Chebyshev interpolant on [lo, hi]."""
-    t = (lo + hi) / 2 + (hi - lo) / 2 * np.cos(np.pi * (np.arange(_NODES) + 0.5) / _NODES)
-    fit = Chebyshev.fit(t, f(t), degree, domain=[lo, hi])
-    return fit.convert(kind=Polynomial, domain=[-1, 1], window=[-1, 1]).coef
+def _interpolant(f, lo: float, hi: float, degree: int) -> list:
+    """Monomial coefficients (lowest power first, mpf) of f's degree-`degree` Chebyshev interpolant on [lo, hi].
+
+    The least-squares Chebyshev fit at _NODES Chebyshev points, in closed form: with s_k = cos(theta_k),
+    theta_k = pi (k + 1/2) / N, c_j = (2 / N) sum_k f(t_k) cos(j theta_k) (c_0 halved). Then
+    sum_j c_j T_j(s) is expanded into powers of s (T_j's integer coefficients) and s = (t - mid) / half into
+    powers of t (binomial expansion). Pure mpmath arithmetic: the same digits on every CPU.
+    """
+    with mpmath.workdps(_DIGITS):
+        n = _NODES
+        mid, half = (mpmath.mpf(lo) + mpmath.mpf(hi)) / 2, (mpmath.mpf(hi) - mpmath.mpf(lo)) / 2
+        theta = [mpmath.pi * (k + mpmath.mpf(1) / 2) / n for k in range(n)]
+        fk = [f(mid + half * mpmath.cos(th)) for th in theta]
+        cheb = [2 * mpmath.fsum(v * mpmath.cos(j * th) for v, th in zip(fk, theta)) / n for j in range(degree + 1)]
+        cheb[0] /= 2
+        # T_0 = 1, T_1 = s, T_{j+1} = 2 s T_j - T_{j-1}: integer power coefficients, exact
+        t_prev, t_cur = [1], [0, 1]
+        in_s = [mpmath.mpf(0)] * (degree + 1)
+        for j in range(degree + 1):
+            tj = t_prev if j == 0 else t_cur
+            for i, a in enumerate(tj):
+                in_s[i] += cheb[j] * a
+            if j >= 1:
+                t_prev, t_cur = t_cur, [-(t_prev[i] if i < len(t_prev) else 0) + (2 * t_cur[i - 1] if i >= 1 else 0)
+                                        for i in range(len(t_cur) + 1)]
+        # s^i = (t - mid)^i / half^i
+        in_t = [mpmath.mpf(0)] * (degree + 1)
+        for i, a in enumerate(in_s):
+            for r in range(i + 1):
+                in_t[r] += a * mpmath.binomial(i, r) * (-mid) ** (i - r) / half**i
+        return in_t
+
+
+def _f32(v) -> float:
+    """A working-precision number rounded to float32 (through float64, like the float path always did)."""
+    return float(np.float32(float(v)))
 
 
 def rows() -> list[tuple[float, list[float]]]:
@@ -43,11 +81,11 @@ def rows() -> list[tuple[float, list[float]]]:
         if k == 0:
             # erf(x) = x q(x): no constant term, so that erf keeps its relative accuracy for tiny x
             centre = 0.0
-            mono = np.concatenate([[0.0], _interpolant(lambda x: erf(x) / x, lo, hi, TERMS - 2)])
+            mono = [0, *_interpolant(lambda x: mpmath.erf(x) / x, lo, hi, TERMS - 2)]
         else:
             centre = (lo + hi) / 2
-            mono = _interpolant(lambda u, c=centre: erf(c + u), lo - centre, hi - centre, TERMS - 1)
-        out.append((float(np.float32(centre)), [float(np.float32(v)) for v in mono]))
+            mono = _interpolant(lambda u, c=centre: mpmath.erf(c + u), lo - centre, hi - centre, TERMS - 1)
+        out.append((_f32(centre), [_f32(v) for v in mono]))
     return out
 
 

@@ -22,7 +22,6 @@ import torch
 from fleetlab.models.train import EXPERT_EPOCHS
 from fleetlab.paths import default_bundle
 
-DEFAULT_OUT = default_bundle()
 TRAIN_ROLES = ("earth", "target")
 N_VECTORS = 1200
 
@@ -90,13 +89,14 @@ def _rewrite_manifest_paths(out: Path, sim_dir: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m fleetlab.export.example", description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"bundle directory (default {DEFAULT_OUT})")
+    p.add_argument("--out", type=Path, default=None,
+                   help="bundle directory (default: the committed example bundle, firmware_c/bundles/example)")
     p.add_argument("--seed", type=int, default=1, help="simulator and training seed (default 1)")
     p.add_argument("--scale", type=float, default=0.3, help="simulator scale (default 0.3)")
     p.add_argument("--epochs", type=int, default=EXPERT_EPOCHS, help=f"training epochs (default {EXPERT_EPOCHS})")
     p.add_argument("--keep", type=Path, help="also keep the trained model and the simulated data in this folder")
     args = p.parse_args(argv)
-    out = make_example(args.out, args.seed, args.scale, args.epochs, args.keep)
+    out = make_example(args.out or default_bundle(), args.seed, args.scale, args.epochs, args.keep)
     print(f"example bundle written to {out}")
     return 0
 

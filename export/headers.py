@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .quant import FloatParams, QParams
+from .quant import EPS_CAP, GELU_N, GELU_STEP_LOG2, FloatNet, FloatParams, QNet, QParams
 
 Q_HEADER = "slipest_model_q.h"
 F32_HEADER = "slipest_model_f32.h"
@@ -141,6 +141,172 @@ def f32_header_text(fp: FloatParams, content_hash: str, c_name: str = DEFAULT_C_
     out.append(_struct("slipest_model_f32_t", model, members, "SLIPEST_MODEL_F32_INCLUDED"))
     out.append(f"\n#endif /* {guard} */\n")
     return "".join(out)
+
+
+# ------------------------------------------------ any architecture: the layer table (slipest_model.h)
+
+# per-block arrays (QBlock attribute, slipest_layer_q_t member, C type, numpy dtype)
+LAYER_Q_ARRAYS = (("w", "w", "int16_t", np.int16), ("b", "b", "int32_t", np.int32), ("g", "gamma", "int16_t", np.int16),
+                  ("bb", "beta", "int32_t", np.int32), ("gelu", "gelu", "int16_t", np.int16))
+# per-block scalars (QBlock attribute = slipest_layer_q_t member)
+LAYER_Q_SCALARS = ("c", "width", "eps_m", "eps_e", "h_bits", "e_bits", "fz", "fg", "fy")
+LAYER_F32_ARRAYS = ("w", "b", "gamma", "beta")
+
+
+def _struct_members(items: list[tuple[str, str]], indent: str = "    ") -> str:
+    return ",\n".join(f"{indent}.{k} = {v}" for k, v in items)
+
+
+def _table_struct(ctype: str, model: str, members: list[tuple[str, str]], latest: str) -> str:
+    m = dict(members)
+    shape = f"{m['n_in']} == SLIPEST_N_FEATURES && {m['n_out']} == SLIPEST_N_CLASSES && {m['n_layers']} <= SLIPEST_MAX_LAYERS"
+    return (
+        # C99 has no static_assert: a negative array size stops a build whose caps are below the model
+        f"typedef char {model}_shape_check[({shape}) ? 1 : -1];\n\n"
+        f"static const {ctype} {model} = {{\n{_struct_members(members)}\n}};\n\n"
+        f"/* the model of the header included last, for sources that include exactly one bundle */\n"
+        f"#undef {latest}\n#define {latest} {model}\n"
+    )
+
+
+def _layer_table(ctype: str, name: str, layers: list[list[tuple[str, str]]], widest: int) -> str:
+    rows = ",\n".join("    {\n" + _struct_members(items, "        ") + "\n    }" for items in layers)
+    return (f"typedef char {name}_width_check[({widest} <= SLIPEST_MAX_WIDTH) ? 1 : -1];\n\n"
+            f"static const {ctype} {name}[{len(layers)}] = {{\n{rows}\n}};\n\n")
+
+
+def q_net_header_text(net: QNet, content_hash: str, c_name: str = DEFAULT_C_NAME, version: int = 1) -> str:
+    """The fixed-point header of any architecture: per-block arrays, the layer table, the model struct."""
+    model = f"slipest_{check_c_name(c_name)}_q"
+    guard = f"SLIPEST_MODEL_Q_{c_name.upper()}_H"
+    arch = "-".join(str(h) for h in net.hidden)
+    out = [_guard_open(guard, f"Fixed-point parameters (integer only), hidden blocks {arch}.", content_hash, model)]
+    out.append(f"/* logits_real = logits_q / {net.logit_scale!r} (s_out * 2^FY of the last block) */\n\n")
+    layers = []
+    n_in = 12
+    for k, blk in enumerate(net.blocks):
+        for attr, member, ctype, _ in LAYER_Q_ARRAYS:
+            vals = np.asarray(getattr(blk, attr)).reshape(-1).astype(np.int64)
+            out.append(_array(ctype, f"{model}_l{k}_{attr}", str(len(vals)), [str(int(v)) for v in vals], 12))
+            out.append("\n")
+        layers.append([(member, f"{model}_l{k}_{attr}") for attr, member, *_ in LAYER_Q_ARRAYS]
+                      + [(key, c_int(getattr(blk, key))) for key in LAYER_Q_SCALARS])
+        n_in = blk.width
+    out.append(_array("int16_t", f"{model}_w2", str(3 * n_in), [str(int(v)) for v in np.asarray(net.w_out).reshape(-1)], 12))
+    out.append("\n")
+    out.append(_array("int32_t", f"{model}_b2", "3", [str(int(v)) for v in net.b_out], 12))
+    out.append("\n")
+    out.append(_array("uint32_t", f"{model}_rsqrt_seed", str(len(net.rsqrt_seed)), [str(int(v)) for v in net.rsqrt_seed], 12))
+    out.append("\n")
+    out.append(_layer_table("slipest_layer_q_t", f"{model}_layers", layers, max(net.hidden)))
+    members = [("w2", f"{model}_w2"), ("b2", f"{model}_b2"), ("rsqrt_seed", f"{model}_rsqrt_seed"),
+               ("layers", f"{model}_layers"), ("n_layers", str(len(net.blocks))), ("n_in", "12"), ("n_out", "3"),
+               ("eps_cap", str(EPS_CAP)), ("gelu_step_log2", str(GELU_STEP_LOG2)), ("gelu_n", str(GELU_N)),
+               ("rsqrt_seed_n", str(len(net.rsqrt_seed))), ("version", f"{int(version)}u"),
+               ("hash32", f"0x{content_hash[:8]}u")]
+    out.append(_table_struct("slipest_model_q_t", model, members, "SLIPEST_MODEL_Q_INCLUDED"))
+    out.append(f"\n#endif /* {guard} */\n")
+    return "".join(out)
+
+
+def f32_net_header_text(fn: FloatNet, content_hash: str, c_name: str = DEFAULT_C_NAME, version: int = 1) -> str:
+    """The float32 header of any architecture (the layer table of slipest_layer_f32_t)."""
+    model = f"slipest_{check_c_name(c_name)}_f32"
+    guard = f"SLIPEST_MODEL_F32_{c_name.upper()}_H"
+    arch = "-".join(str(h) for h in fn.hidden)
+    out = [_guard_open(guard, f"Float32 parameters (for the float C path), hidden blocks {arch}.", content_hash, model)]
+    layers = []
+    for k, blk in enumerate(fn.blocks):
+        for attr in LAYER_F32_ARRAYS:
+            vals = np.asarray(getattr(blk, attr), dtype=np.float32).reshape(-1)
+            out.append(_array("float", f"{model}_l{k}_{attr}", str(len(vals)), [c_float(v) for v in vals], 6))
+            out.append("\n")
+        layers.append([(attr, f"{model}_l{k}_{attr}") for attr in LAYER_F32_ARRAYS] + [("width", str(blk.w.shape[0]))])
+    for attr in ("w_out", "b_out"):
+        vals = np.asarray(getattr(fn, attr), dtype=np.float32).reshape(-1)
+        out.append(_array("float", f"{model}_{attr}", str(len(vals)), [c_float(v) for v in vals], 6))
+        out.append("\n")
+    out.append(_layer_table("slipest_layer_f32_t", f"{model}_layers", layers, max(fn.hidden)))
+    members = [("w2", f"{model}_w_out"), ("b2", f"{model}_b_out"), ("layers", f"{model}_layers"),
+               ("n_layers", str(len(fn.blocks))), ("ln_eps", c_float(fn.eps)), ("n_in", "12"), ("n_out", "3"),
+               ("version", f"{int(version)}u"), ("hash32", f"0x{content_hash[:8]}u")]
+    out.append(_table_struct("slipest_model_f32_t", model, members, "SLIPEST_MODEL_F32_INCLUDED"))
+    out.append(f"\n#endif /* {guard} */\n")
+    return "".join(out)
+
+
+def write_net_headers(out_dir: Path, net: QNet, fn: FloatNet, content_hash: str, c_name: str = DEFAULT_C_NAME,
+                      version: int = 1) -> list[Path]:
+    """Both headers of a layer-table model (any architecture other than SN-S)."""
+    out_dir = Path(out_dir)
+    (out_dir / F32_HEADER).write_text(f32_net_header_text(fn, content_hash, c_name, version))
+    (out_dir / Q_HEADER).write_text(q_net_header_text(net, content_hash, c_name, version))
+    return [out_dir / F32_HEADER, out_dir / Q_HEADER]
+
+
+_LAYER_ROW = re.compile(r"\{\n((?:\s+\.\w+ = [^\n]+\n)+)\s+\}")
+
+
+def _layer_rows(text: str, table: str, path: Path) -> list[dict[str, str]]:
+    m = re.search(rf"static const \w+ {table}\[(\d+)\] = \{{\n(.*?)\n\}};", text, re.S)
+    if m is None:
+        raise ValueError(f"{path}: no layer table {table}")
+    rows = [{k: v.strip() for k, v in _MEMBER.findall(r)} for r in _LAYER_ROW.findall(m[2])]
+    if len(rows) != int(m[1]):
+        raise ValueError(f"{path}: layer table {table} has {len(rows)} rows, declares {m[1]}")
+    return rows
+
+
+def read_q_net_header(path: Path) -> tuple[QNet, str, int]:
+    """(the QNet, hash string, hash32) of a layer-table fixed-point header."""
+    from .quant import QBlock
+
+    path = Path(path)
+    members, arrays, model = parse_header(path)
+    text = path.read_text()
+    blocks, n_in = [], 12
+    for k, row in enumerate(_layer_rows(text, f"{model}_layers", path)):
+        sc = {key: _int_member(row, key, path) for key in LAYER_Q_SCALARS}
+        arr = {}
+        for attr, _, ctype, dtype in LAYER_Q_ARRAYS:
+            tokens = _array_of(arrays, f"{model}_l{k}_{attr}", ctype, path)
+            arr[attr] = np.array([int(t.strip("()")) for t in tokens], dtype=np.int64).astype(dtype)
+        width = sc["width"]
+        if arr["w"].size != width * n_in:
+            raise ValueError(f"{path}: block {k + 1} weights have {arr['w'].size} values, expected {width} x {n_in}")
+        blk = QBlock(w=arr["w"].reshape(width, n_in), b=arr["b"], g=arr["g"], bb=arr["bb"], gelu=arr["gelu"],
+                     fg=sc["fg"], fy=sc["fy"], eps_m=sc["eps_m"], eps_e=sc["eps_e"], s=float("nan"))
+        derived = {key: getattr(blk, key) for key in ("c", "h_bits", "e_bits", "fz")}
+        if any(derived[key] != sc[key] for key in derived):
+            raise ValueError(f"{path}: block {k + 1} shifts {sc} are not those of width {width} ({derived})")
+        blocks.append(blk)
+        n_in = width
+    w2 = np.array([int(t.strip("()")) for t in _array_of(arrays, f"{model}_w2", "int16_t", path)], np.int16)
+    b2 = np.array([int(t.strip("()")) for t in _array_of(arrays, f"{model}_b2", "int32_t", path)], np.int32)
+    seed = np.array([int(t) for t in _array_of(arrays, f"{model}_rsqrt_seed", "uint32_t", path)], np.int64)
+    net = QNet(blocks, w2.reshape(3, n_in), b2, float("nan"), seed)
+    return (net, *_header_hash(text, members, path))
+
+
+def read_f32_net_header(path: Path) -> tuple[FloatNet, str, int]:
+    """(the FloatNet, hash string, hash32) of a layer-table float header."""
+    from .quant import FloatBlock
+
+    path = Path(path)
+    members, arrays, model = parse_header(path)
+    text = path.read_text()
+    f = lambda name: np.array([float(t.rstrip("fF")) for t in _array_of(arrays, name, "float", path)], np.float32)  # noqa: E731
+    blocks, n_in = [], 12
+    for k, row in enumerate(_layer_rows(text, f"{model}_layers", path)):
+        width = _int_member(row, "width", path)
+        arr = {attr: f(f"{model}_l{k}_{attr}") for attr in LAYER_F32_ARRAYS}
+        blocks.append(FloatBlock(w=arr["w"].reshape(width, n_in), b=arr["b"], gamma=arr["gamma"], beta=arr["beta"]))
+        n_in = width
+    if "ln_eps" not in members:
+        raise ValueError(f"{path}: model struct has no .ln_eps")
+    eps = float(np.float32(float(members["ln_eps"].rstrip("fF"))))
+    fn = FloatNet(blocks, f(f"{model}_w_out").reshape(3, n_in), f(f"{model}_b_out"), eps)
+    return (fn, *_header_hash(text, members, path))
 
 
 def write_headers(out_dir: Path, qp: QParams | None, fp: FloatParams, content_hash: str,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from .quant import C30, E_BITS, EPS_CAP, FZ, GELU_N, GELU_STEP_LOG2, H_BITS, N_HIDDEN, QParams
+from .quant import EPS_CAP, GELU_N, GELU_STEP_LOG2, QBlock, QNet, QParams
 
 _POW2 = torch.tensor([1 << b for b in range(63)], dtype=torch.int64)
 
@@ -34,22 +34,23 @@ def _saturate(x: torch.Tensor, lo: int, hi: int) -> tuple[torch.Tensor, torch.Te
     return x.clamp(lo, hi), ((x < lo) | (x > hi)).sum(-1)
 
 
-class IntSlipNet(torch.nn.Module):
-    """The SN-S fixed-point path: int16 features (N,12) -> int32-range logits (N,3), saturations (N,)."""
+class IntBlock(torch.nn.Module):
+    """One Linear -> LayerNorm -> GELU block: int16-range input (N, n_in) -> int16-range g (N, H) in Q(fy)."""
 
-    def __init__(self, qp: QParams):
+    def __init__(self, blk: QBlock, rsqrt_seed: np.ndarray):
         super().__init__()
-        qp.check_bounds()
-        self.fg, self.fy, self.eps_m, self.eps_e = int(qp.fg), int(qp.fy), int(qp.eps_m), int(qp.eps_e)
-        for name in QParams.INT_ARRAYS:  # t_<name>: the integer arrays as int64 tensors
-            self.register_buffer("t_" + name, torch.as_tensor(np.asarray(getattr(qp, name), dtype=np.int64)))
+        self.width, self.h_bits, self.e_bits, self.fz, self.c = blk.width, blk.h_bits, blk.e_bits, blk.fz, blk.c
+        self.fg, self.fy, self.eps_m, self.eps_e = int(blk.fg), int(blk.fy), int(blk.eps_m), int(blk.eps_e)
+        for name in QBlock.INT_ARRAYS:  # t_<name>: the integer arrays as int64 tensors
+            self.register_buffer("t_" + name, torch.as_tensor(np.asarray(getattr(blk, name), dtype=np.int64)))
+        self.register_buffer("t_rsqrt_seed", torch.as_tensor(np.asarray(rsqrt_seed, dtype=np.int64)))
 
     def layer_norm(self, h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Integer LayerNorm core: h (N,30) -> z (N,30) in Q12 (before gamma/beta), saturations (N,)."""
-        k1 = (bitlen(h.abs().amax(1)) - H_BITS).clamp(min=0).unsqueeze(1)
+        """Integer LayerNorm core: h (N,H) -> z (N,H) in Q(fz) (before gamma/beta), saturations (N,)."""
+        k1 = (bitlen(h.abs().amax(1)) - self.h_bits).clamp(min=0).unsqueeze(1)
         hp = rsr(h, k1)
-        d = N_HIDDEN * hp - hp.sum(1, keepdim=True)  # 30 * (h' - mean(h')), exact
-        k2 = (bitlen(d.abs().amax(1)) - E_BITS).clamp(min=0).unsqueeze(1)
+        d = self.width * hp - hp.sum(1, keepdim=True)  # H * (h' - mean(h')), exact
+        k2 = (bitlen(d.abs().amax(1)) - self.e_bits).clamp(min=0).unsqueeze(1)
         e = rsr(d, k2)
         s = (e * e).sum(1, keepdim=True)
 
@@ -65,11 +66,11 @@ class IntSlipNet(torch.nn.Module):
         v = s + eps
 
         mult = self.rsqrt_mult(v)
-        z = rsr(e * mult, 16)  # |e M| <= sqrt(30) 2^28 (1 + 1e-5): |z| < 22500, no saturation possible
+        z = rsr(e * mult, 16)  # |e M| <= sqrt(H) 2^(fz+16) (1 + 1e-5): |z| < 2^15, no saturation possible
         return z, sat
 
     def rsqrt_mult(self, v: torch.Tensor) -> torch.Tensor:
-        """M ~ sqrt(30) 2^28 / sqrt(v) for v >= 0 (N,1), so that z = rsr(e M, 16); M = 0 when v = 0."""
+        """M ~ sqrt(H) 2^(fz+16) / sqrt(v) for v >= 0 (N,1), so that z = rsr(e M, 16); M = 0 when v = 0."""
         a = torch.where(v > 0, (32 - bitlen(v)) // 2, 0)
         w = torch.bitwise_left_shift(v, 2 * a)
         idx = (torch.bitwise_right_shift(w, 27) - 8).clamp(0, len(self.t_rsqrt_seed) - 1)
@@ -79,7 +80,7 @@ class IntSlipNet(torch.nn.Module):
             y2 = torch.bitwise_right_shift(y * y, 30)
             t = torch.bitwise_right_shift(w30 * y2, 30)
             y = torch.bitwise_right_shift(y * (3 * 2**30 - t), 31)
-        m = torch.bitwise_right_shift(torch.bitwise_left_shift(y * C30, a) + 2**31, 32)
+        m = torch.bitwise_right_shift(torch.bitwise_left_shift(y * self.c, a) + 2**31, 32)
         return torch.where(v > 0, m, 0)
 
     def gelu(self, u: torch.Tensor) -> torch.Tensor:
@@ -93,28 +94,48 @@ class IntSlipNet(torch.nn.Module):
         tneg = torch.where(k >= GELU_N - 1, 0, t0 + rsr((t1 - t0) * f, sh))
         return u.clamp(min=0) + tneg
 
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        h = x @ self.t_w.T + self.t_b
+        z, sat = self.layer_norm(h)
+        u, usat = _saturate(rsr(self.t_g * z, self.fz + self.fg - self.fy) + self.t_bb, -(2**15), 2**15 - 1)
+        # g is the next block's int16 input as it is: the requantisation (to Q(fy) of this block) is
+        # folded into the next block's weights and bias at export
+        return self.gelu(u), sat + usat
+
+
+class IntSlipNet(torch.nn.Module):
+    """The fixed-point path of any SlipNet: int16 features (N,12) -> int32-range logits (N,3), saturations (N,)."""
+
+    def __init__(self, qp: QParams | QNet):
+        super().__init__()
+        net = qp.net() if isinstance(qp, QParams) else qp
+        net.check_bounds()
+        self.blocks = torch.nn.ModuleList(IntBlock(b, net.rsqrt_seed) for b in net.blocks)
+        self.register_buffer("t_w_out", torch.as_tensor(np.asarray(net.w_out, dtype=np.int64)))
+        self.register_buffer("t_b_out", torch.as_tensor(np.asarray(net.b_out, dtype=np.int64)))
+
     def forward(self, xq: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         x = torch.as_tensor(xq).to(torch.int64)
-        if x.dim() != 2 or x.shape[1] != self.t_w1.shape[1]:
-            raise ValueError(f"integer features must have shape (N, {self.t_w1.shape[1]}), got {tuple(x.shape)}")
+        n_in = self.blocks[0].t_w.shape[1]
+        if x.dim() != 2 or x.shape[1] != n_in:
+            raise ValueError(f"integer features must have shape (N, {n_in}), got {tuple(x.shape)}")
         if x.numel() and (x.min() < -(2**15) or x.max() > 2**15 - 1):
             raise ValueError("integer features must be int16 values")
-        h = x @ self.t_w1.T + self.t_b1
-        z, sat = self.layer_norm(h)
-        u, usat = _saturate(rsr(self.t_g * z, FZ + self.fg - self.fy) + self.t_bb, -(2**15), 2**15 - 1)
-        g = self.gelu(u)
-        logits = g @ self.t_w2.T + self.t_b2
-        return logits, sat + usat
+        sat = torch.zeros(x.shape[0], dtype=torch.int64)
+        for blk in self.blocks:
+            x, s = blk(x)
+            sat = sat + s
+        return x @ self.t_w_out.T + self.t_b_out, sat
 
 
-def run(qp: QParams, q_inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def run(qp: QParams | QNet, q_inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(logits int32 (N,3), saturations int32 (N,)) of the fixed-point path."""
     with torch.no_grad():
         logits, sat = IntSlipNet(qp)(torch.from_numpy(np.asarray(q_inputs, dtype=np.int64)))
     return logits.numpy().astype(np.int32), sat.numpy().astype(np.int32)
 
 
-def q_logits_of(qp: QParams, q_inputs: np.ndarray, return_saturations: bool = False):
+def q_logits_of(qp: QParams | QNet, q_inputs: np.ndarray, return_saturations: bool = False):
     """Integer logits (N,3) int32 of fixed-point parameters (of a bundle: `load_bundle(dir).qparams`;
     this module does not load bundles itself, so bundle -> vectors -> intref stays one-way)."""
     logits, sat = run(qp, q_inputs)

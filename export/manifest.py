@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .quant import FloatParams, QParams
+from .quant import FloatBlock, FloatNet, FloatParams, QBlock, QNet, QParams
 
 MANIFEST = "manifest.json"
 FORMAT = "fleetlab-bundle/1"
@@ -31,7 +31,7 @@ def _feed(h, name: str, arr: np.ndarray, dtype: str) -> None:
 
 
 def content_hash(qp: QParams | None, fp: FloatParams) -> str:
-    """sha256 hex of the canonical model content (fixed-point part absent for SN-D-only bundles)."""
+    """sha256 hex of the canonical SN-S model content (fixed-point part absent for ONNX-only bundles)."""
     h = hashlib.sha256(CONTENT_TAG)
     if qp is not None:
         h.update(json.dumps(qp.scalars(), sort_keys=True, separators=(",", ":")).encode() + b"\n")
@@ -40,6 +40,29 @@ def content_hash(qp: QParams | None, fp: FloatParams) -> str:
     h.update(f"eps:{float(np.float32(fp.eps))!r}\n".encode())
     for name in FloatParams.ARRAYS:
         _feed(h, "f." + name, getattr(fp, name), "<f4")
+    return h.hexdigest()
+
+
+def content_hash_net(net: QNet, fn: FloatNet) -> str:
+    """sha256 hex of a layer-table model's content (any architecture but SN-S, whose hash is content_hash).
+    The scales s are information only and left out, so that a bundle read back from its headers hashes the same."""
+    h = hashlib.sha256(CONTENT_TAG)
+    sc = net.scalars()
+    sc = {**sc, "blocks": [{k: v for k, v in b.items() if k != "s"} for b in sc["blocks"]]}
+    sc.pop("s_out"), sc.pop("logit_scale")
+    h.update(json.dumps(sc, sort_keys=True, separators=(",", ":")).encode() + b"\n")
+    for k, blk in enumerate(net.blocks):
+        for name in QBlock.INT_ARRAYS:
+            _feed(h, f"q.{k}.{name}", getattr(blk, name), "<i8")
+    _feed(h, "q.w_out", net.w_out, "<i8")
+    _feed(h, "q.b_out", net.b_out, "<i8")
+    _feed(h, "q.rsqrt_seed", net.rsqrt_seed, "<i8")
+    h.update(f"eps:{float(np.float32(fn.eps))!r}\n".encode())
+    for k, fb in enumerate(fn.blocks):
+        for name in FloatBlock.ARRAYS:
+            _feed(h, f"f.{k}.{name}", getattr(fb, name), "<f4")
+    _feed(h, "f.w_out", fn.w_out, "<f4")
+    _feed(h, "f.b_out", fn.b_out, "<f4")
     return h.hexdigest()
 
 

@@ -1,4 +1,9 @@
-"""The fixed-point scheme of the SN-S estimator (integer-only inference for a core without FPU).
+"""The fixed-point scheme of the estimator (integer-only inference for a core without FPU).
+
+Below: the scheme on SN-S (QParams, quantize). Any other stack of Linear -> LayerNorm -> GELU
+blocks (QBlock, QNet, quantize_net further down) uses the same steps per block with shifts that
+depend on the block's width (docs/fixed_point.md, "A general block"); at width 30 they are the
+SN-S constants, and quantize() is quantize_net() seen through the SN-S layout.
 
 Full description with the overflow proofs: docs/fixed_point.md. The integer operations are
 performed identically by `intref.py` (torch) and `firmware_c/src/slipest_infer_q.c` (C).
@@ -50,7 +55,7 @@ import numpy as np
 import torch
 
 from fleetlab.data.contracts import FEATURE_SOURCES, N_CLASSES, N_FEATURES, RAW_LSB
-from fleetlab.models.mlp import LN_EPS, SlipNet, arch_of
+from fleetlab.models.mlp import LN_EPS, MAX_HIDDEN_LAYERS, MAX_UNITS, MIN_UNITS, SlipNet, arch_of
 
 SCHEME = "fleetlab-slipest-q/1"
 N_HIDDEN = 30
@@ -130,6 +135,9 @@ class FloatParams:
                 raise ValueError(f"model parameter {name} contains NaN/Inf: cannot export")
         return fp
 
+    def net(self) -> "FloatNet":
+        return FloatNet([FloatBlock(self.w1, self.b1, self.gamma, self.beta)], self.w2, self.b2, self.eps)
+
     def to_model(self) -> SlipNet:
         from fleetlab.models import build
 
@@ -168,6 +176,22 @@ class QParams:
     @property
     def logit_scale(self) -> float:
         return self.s2 * 2.0**self.fy
+
+    def net(self) -> "QNet":
+        """The same parameters as the general one-block network (a copy of the current fields)."""
+        blk = QBlock(w=self.w1, b=self.b1, g=self.g, bb=self.bb, gelu=self.gelu, fg=self.fg, fy=self.fy,
+                     eps_m=self.eps_m, eps_e=self.eps_e, s=self.s1)
+        return QNet([blk], self.w2, self.b2, self.s2, self.rsqrt_seed)
+
+    @classmethod
+    def from_net(cls, net: "QNet") -> "QParams":
+        if net.hidden != (N_HIDDEN,):
+            raise ValueError(f"the SN-S layout needs one hidden block of {N_HIDDEN} units, not {list(net.hidden)}")
+        b = net.blocks[0]
+        qp = cls(w1=b.w, b1=b.b, g=b.g, bb=b.bb, w2=net.w_out, b2=net.b_out, gelu=b.gelu, fg=b.fg, fy=b.fy,
+                 eps_m=b.eps_m, eps_e=b.eps_e, s1=b.s, s2=net.s_out, rsqrt_seed=net.rsqrt_seed)
+        qp.check_bounds()
+        return qp
 
     def scalars(self) -> dict:
         """The scheme parameters that are not arrays (all go into manifest.json and the q header)."""
@@ -260,38 +284,268 @@ def _mantissa_exponent(v: float) -> tuple[int, int]:
     return m, e
 
 
-def quantize(fp: FloatParams, w1_max: int = W1_MAX, w2_max: int = W2_MAX) -> QParams:
-    """Float SN-S parameters -> integer parameters of the fixed-point scheme."""
-    # Layer 1: fold the feature LSB into the weights; any positive s1 is exact for LayerNorm.
-    # s1 is as large as the exact per-row worst case over int16 inputs allows.
-    w1p = fp.w1.astype(np.float64) * FEATURE_LSB[None, :]
-    s1, w1q, b1q = _fit_scale(w1p, fp.b1.astype(np.float64), w1_max, ACC1_LIMIT)
+# --- The general scheme: a stack of Linear -> LayerNorm -> GELU blocks, then the head -------------
+#
+# The shifts of one block depend only on its width H (docs/fixed_point.md, "A general block"); at
+# H = 30 they are exactly SN-S's constants above, so SN-S bundles did not change.
+
+
+def h_bits_of(width: int) -> int:
+    """Bits kept of h' before centring: |d| = |H h'_i - sum h'| <= 2 H 2^h_bits <= 2^30."""
+    return min(H_BITS, 30 - (2 * width - 1).bit_length())
+
+
+def e_bits_of(width: int) -> int:
+    """Bits kept of the centred values: S = sum e^2 <= H 4^e_bits <= 2^31 (then V = S + eps < 2^32)."""
+    e = E_BITS
+    while width * 4**e > 2**31:
+        e -= 1
+    return e
+
+
+def fz_of(width: int) -> int:
+    """Fraction bits of z: |z| <= sqrt(H) 2^fz (1 + 2^-14) stays below 2^15 - 1, so that e M < 2^31 - 2^15."""
+    f = FZ
+    while math.sqrt(width) * 2**f * (1 + 2**-14) >= INT16_MAX:
+        f -= 1
+    return f
+
+
+def c_of(width: int) -> int:
+    """The normalising constant: M = c 2^14 / sqrt(V) = sqrt(H) 2^(fz + 16) / sqrt(V) (C30 at H = 30)."""
+    return round(math.sqrt(width) * 2 ** (fz_of(width) + 2))
+
+
+def acc_limit_of(width: int) -> int:
+    """Bound of a block's accumulator: room for the rounding term 2^(k1 - 1) of rsr(h, k1), k1 <= 31 - h_bits."""
+    return INT32_MAX - 2 ** (32 - h_bits_of(width))
+
+
+def z_bound_of(width: int) -> float:
+    """|z| <= sqrt(H - 1) < sqrt(H), rounded up to the next half (5.5 at H = 30): used to choose FY."""
+    return math.ceil(2 * math.sqrt(width)) / 2
+
+
+@dataclass
+class FloatBlock:
+    """One hidden block's float32 parameters: Linear (w, b), LayerNorm (gamma, beta)."""
+
+    w: np.ndarray  # (H, n_in)
+    b: np.ndarray  # (H,)
+    gamma: np.ndarray  # (H,)
+    beta: np.ndarray  # (H,)
+
+    ARRAYS = ("w", "b", "gamma", "beta")
+
+
+@dataclass
+class FloatNet:
+    """The float32 parameters of any SlipNet (eval semantics)."""
+
+    blocks: list[FloatBlock]
+    w_out: np.ndarray  # (3, H_last)
+    b_out: np.ndarray  # (3,)
+    eps: float = LN_EPS
+
+    @property
+    def hidden(self) -> tuple[int, ...]:
+        return tuple(int(b.w.shape[0]) for b in self.blocks)
+
+    @classmethod
+    def from_model(cls, model: SlipNet) -> "FloatNet":
+        f = lambda t: t.detach().cpu().numpy().astype(np.float32).copy()  # noqa: E731
+        arch_of(model)  # within the caps
+        blocks = [FloatBlock(f(lin.weight), f(lin.bias), f(norm.weight), f(norm.bias))
+                  for lin, norm in zip(model.linears, model.norms)]
+        net = cls(blocks, f(model.head.weight), f(model.head.bias), float(np.float32(model.norms[0].eps)))
+        for i, blk in enumerate(net.blocks):
+            for name in FloatBlock.ARRAYS:
+                if not np.isfinite(getattr(blk, name)).all():
+                    raise ValueError(f"model parameter {name} of hidden block {i + 1} contains NaN/Inf: cannot export")
+        if not (np.isfinite(net.w_out).all() and np.isfinite(net.b_out).all()):
+            raise ValueError("model parameter of the output layer contains NaN/Inf: cannot export")
+        return net
+
+    def to_model(self) -> SlipNet:
+        from fleetlab.models.mlp import SlipNet as Net
+
+        m = Net(self.hidden)
+        with torch.no_grad():
+            for blk, lin, norm in zip(self.blocks, m.linears, m.norms):
+                lin.weight.copy_(torch.from_numpy(blk.w))
+                lin.bias.copy_(torch.from_numpy(blk.b))
+                norm.weight.copy_(torch.from_numpy(blk.gamma))
+                norm.bias.copy_(torch.from_numpy(blk.beta))
+            m.head.weight.copy_(torch.from_numpy(self.w_out))
+            m.head.bias.copy_(torch.from_numpy(self.b_out))
+        return m.eval()
+
+
+@dataclass
+class QBlock:
+    """One hidden block in fixed point. Its input is int16 (the features, or the previous block's
+    GELU output in Q(fy) of that block: the requantisation between blocks is folded into w and b)."""
+
+    w: np.ndarray  # int16 (H, n_in)
+    b: np.ndarray  # int32 (H,)
+    g: np.ndarray  # int16 (H,) LayerNorm gamma, Q(fg)
+    bb: np.ndarray  # int32 (H,) LayerNorm beta, Q(fy)
+    gelu: np.ndarray  # int16 (129,) GELU(-k/16) in Q(fy)
+    fg: int
+    fy: int
+    eps_m: int
+    eps_e: int
+    s: float  # scale of the accumulator over the real pre-activation (information)
+
+    INT_ARRAYS = ("w", "b", "g", "bb", "gelu")
+
+    @property
+    def width(self) -> int:
+        return int(self.w.shape[0])
+
+    @property
+    def h_bits(self) -> int:
+        return h_bits_of(self.width)
+
+    @property
+    def e_bits(self) -> int:
+        return e_bits_of(self.width)
+
+    @property
+    def fz(self) -> int:
+        return fz_of(self.width)
+
+    @property
+    def c(self) -> int:
+        return c_of(self.width)
+
+    def scalars(self) -> dict:
+        return {
+            "n_in": int(self.w.shape[1]), "width": self.width, "h_bits": self.h_bits, "e_bits": self.e_bits,
+            "fz": self.fz, "fg": int(self.fg), "fy": int(self.fy), "eps_m": int(self.eps_m),
+            "eps_e": int(self.eps_e), "c": self.c, "acc_bound": int(row_bounds(self.w, self.b).max(initial=0)),
+            "acc_limit": acc_limit_of(self.width), "w_max": int(np.abs(self.w).max(initial=0)), "s": float(self.s),
+        }
+
+    def problems(self, n_in: int) -> list[str]:
+        out = []
+        if self.w.ndim != 2 or self.w.shape[1] != n_in or not MIN_UNITS <= self.width <= MAX_UNITS:
+            out.append(f"weights of shape {self.w.shape} after {n_in} inputs")
+            return out
+        if any(np.shape(a) != (self.width,) for a in (self.b, self.g, self.bb)):
+            out.append("bias or LayerNorm parameters of the wrong length")
+        acc = int(row_bounds(self.w, self.b).max(initial=0))
+        if acc > acc_limit_of(self.width):
+            out.append(f"accumulator bound {acc} exceeds {acc_limit_of(self.width)}")
+        if not FY_MIN <= self.fy <= FY_MAX:
+            out.append(f"fy={self.fy} outside [{FY_MIN}, {FY_MAX}]")
+        if not 0 <= self.fg <= 15:
+            out.append(f"fg={self.fg} outside [0, 15]")
+        if not 1 <= self.fz + self.fg - self.fy <= 30:
+            out.append(f"u shift fz + fg - fy = {self.fz + self.fg - self.fy} outside [1, 30]")
+        if np.abs(self.bb).max(initial=0) > INT16_MAX:
+            out.append("LayerNorm beta does not fit int16 in Q(fy)")
+        if not (2**14 <= self.eps_m < 2**15 or self.eps_m == 0) or abs(self.eps_e) > 200:
+            out.append(f"eps mantissa/exponent {self.eps_m}, {self.eps_e} out of range")
+        if len(self.gelu) != GELU_N:
+            out.append(f"GELU table has {len(self.gelu)} entries, expected {GELU_N}")
+        return out
+
+
+@dataclass
+class QNet:
+    """Every integer array and every shift of the fixed-point path of any SlipNet."""
+
+    blocks: list[QBlock]
+    w_out: np.ndarray  # int16 (3, H_last)
+    b_out: np.ndarray  # int32 (3,)
+    s_out: float  # head weight scale; logits_real = logits_q / (s_out 2^fy_last)
+    rsqrt_seed: np.ndarray = field(default_factory=rsqrt_seed_table)
+
+    @property
+    def hidden(self) -> tuple[int, ...]:
+        return tuple(b.width for b in self.blocks)
+
+    @property
+    def logit_scale(self) -> float:
+        return self.s_out * 2.0 ** self.blocks[-1].fy
+
+    def scalars(self) -> dict:
+        """Every scalar of the scheme of this network (manifest.json `quantization`, the content hash)."""
+        return {
+            "scheme": SCHEME, "n_in": N_FEATURES, "hidden": list(self.hidden), "n_out": N_CLASSES,
+            "blocks": [b.scalars() for b in self.blocks],
+            "head_w_max": int(np.abs(self.w_out).max(initial=0)),
+            "head_acc_bound": int(row_bounds(self.w_out, self.b_out).max(initial=0)),
+            "eps_cap": EPS_CAP, "gelu_step_log2": GELU_STEP_LOG2, "gelu_n": GELU_N, "rsqrt_seed_bits": RSQRT_SEED_BITS,
+            "s_out": float(self.s_out), "logit_scale": float(self.logit_scale),
+            "feature_lsb": [float(v) for v in FEATURE_LSB],
+        }
+
+    def check_bounds(self) -> None:
+        """The preconditions of the overflow proof of every block; raise ValueError if broken."""
+        problems = []
+        if not 1 <= len(self.blocks) <= MAX_HIDDEN_LAYERS:
+            problems.append(f"{len(self.blocks)} hidden blocks (1 to {MAX_HIDDEN_LAYERS} supported)")
+        n_in = N_FEATURES
+        for i, blk in enumerate(self.blocks):
+            problems += [f"block {i + 1}: {p}" for p in blk.problems(n_in)]
+            n_in = blk.width
+        if self.w_out.shape != (N_CLASSES, n_in) or np.shape(self.b_out) != (N_CLASSES,):
+            problems.append(f"head of shape {self.w_out.shape} after {n_in} units")
+        elif int(row_bounds(self.w_out, self.b_out).max(initial=0)) > INT32_MAX:
+            problems.append("head accumulator bound exceeds int32")
+        if problems:
+            raise ValueError("fixed-point parameters break the scheme's bounds: " + "; ".join(problems))
+
+
+def _quantize_block(fb: FloatBlock, w_scale: np.ndarray | float, b_mult: float, w_max: int,
+                    eps: float) -> QBlock:
+    """One block; the weights are first multiplied by w_scale (the feature LSBs for block 1, else 1) and
+    the bias by b_mult (1 for block 1, else 2^fy of the block before: its input is in Q(fy))."""
+    width = int(fb.w.shape[0])
+    wp = fb.w.astype(np.float64) * w_scale
+    s, wq, bq = _fit_scale(wp, fb.b.astype(np.float64), w_max, acc_limit_of(width), b_mult=b_mult)
 
     # LayerNorm affine: gamma in Q(fg), output in Q(fy) chosen so that |u| < 2^15 always.
-    gamma, beta = fp.gamma.astype(np.float64), fp.beta.astype(np.float64)
+    gamma, beta = fb.gamma.astype(np.float64), fb.beta.astype(np.float64)
     gmax = float(np.abs(gamma).max())
     if gmax >= 2**15:
         raise ValueError(f"LayerNorm weight {gmax:g} too large for the fixed-point scheme")
     fg = 15 if gmax == 0 else min(15, math.floor(math.log2(INT16_MAX / gmax)))
-    u_bound = float((np.abs(gamma) * Z_BOUND + np.abs(beta)).max())
+    u_bound = float((np.abs(gamma) * z_bound_of(width) + np.abs(beta)).max())
     fy = FY_MAX
     while fy > FY_MIN and u_bound * 2**fy + 2 >= 2**15:
         fy -= 1
     if u_bound * 2**fy + 2 >= 2**15:
         raise ValueError(f"LayerNorm output bound {u_bound:g} too large for the fixed-point scheme (needs < {2**15 / 2**FY_MIN:g})")
-    gq = round_away(gamma * 2**fg)
-    bq = round_away(beta * 2**fy)
 
-    # Head: logits in Q(s2 * 2^fy); |g| <= 2^15 - 1 like an int16 input.
-    s2, w2q, b2q = _fit_scale(fp.w2.astype(np.float64), fp.b2.astype(np.float64), w2_max, INT32_MAX, b_mult=2.0**fy)
+    # eps in the units of S = sum(e^2) before the per-sample shifts: eps H (H sigma)^2, sigma = s b_mult
+    # the scale of the accumulator over the real pre-activation.
+    sigma = s * b_mult
+    eps_m, eps_e = _mantissa_exponent(eps * width * (width * sigma) ** 2)
+    return QBlock(w=wq.astype(np.int16), b=bq.astype(np.int32), g=round_away(gamma * 2**fg).astype(np.int16),
+                  bb=round_away(beta * 2**fy).astype(np.int32), gelu=gelu_table(fy), fg=fg, fy=fy,
+                  eps_m=eps_m, eps_e=eps_e, s=float(s))
 
-    # eps in the units of S = sum(e^2) before the per-sample shifts: eps * 30 * (30 s1)^2.
-    eps_m, eps_e = _mantissa_exponent(fp.eps * N_HIDDEN * (N_HIDDEN * s1) ** 2)
 
-    qp = QParams(
-        w1=w1q.astype(np.int16), b1=b1q.astype(np.int32), g=gq.astype(np.int16), bb=bq.astype(np.int32),
-        w2=w2q.astype(np.int16), b2=b2q.astype(np.int32), gelu=gelu_table(fy),
-        fg=fg, fy=fy, eps_m=eps_m, eps_e=eps_e, s1=float(s1), s2=float(s2),
-    )
-    qp.check_bounds()
-    return qp
+def quantize_net(fn: FloatNet, w_max: int = W1_MAX) -> QNet:
+    """Float parameters of any SlipNet -> the fixed-point scheme, block by block, then the head."""
+    blocks: list[QBlock] = []
+    w_scale, b_mult = FEATURE_LSB[None, :], 1.0  # block 1: the feature LSB folded into the weights
+    for fb in fn.blocks:
+        blocks.append(_quantize_block(fb, w_scale, b_mult, w_max, fn.eps))
+        w_scale, b_mult = 1.0, 2.0 ** blocks[-1].fy  # later blocks: int16 input in Q(fy) of the block before
+    # Head: logits in Q(s_out 2^fy); |g| <= 2^15 - 1 like an int16 input.
+    s_out, woq, boq = _fit_scale(fn.w_out.astype(np.float64), fn.b_out.astype(np.float64), w_max, INT32_MAX,
+                                 b_mult=b_mult)
+    net = QNet(blocks, woq.astype(np.int16), boq.astype(np.int32), float(s_out))
+    net.check_bounds()
+    return net
+
+
+def quantize(fp: FloatParams, w1_max: int = W1_MAX, w2_max: int = W2_MAX) -> QParams:
+    """Float SN-S parameters -> integer parameters of the fixed-point scheme (quantize_net's SN-S view)."""
+    if w1_max != w2_max:
+        raise ValueError("one weight width serves every layer")
+    return QParams.from_net(quantize_net(fp.net(), w1_max))

@@ -134,7 +134,7 @@ def make_vectors(model: torch.nn.Module, qparams, inputs: np.ndarray) -> Vectors
     q_inputs, n_sat = quantize_features(inputs, return_saturations=True)
     if qparams is not None:
         q_logits, q_sat = run(qparams, q_inputs)
-    else:  # SN-D: no fixed-point path
+    else:  # --onnx-only: no fixed-point path
         q_logits, q_sat = np.zeros((len(inputs), N_CLASSES), np.int32), np.zeros(len(inputs), np.int32)
     return Vectors(
         inputs=inputs, q_inputs=q_inputs.astype(np.int16), torch_logits=torch_logits, q_logits=q_logits,

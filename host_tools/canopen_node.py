@@ -16,7 +16,7 @@ import can
 
 from .wire.dbc import Frame
 from .binding import CFrame
-from .status_codes import STATUS
+from .status_codes import status
 
 # slipest_nvm_t callbacks
 _READ = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32, ctypes.POINTER(ctypes.c_uint8), ctypes.c_uint32)
@@ -24,7 +24,6 @@ _WRITE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32, ctypes
                           ctypes.c_uint32)
 _ERASE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32)
 
-SLIPEST_OK, SLIPEST_E_NVM, SLIPEST_E_STATE = STATUS["SLIPEST_OK"], STATUS["SLIPEST_E_NVM"], STATUS["SLIPEST_E_STATE"]
 
 
 class CNvm(ctypes.Structure):
@@ -62,25 +61,25 @@ class RamNvm:
 
     def _read(self, _ctx, addr, buf, n):
         if addr + n > len(self.mem):
-            return SLIPEST_E_NVM
+            return status()["SLIPEST_E_NVM"]
         ctypes.memmove(buf, bytes(self.mem[addr:addr + n]), n)
-        return SLIPEST_OK
+        return status()["SLIPEST_OK"]
 
     def _write(self, _ctx, addr, buf, n):
         if addr % self.sector_size or n != self.sector_size or addr + n > len(self.mem):
-            return SLIPEST_E_NVM
+            return status()["SLIPEST_E_NVM"]
         if self.mem[addr:addr + n].count(0xFF) != n:  # programming flash only clears bits: erase first
-            return SLIPEST_E_NVM
+            return status()["SLIPEST_E_NVM"]
         self.mem[addr:addr + n] = ctypes.string_at(buf, n)
         self.writes += 1
-        return SLIPEST_OK
+        return status()["SLIPEST_OK"]
 
     def _erase(self, _ctx, addr):
         if addr % self.sector_size or addr >= len(self.mem):
-            return SLIPEST_E_NVM
+            return status()["SLIPEST_E_NVM"]
         self.mem[addr:addr + self.sector_size] = b"\xff" * self.sector_size
         self.erases += 1
-        return SLIPEST_OK
+        return status()["SLIPEST_OK"]
 
 
 def now_ms() -> int:
@@ -127,7 +126,7 @@ class CCanopenNode:
             if self.nvm is not None:
                 self._store = ctypes.create_string_buffer(self.lib.slipest_co_store_size())
                 st = self.lib.slipest_store_open(self._store, ctypes.byref(self.nvm.struct), None)
-                if st not in (SLIPEST_OK, SLIPEST_E_STATE, SLIPEST_E_NVM):
+                if st not in (status()["SLIPEST_OK"], status()["SLIPEST_E_STATE"], status()["SLIPEST_E_NVM"]):
                     raise OSError(f"slipest_store_open failed ({st})")
             n = self.lib.slipest_co_init(self._co, self.node_id, self.serial, self._store,
                                          self.lib.slipest_bundle_model_q(), self.lib.slipest_bundle_model_f32(),

@@ -51,6 +51,7 @@ class SegmentResult:
     status_problems: list[str]
     expected_received: int
     frames_sent: int
+    statuses: list[StatusReport] = field(default_factory=list)  # every STATUS report, periodic ones included
 
 
 @dataclass
@@ -297,13 +298,49 @@ def _run_segment(link: Link, seg: fault_mod.Segment, ref: Reference, timeout: fl
         result.model_hash_problems.append(
             f"STATUS_MODEL hash {final.model_hash:08x} != bundle {ref.model_hash32:08x}")
     result.host_rx_errors.extend(errors + asm.errors)
-    return SegmentResult(verdicts, unexplained, final, problems, expected_counters.frames_received, len(items))
+    return SegmentResult(verdicts, unexplained, final, problems, expected_counters.frames_received, len(items),
+                         statuses)
+
+
+def _expected_at(items: list, positions: set[int]) -> dict[int, tuple[int, int]]:
+    """(frames_rejected, samples_dropped) the estimator must report once it has received `p` items, for each
+    p in positions (a STATUS report carries frames_received = p)."""
+    model, out = EstimatorModel(), {0: (0, 0)}
+    for i, it in enumerate(items):
+        model.feed(it, i)
+        if i + 1 in positions:
+            c = model.status_snapshot()
+            out[i + 1] = (c.frames_rejected, c.samples_dropped)
+    return out
+
+
+def _observed(f: fault_mod.Fault, fidx: int, items: list, seg: SegmentResult, cache: dict) -> bool:
+    """Whether the node's own STATUS reports show the rejection or drop this fault caused: across the two
+    reports around its frames (the node sends one every few windows and one on request at the end), its
+    counters rose exactly as the replay of those frames predicts, and by at least this fault's own share."""
+    where = [i for i, it in enumerate(items) if it.fault == fidx]
+    if not where or f.frames_rejected + f.samples_dropped == 0:
+        return False  # nothing on the wire or in the counters to observe
+    got = {s.frames_received: (s.frames_rejected, s.samples_dropped) for s in seg.statuses}
+    got[0] = (0, 0)  # a lifetime starts at zero (CONTROL reset is its first frame)
+    before = max(p for p in got if p <= where[0])
+    after = min((p for p in got if p > where[-1]), default=None)
+    if after is None:
+        return False
+    if "expected" not in cache:
+        cache["expected"] = _expected_at(items, set(got))
+    want = cache["expected"]
+    rose = [a - b for a, b in zip(got[after], got[before])]
+    return (rose == [a - b for a, b in zip(want[after], want[before])]
+            and rose[0] >= f.frames_rejected and rose[1] >= f.samples_dropped)
 
 
 def _mark_detected(plan: fault_mod.Plan, result: EmulationResult) -> None:
-    """A fault is detected when its lifetime's counters match the prediction (which includes its
-    effect) and, for faults that must flag their window, the estimator flagged that window."""
-    for f in plan.faults:
+    """A fault is detected when the estimator shows what it caused: the flag on the window it cut short,
+    the rejected frame or dropped sample in the STATUS reports around it, or (restart) the next lifetime's
+    counters starting from zero."""
+    caches: dict[int, dict] = {}
+    for fidx, f in enumerate(plan.faults):
         seg = result.segments[f.segment] if f.segment < len(result.segments) else None
         if seg is None or seg.status is None or seg.status_problems:
             continue
@@ -316,7 +353,7 @@ def _mark_detected(plan: fault_mod.Plan, result: EmulationResult) -> None:
             wins = [v for v in seg.verdicts if v.expected.window_index == f.window]
             f.detected = bool(wins) and wins[0].got is not None and bool(wins[0].got.flags & FLAG_GAP)
         else:
-            f.detected = True
+            f.detected = _observed(f, fidx, plan.segments[f.segment].items, seg, caches.setdefault(f.segment, {}))
 
 
 def soak_source(frames: int, seed: int, scale: float, base: TelemetrySource | None = None) -> TelemetrySource:

@@ -1,7 +1,8 @@
 """Build the C estimator (CMake) and run the host emulator `slipest_emu` on a pseudo-terminal.
 
 `fleetlab emulate` builds on demand: one build directory per bundle and DBC under
-`build/emulate*` (`$FLEETLAB_BUILD_ROOT` instead of `build/` if set), configured with
+`<build root>/emulate*` (`fleetlab.paths.build_root`: `build/` in a clone, the user's cache folder for
+an installed wheel, `$FLEETLAB_BUILD_ROOT` if set), configured with
 `-DSLIPEST_BUNDLE=<bundle> -DSLIPEST_DBC=<dbc in use>`, guarded by a file lock so concurrent
 runs do not race. The emulator opens a pty itself and prints its path; we read it from
 the emulator's stdout.
@@ -13,14 +14,14 @@ import fcntl
 import hashlib
 import os
 import re
-import shutil
 import signal
 import subprocess
 import threading
 import time
 from pathlib import Path
 
-from fleetlab.paths import build_root, default_bundle, repo_root
+from fleetlab.system_tools import need
+from fleetlab.paths import build_root, default_bundle
 from .wire.dbc import DBC_PATH, dbc_path
 from .firmware.build import build_command, configure_command
 
@@ -64,9 +65,7 @@ def build(bundle: Path | str | None = None, targets: tuple[str, ...] = (EMULATOR
     bundle = Path(bundle) if bundle else default_bundle()
     if not (bundle / "slipest_model_q.h").is_file():
         raise OSError(f"{bundle}: not an export bundle (no slipest_model_q.h)")
-    for tool in ("cmake",):
-        if shutil.which(tool) is None:
-            raise OSError(f"{tool} not found on PATH (scripts/setup.sh installs it)")
+    need("cmake", "building the host emulator (fleetlab emulate, stream, upload --emulate)")
     dbc = dbc_path()
     bdir = build_dir_for(bundle, dbc)
     bdir.mkdir(parents=True, exist_ok=True)

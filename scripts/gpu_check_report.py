@@ -22,7 +22,9 @@ def main(folder: Path) -> int:
         g = s["sn-s"]
         print(f"device: {g['device']}")
         print(f"SN-S generation, one run:  {g['generation_ms']:.4f} ms (goal <= 0.15 ms; fitness call alone "
-              f"{g['fitness_ms']:.4f} ms; {g['batch_runs']} runs batched: {g['batched_generation_ms']:.4f} ms per "
+              f"{g['fitness_ms']:.4f} ms; one more generation {g.get('generation_ms_steady', float('nan')):.4f} ms; "
+              f"eager {g['generation_ms_eager']:.4f} ms; graph run == eager run: {g.get('cuda_graph_same_search')}; "
+              f"{g['batch_runs']} runs batched: {g['batched_generation_ms']:.4f} ms per "
               f"generation, {g['per_run_generation_ms']:.4f} ms per run)")
     if s["sn-d"]:
         g = s["sn-d"]
@@ -43,18 +45,27 @@ def main(folder: Path) -> int:
     if c["sn-d"]:
         print(f"CPU on this host: SN-D run {c['sn-d']['full_run_s']:.3f} s ({c['sn-d']['threads']} threads), generation "
               f"{c['sn-d']['full_generation_ms']:.3f} ms")
-    gpu, cpu = load(folder, "table_sn-s_gpu.json"), load(folder, "table_sn-s_cpu.json")
-    if gpu and cpu:
-        worst = 0.0
-        for m in gpu["results"]:
-            for size in gpu["results"][m]:
-                for metric in ("balanced_accuracy", "macro_f1"):
-                    a, b = gpu["results"][m][size][metric]["mean"], cpu["results"][m][size][metric]["mean"]
-                    worst = max(worst, abs(a - b))
-                    print(f"SN-S 30-run table {m} |D_Cal|={size} {metric:17s} GPU {a:.4f} CPU {b:.4f} diff {a - b:+.4f}")
-        verdict = "within" if worst <= SCORE_TOLERANCE else "OUTSIDE"
-        print(f"largest |GPU - CPU| of the table's means: {worst:.4f} ({verdict} +-{SCORE_TOLERANCE})")
+    cpu = load(folder, "table_sn-s_cpu.json")
+    for name, what in (("table_sn-s_gpu_host_rng.json", "--rng host, the CPU's random numbers: the criterion"),
+                       ("table_sn-s_gpu.json", "--rng device, another random stream: information only")):
+        gpu = load(folder, name)
+        if gpu and cpu:
+            compare(gpu, cpu, what)
     return 0
+
+
+def compare(gpu: dict, cpu: dict, what: str) -> None:
+    """Each mean score of the GPU's SN-S table against the CPU's, and the largest difference."""
+    print(f"SN-S 30-run table, GPU ({what}) vs CPU:")
+    worst = 0.0
+    for m in gpu["results"]:
+        for size in gpu["results"][m]:
+            for metric in ("balanced_accuracy", "macro_f1"):
+                a, b = gpu["results"][m][size][metric]["mean"], cpu["results"][m][size][metric]["mean"]
+                worst = max(worst, abs(a - b))
+                print(f"  {m} |D_Cal|={size} {metric:17s} GPU {a:.4f} CPU {b:.4f} diff {a - b:+.4f}")
+    verdict = "within" if worst <= SCORE_TOLERANCE else "OUTSIDE"
+    print(f"  largest |GPU - CPU| of the table's means: {worst:.4f} ({verdict} +-{SCORE_TOLERANCE})")
 
 
 if __name__ == "__main__":

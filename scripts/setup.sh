@@ -15,7 +15,8 @@ cd "$ROOT"
 source scripts/venv.sh
 
 need_apt() { for p in "$@"; do dpkg -s "$p" >/dev/null 2>&1 || printf ' %s' "$p"; done; }
-APT_PACKAGES=$(grep -v '^[[:space:]]*#' scripts/apt-packages.txt | tr '\n' ' ')
+# first word of each line: the package (the words after it name its commands, for tests/required.py)
+APT_PACKAGES=$(grep -v '^[[:space:]]*#' scripts/apt-packages.txt | awk 'NF {print $1}' | tr '\n' ' ')
 missing=$(need_apt $APT_PACKAGES)
 PY=${PYTHON:-python3}
 # a venv needs ensurepip, which Debian ships separately (python3-venv / python3.X-venv)

@@ -2,10 +2,12 @@
 (cppcheck addon) against the recorded deviations, static analysers, and C statement/branch coverage.
 
 None of these skip: the tools come from scripts/apt-packages.txt (cppcheck, clang-tidy,
-frama-c-base) and the test extras (gcovr); a missing tool fails the test with its name.
+frama-c-base) and the test extras (gcovr); a missing tool fails the test naming its Debian package
+(fleetlab.system_tools). Every analyser also has a negative control here: a planted defect it must report.
 """
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -14,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from fleetlab.paths import repo_root
+from doc_figures import assert_near, worst_case_instructions
 
 REPO = repo_root()
 
@@ -84,7 +87,7 @@ def test_misra_checker_fails_on_an_unrecorded_deviation(tmp_path, misra_findings
     """The checker can fail: drop one permit's rows and its section from a copy of the record."""
     from fleetlab.assurance import misra
 
-    text = misra.DEVIATIONS.read_text()
+    text = misra.deviations_file().read_text()
     trimmed = "\n".join(line for line in text.splitlines()
                         if not line.startswith("| 13.4 |") and not line.startswith("### MD-13.4"))
     record = tmp_path / "MISRA_DEVIATIONS.md"
@@ -131,6 +134,7 @@ def test_frama_c_eva_over_all_int16_inputs():
     res = {e.entry: e for e in analysers.frama_c_eva(BUNDLE)}
     assert set(res) == {"eva_infer_q", "eva_features"}
     assert res["eva_features"].alarms == [], "\n".join(res["eva_features"].alarms)
+    assert window_features_reached(res["eva_features"].log)  # the zero covers the window-closing path
     infer = res["eva_infer_q"]
     assert "Frama_C_show_each_class: {0; 1; 2}" in infer.log  # the analysis ran through the whole kernel
     assert infer.alarms == [], "\n".join(infer.alarms)
@@ -140,8 +144,9 @@ def test_frama_c_eva_finds_an_overflow(tmp_path):
     """The kernel's zero is not vacuous: without the saturation that states |e| < 2^14 (a bound that holds
     only through e's relation to max|d|), EVA reports the possible overflow of e * e."""
     from fleetlab.assurance import analysers
-    from fleetlab.assurance.sources import FW
+    from fleetlab.assurance.sources import fw
 
+    FW = fw()
     src = (FW / "src" / "slipest_infer_q.c").read_text()
     with_sat = "int32_t e = SAT(rsr_h(NH * SAT(h[i], 25) - sum, k2_half, k2), 14);"
     assert with_sat in src
@@ -151,6 +156,69 @@ def test_frama_c_eva_finds_an_overflow(tmp_path):
         src.replace(with_sat, "int32_t e = rsr_h(NH * SAT(h[i], 25) - sum, k2_half, k2);"))
     (res,) = analysers.frama_c_eva(BUNDLE, entries=["eva_infer_q"], src_dir=tmp_path)
     assert any("e * e" in a for a in res.alarms), "\n".join(res.alarms)
+
+
+# planted defects, one scratch file each, put among the library's sources: each analyser must report its own
+# (a configuration that turns every check off, or a changed output format, would read as clean)
+PLANTED = {
+    # bugprone-suspicious-memset-usage: value and size swapped, so nothing is cleared
+    "clang_tidy": ("#include <stdint.h>\n#include <string.h>\nvoid clear(int32_t *v, int n);\n"
+                   "void clear(int32_t *v, int n) { memset(v, n, 0); }\n",
+                   ["bugprone-suspicious-memset-usage"]),
+    # a double fclose and a use after free
+    "gcc_analyzer": ("#include <stdio.h>\n#include <stdlib.h>\nint twice(const char *path);\nint after(int n);\n"
+                     "int twice(const char *path) {\n  FILE *f = fopen(path, \"r\");\n  if (f == NULL) return -1;\n"
+                     "  (void)fclose(f);\n  return fclose(f);\n}\n"
+                     "int after(int n) {\n  int *p = malloc(sizeof *p);\n  if (p == NULL) return -1;\n  *p = n;\n"
+                     "  free(p);\n  return *p;\n}\n",
+                     ["-Wanalyzer-double-fclose", "-Wanalyzer-use-after-free"]),
+}
+
+
+@pytest.mark.parametrize("tool", sorted(PLANTED))
+def test_static_analyser_reports_a_planted_defect(tool, tmp_path, monkeypatch):
+    """Negative control: the same call that finds the library clean reports the planted defect."""
+    from fleetlab.assurance import analysers
+
+    text, expected = PLANTED[tool]
+    bad = tmp_path / "planted.c"
+    bad.write_text(text)
+    monkeypatch.setattr(analysers, "library_sources", lambda: [bad])
+    res = getattr(analysers, tool)(BUNDLE)
+    assert not res.clean
+    for check in expected:
+        assert any("planted.c" in f and check in f for f in res.findings), (check, res.findings)
+
+
+def window_features_reached(log: str) -> bool:
+    """The driver's reachability marker (eva_driver.c): EVA printed the values slipest_window_features_q
+    returns for a window the extractor closed, 0 (features computed) among them. Without it, "no alarm"
+    could mean that EVA decided no window ever closes and never analysed the feature code."""
+    for values in re.findall(r"Frama_C_show_each_window_features: (\S+)", log):
+        if values.startswith("{") and 0 in {int(v) for v in values.strip("{}").split(";")}:
+            return True
+        m = re.fullmatch(r"\[(-?\d+)\.\.(-?\d+)\]", values)
+        if m and int(m[1]) <= 0 <= int(m[2]):
+            return True
+    return False
+
+
+def test_frama_c_eva_finds_an_overflow_in_the_feature_extractor(tmp_path):
+    """Negative control of the extractor's proof: with the 64-bit widening of S * S removed from the variance
+    of a closed window, EVA reports the signed overflow (reached only through a closed window)."""
+    from fleetlab.assurance import analysers
+    from fleetlab.assurance.sources import FW
+
+    src = (FW / "src" / "slipest_features.c").read_text()
+    wide = "uint64_t d = (uint64_t)(nn * q - (int64_t)s * s);"
+    assert wide in src
+    for f in (FW / "src").iterdir():
+        (tmp_path / f.name).write_bytes(f.read_bytes())
+    (tmp_path / "slipest_features.c").write_text(src.replace(wide, "uint64_t d = (uint64_t)(nn * q - s * s);"))
+    (res,) = analysers.frama_c_eva(BUNDLE, entries=["eva_features"], src_dir=tmp_path)
+    assert window_features_reached(res.log)
+    assert any("slipest_features.c" in a and "overflow" in a and "s * s" in a for a in res.alarms), \
+        "\n".join(res.alarms)
 
 
 def test_static_analyser_can_fail(tmp_path, monkeypatch):
@@ -215,6 +283,11 @@ def test_worst_case_instruction_counts_on_the_reference_target():
     worst = wcet.per_function(rows)
     assert worst["slipest_node_handle"] > worst["slipest_infer_q"] > 4 * worst["slipest_extractor_push"] > 0, \
         wcet.table(rows)
+    # each maximum within +-10 % of the figure docs/assurance.md publishes (a rise fails until the docs say so)
+    published = worst_case_instructions()
+    assert set(published) == set(worst), (published, worst)
+    for fn, n in worst.items():
+        assert_near(n, published[fn], f"worst-case instructions of {fn}")
 
 
 def test_worst_case_parser_rejects_incomplete_output():

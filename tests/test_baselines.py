@@ -81,6 +81,21 @@ def test_baseline_returns_a_model_better_than_chance(problem, name):
     assert balanced_accuracy(flat, problem["x_test"], problem["y_test"]) > 0.8
 
 
+def test_modelswarm_improves_on_weak_experts(problem):
+    """The experts of `problem` already score above 0.8, so returning one of them would pass the test above.
+    From weak experts (one epoch on 60 rows each: about chance for two of them) the swarm must find a model
+    better than the best of them, on D_Cal and on held-out rows."""
+    weak = [train_classifier(copy.deepcopy(build(ARCH, seed=s)), *blobs(60, shift, s), epochs=1, seed=s)
+            for s, shift in enumerate((0.0, 0.4, -0.4))]
+    aligned = torch.stack(align_to_reference(weak, ARCH))
+    loss = cal_objective(ARCH, problem["x_cal"], problem["y_cal"])
+    swarm = bl.modelswarm(aligned, ARCH, problem["x_cal"], problem["y_cal"], seed=1, steps=STEPS)
+    best_expert = max(balanced_accuracy(a, problem["x_test"], problem["y_test"]) for a in aligned)
+    assert best_expert < 0.75  # the starting point leaves room to improve
+    assert float(loss(swarm.unsqueeze(0))[0]) < 0.95 * float(loss(aligned).min())
+    assert balanced_accuracy(swarm, problem["x_test"], problem["y_test"]) > best_expert + 0.03
+
+
 @pytest.mark.parametrize("name", ["evomerge", "modelswarm", "distill", "model-base"])
 def test_baseline_is_deterministic_for_a_seed(problem, name):
     assert torch.equal(BASELINES[name](problem), BASELINES[name](problem))

@@ -69,6 +69,12 @@ def wait_emcy(node, code: int, timeout: float = 2.0) -> bool:
     return False
 
 
+def heartbeat_reaches(node, state: str, beats: int = 100) -> bool:
+    """True once a heartbeat reports `state` (the event an NMT command's effect is read from); the count of
+    heartbeats waited for is only a safety net, not a deadline the node must meet."""
+    return any(node.nmt.wait_for_heartbeat(2) == state for _ in range(beats))
+
+
 def run_windows(s: CanopenSession, samples: np.ndarray) -> list:
     s.master.node.tpdo.read()  # the PDO maps, read from the node by SDO
     col = EstimateCollector(s.master.node)
@@ -110,6 +116,34 @@ def test_pdo_payloads_are_the_dbc_frames_and_cob_ids_the_predefined_set():
                                                    (4, False): "I"}[(s, g)] for s, g in zip(sizes, signed))
 
 
+def test_heartbeats_are_counted_on_the_nodes_own_tick(bdir):
+    """The producer heartbeat time, counted against the node's millisecond tick (a simulated clock given to
+    slipest_co_tick, no wall time): one heartbeat per second at the default, twenty at 50 ms, evenly spaced."""
+    from fleetlab.host_tools.canopen_node import CCanopenNode
+    from fleetlab.host_tools.wire.dbc import Frame
+
+    from fleetlab.host_tools.canopen_node import now_ms
+
+    node = CCanopenNode(find_artifact(bdir, "libslipest_host.so"), NODE_ID)  # boots at the tick now_ms()
+    # half the 32-bit tick away from boot: the node measures differences modulo 2^32, so any tick works;
+    # this one is surely past one period after the boot
+    t0 = now_ms() + 2**31
+
+    def heartbeats(start: int, stop: int) -> list[int]:
+        return [t for t in range(start, stop) for f in node.tick(t & 0xFFFFFFFF) if f.can_id == 0x700 + NODE_ID]
+
+    first = heartbeats(t0, t0 + 1)  # the first tick after boot is over any period: it sends at once
+    assert len(first) == 1
+    default = heartbeats(t0 + 1, t0 + 3001)
+    assert len(default) == 3 and np.diff(default).tolist() == [od.HEARTBEAT_MS] * 2
+    # SDO expedited download of 50 ms into 0x1017:00, answered with the download response
+    (ack,) = node.handle(Frame(0x600 + NODE_ID, bytes([0x2B, 0x17, 0x10, 0x00, 50, 0, 0, 0])),
+                         (t0 + 3001) & 0xFFFFFFFF)
+    assert ack.can_id == 0x580 + NODE_ID and ack.data[0] == 0x60
+    fast = heartbeats(t0 + 3001, t0 + 4001)
+    assert len(fast) == 20 and set(np.diff(fast).tolist()) == {50}
+
+
 @pytest.mark.parametrize("link", LINKS)
 def test_nmt_heartbeat_and_sdo_reads(bdir, tmp_path, link):
     with open_session(link, bdir, tmp_path) as s:
@@ -117,21 +151,20 @@ def test_nmt_heartbeat_and_sdo_reads(bdir, tmp_path, link):
         s.reset_node()
         assert node.nmt.wait_for_heartbeat(3) == "PRE-OPERATIONAL"
         node.sdo[0x1017].raw = 50
-        t0 = time.monotonic()
+        # the period itself is counted on the node's tick (test_heartbeats_are_counted_on_the_nodes_own_tick)
+        assert node.sdo[0x1017].raw == 50
         for _ in range(3):
             node.nmt.wait_for_heartbeat(1)
-        assert time.monotonic() - t0 < 0.9  # 3 heartbeats at 50 ms, not at the default 1 s
         for cmd, state in (("OPERATIONAL", "OPERATIONAL"), ("STOPPED", "STOPPED"),
                            ("PRE-OPERATIONAL", "PRE-OPERATIONAL")):
             node.nmt.state = cmd
-            time.sleep(0.15)
-            assert node.nmt.wait_for_heartbeat(1) == state
+            assert heartbeat_reaches(node, state)
         node.nmt.state = "STOPPED"
-        time.sleep(0.1)
+        assert heartbeat_reaches(node, "STOPPED")
         with pytest.raises(canopen.SdoCommunicationError):  # a stopped node has no SDO server
             node.sdo[0x1000].raw
         node.nmt.state = "PRE-OPERATIONAL"
-        time.sleep(0.1)
+        assert heartbeat_reaches(node, "PRE-OPERATIONAL")
         ident = s.master.identity()
         assert ident == {"vendor_id": od.VENDOR_ID, "product_code": od.PRODUCT_CODE, "revision": od.REVISION,
                          "serial": 1}
@@ -212,7 +245,10 @@ def test_python_ram_nvm_keeps_the_strict_nvm_rules() -> None:
     short or out-of-range write is refused (SLIPEST_E_NVM) and changes nothing; after an erase it is taken."""
     import ctypes
 
-    from fleetlab.host_tools.canopen_node import SLIPEST_E_NVM, SLIPEST_OK, RamNvm
+    from fleetlab.host_tools.canopen_node import RamNvm
+    from fleetlab.host_tools.status_codes import status
+
+    SLIPEST_OK, SLIPEST_E_NVM = status()["SLIPEST_OK"], status()["SLIPEST_E_NVM"]
 
     nvm = RamNvm(sector_size=64, n_sectors=4)
     buf = (ctypes.c_uint8 * 64)(*([0x5A] * 64))

@@ -7,15 +7,14 @@ import shutil
 import subprocess
 from pathlib import Path
 
-import pytest
+from required import need_tool
 
 REPO = Path(__file__).resolve().parents[1]
 INCLUDE = REPO / "firmware_c" / "include"
 
 
 def run_doxygen(input_dir: Path, out: Path) -> subprocess.CompletedProcess:
-    if shutil.which("doxygen") is None:
-        pytest.fail("doxygen is not installed: scripts/setup.sh installs it (scripts/apt-packages.txt)")
+    need_tool("doxygen")
     # the project's Doxyfile, with the input and output directories overridden on stdin
     cfg = (REPO / "firmware_c" / "Doxyfile").read_text() + f"\nINPUT = {input_dir}\nOUTPUT_DIRECTORY = {out}\n"
     return subprocess.run(["doxygen", "-"], input=cfg, cwd=REPO, capture_output=True, text=True, timeout=120)

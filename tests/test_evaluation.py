@@ -16,6 +16,7 @@ from fleetlab.evaluation.methods import parse_methods, selectable
 from fleetlab.evaluation.metrics import classification_metrics
 from fleetlab.evaluation.tables import markdown_table
 from fleetlab.fusion.registry import Budget
+from required import need_module
 
 TINY = Budget(steps=3, ants=6)
 
@@ -94,7 +95,7 @@ def test_same_seed_same_numbers_sequential_vs_processes(dataset, small_settings,
 
 
 def test_dask_backend_gives_identical_results(dataset, small_settings, loky_result):
-    distributed = pytest.importorskip("dask.distributed")
+    distributed = need_module("dask.distributed", "dask")
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster:
         on_dask = run_mccv(dataset, small_settings, backend="dask", scheduler=cluster.scheduler_address,
@@ -224,7 +225,8 @@ def test_fleet_ablation_and_calibration_fit_in_an_evaluation(dataset):
     res = result["results"]
     assert set(res) == set(settings.all_methods)
     runs = {m: res[m]["150"]["balanced_accuracy"]["runs"] for m in res}
-    assert runs["acomerge-earth-only"] != runs["acomerge"] != runs["acomerge-fleet-only"]
+    earth, both, fleet = runs["acomerge-earth-only"], runs["acomerge"], runs["acomerge-fleet-only"]
+    assert earth != both and both != fleet and earth != fleet  # three different searches, pairwise
     for m in res:
         fit = res[m]["150"]["calibration_fit"]["balanced_accuracy"]
         assert 0.0 <= fit["mean"] <= 1.0 and fit["std"] >= 0.0

@@ -200,13 +200,19 @@ def test_edited_vectors_fail_the_check(exported, tmp_path) -> None:
         check_bundle(c)
 
 
-def test_sn_d_is_refused_for_c_headers(tmp_path) -> None:
+def test_sn_d_exports_the_whole_bundle_from_the_cli(tmp_path) -> None:
+    """Issue 28: an SN-D goes to the C path too (layer-table headers, vectors, manifest); model.img is
+    skipped with a message that says why; --onnx-only still writes ONNX alone."""
     p = save_model(tmp_path / "d.pt", build("sn-d", seed=0))
-    res = fleetlab("export", str(p), "--out", str(tmp_path / "bd"))
-    assert res.returncode == 1 and "SN-S only" in res.stderr and "--onnx-only" in res.stderr
-    res = fleetlab("export", str(p), "--out", str(tmp_path / "bd"), "--onnx-only", "--check")
+    res = fleetlab("export", str(p), "--out", str(tmp_path / "bd"), "--builtin-vectors", "--check")
     assert res.returncode == 0, res.stderr
-    assert (tmp_path / "bd" / "model.onnx").is_file() and not (tmp_path / "bd" / "slipest_model_q.h").exists()
+    assert "no model.img" in res.stderr + res.stdout and "bit for bit" in res.stdout
+    for name in ("model.onnx", "slipest_model_q.h", "slipest_model_f32.h", "vectors.bin", "manifest.json"):
+        assert (tmp_path / "bd" / name).is_file(), name
+    assert not (tmp_path / "bd" / "model.img").exists()
+    res = fleetlab("export", str(p), "--out", str(tmp_path / "bo"), "--onnx-only", "--check")
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "bo" / "model.onnx").is_file() and not (tmp_path / "bo" / "slipest_model_q.h").exists()
 
 
 def test_bad_model_file_gives_one_line_error(tmp_path) -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -11,6 +10,7 @@ import pytest
 
 from fleetlab.export.bundle import export_bundle
 from fleetlab.export.vectors import draw_inputs
+from required import need_tool as need
 
 REPO = Path(__file__).resolve().parents[1]
 INCLUDE = REPO / "firmware_c" / "include"
@@ -23,13 +23,6 @@ CHECK_SRC = REPO / "export" / "c" / "check_vectors.c"
 EXAMPLE = REPO / "firmware_c" / "bundles" / "example"
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 ARM_GCC = "arm-none-eabi-gcc"
-
-
-def need(tool: str) -> str:
-    path = shutil.which(tool)
-    if path is None:
-        pytest.skip(f"{tool} is not installed (scripts/setup.sh installs it)")
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -86,8 +79,11 @@ def test_fixed_point_kernel_has_no_float_and_fits(cpu, tmp_path) -> None:
     """No soft-float helper on a core without FPU; flash (code + model) <= 6 KB; no RAM but the stack."""
     cc = need(ARM_GCC)
     obj = tmp_path / "q.o"
-    # the kernel and the example model (the const struct the bundle's header defines), as one object
-    base = [cc, *STRICT, "-Os", f"-mcpu={cpu}", "-mthumb", "-mfloat-abi=soft", "-fstack-usage", f"-I{INCLUDE}", f"-I{EXAMPLE}"]
+    # the kernel and the example model (the const struct the bundle's header defines), as one object; an
+    # SN-S bundle builds without the layer-table kernel (CMake's SLIPEST_LAYER_TABLE follows the bundle),
+    # whose stack scratch is sized by the caps instead (test_layer_table_kernel_stack_follows_the_caps)
+    base = [cc, *STRICT, "-Os", f"-mcpu={cpu}", "-mthumb", "-mfloat-abi=soft", "-fstack-usage", f"-I{INCLUDE}", f"-I{EXAMPLE}",
+            "-DSLIPEST_LAYER_TABLE=0"]
     parts = []
     for src in (KERNELS[0], REPO / "firmware_c" / "src" / "slipest_bundle_q.c"):
         parts.append(tmp_path / (src.stem + ".o"))
@@ -105,6 +101,23 @@ def test_fixed_point_kernel_has_no_float_and_fits(cpu, tmp_path) -> None:
     assert sec.get(".data", 0) == 0 and sec.get(".bss", 0) == 0, sizes
     stack = max(int(m[1]) for m in re.finditer(r"\t(\d+)\t", (tmp_path / "q.su").read_text()))
     assert stack <= 512, (tmp_path / "q.su").read_text()
+
+
+@pytest.mark.parametrize("width", [256, 128, 32])
+def test_layer_table_kernel_stack_follows_the_caps(width, tmp_path) -> None:
+    """The layer-table kernel's frame is its scratch, 6 bytes per unit of SLIPEST_MAX_WIDTH, plus a bounded
+    rest; it has no .data/.bss and no soft-float helper on the M0."""
+    cc = need(ARM_GCC)
+    obj = tmp_path / "k.o"
+    res = subprocess.run([cc, *STRICT, "-Os", "-mcpu=cortex-m0", "-mthumb", "-mfloat-abi=soft", "-fstack-usage",
+                          f"-I{INCLUDE}", f"-DSLIPEST_MAX_WIDTH={width}", "-c", str(KERNELS[0]), "-o", str(obj)],
+                         capture_output=True, text=True, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    su = (tmp_path / "k.su").read_text()
+    frames = {m[1]: int(m[2]) for m in re.finditer(r":(\w+)(?:\.\w+)*\t(\d+)\t", su)}
+    assert 6 * width <= frames["infer_layers"] <= 6 * width + 128, su
+    nm = subprocess.run([need("arm-none-eabi-nm"), "-u", str(obj)], capture_output=True, text=True).stdout
+    assert not re.search(r"__aeabi_[fd]|__(add|sub|mul|div)[sd]f3|__float|__fix", nm), nm
 
 
 def test_c_counts_saturations_and_breaks_ties_like_the_reference(tmp_path) -> None:

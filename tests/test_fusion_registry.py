@@ -14,11 +14,14 @@ from fleetlab.fusion.registry import FusedModel, FusionInputs
 from fleetlab.models import flatten, load_model
 
 NAME = "mean-of-experts"
+FITTED: list[torch.Tensor] = []  # every model the throw-away method returned in this process
 
 
 def fit_mean_of_experts(inputs: FusionInputs) -> FusedModel:
     """Throw-away method: the plain average of the aligned experts (no calibration data used)."""
-    return FusedModel(method=NAME, arch=inputs.arch, flat=inputs.aligned.mean(dim=0))
+    flat = inputs.aligned.mean(dim=0)
+    FITTED.append(flat.clone())
+    return FusedModel(method=NAME, arch=inputs.arch, flat=flat)
 
 
 @pytest.fixture
@@ -64,6 +67,7 @@ def test_throwaway_method_through_fuse(throwaway_method, real_data_dir, tmp_path
 
 
 def test_throwaway_method_through_evaluate(throwaway_method, real_data_dir, tmp_path):
+    FITTED.clear()
     out = tmp_path / "eval.json"
     assert main(["evaluate", "--data", str(real_data_dir), "--methods", f"{NAME},earth-ft", "--runs", "2",
                  "--cal-size", "150", "--epochs", "1", "--generations", "3", "--jobs", "1", "--no-progress",
@@ -74,3 +78,4 @@ def test_throwaway_method_through_evaluate(throwaway_method, real_data_dir, tmp_
     # the average of fixed experts does not depend on the draw's calibration rows: both runs score
     # the same model, on their own test rows
     assert len(scores["runs"]) == 2 and all(0.0 <= s <= 1.0 for s in scores["runs"])
+    assert len(FITTED) == 2 and torch.equal(FITTED[0], FITTED[1])

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import socket
 import threading
-import time
 from pathlib import Path
 
 import can
@@ -96,11 +95,11 @@ def test_realtime_pacing_follows_50_hz(lib):
 
     src = TelemetrySource("noise", rng.integers(-500, 500, size=(100, 7)).astype(np.int16), [])
     with InprocLink(lib) as link:
-        t0 = time.perf_counter()
         stats = stream(link, timed_frames(src), True, TrafficLog(None), progress=False)
-        wall = time.perf_counter() - t0
-    assert len(stats.estimates) == 1
-    assert 99 / 50 - 0.05 <= wall < 99 / 50 + 1.5  # the 100th sample is due 1.98 s after the first
+    assert len(stats.estimates) == 1 and stats.frames_sent == 300 + 2  # with CONTROL reset and status
+    # paced: the 100th sample is due 1.98 s after the first, so the run cannot be shorter (a load can only
+    # make it longer, so there is no upper bound here)
+    assert stats.wall_s >= 99 / 50 - 0.05
 
 
 def _socketcan_available(channel: str) -> bool:

@@ -124,6 +124,7 @@ ARGPARSE_OUTSIDE_CLI = {
     "dbc/layout.py": "run by CMake as a script, without fleetlab installed",
     "export/erf_table.py": "maintainer script (python -m), regenerates the GELU erf header",
     "export/example.py": "maintainer script (python -m), regenerates the example bundle",
+    "host_tools/bench_link.py": "fleetlab bench link options (the bench modules' pattern, not yet moved)",
     "host_tools/firmware/bench.py": "fleetlab bench c options (not yet moved)",
     "host_tools/wire/dbc.py": "the shared --dbc option (not yet moved)",
     "toolchain/data/bench.py": "fleetlab bench data options (not yet moved)",

@@ -137,3 +137,125 @@ def test_bench_reports_idle_and_loaded_runs(capsys):
     assert busy["run_s_loaded_all_cores"] > 0 and 1 <= busy["threads_loaded"] <= busy["threads_all_cores"]
     assert busy["goals"] == {"run_s_idle": 0.35, "run_s_loaded": 0.6,
                              "met": busy["run_s_idle"] <= 0.35 and busy["run_s_loaded"] <= 0.6}
+
+
+# --- the whole generation as one CUDA graph, and --rng host (issue 30 follow-up) ----------
+
+def _state(experts, cals, cfg, seeds):
+    from fleetlab.fusion.lockstep import _Lockstep, generators
+
+    chk = _checked(experts, seeds)
+    ex = torch.stack([c[1] for c in chk])
+    cand = torch.stack([c[2] for c in chk])
+    return _Lockstep(ex, cand, StackedFitness("sn-s", cals[: len(seeds)]), cfg, generators(seeds, ex.device))
+
+
+def _tensors(state) -> dict[str, torch.Tensor]:
+    out = {k: v for k, v in vars(state).items() if isinstance(v, torch.Tensor)}
+    out.update({f"hist.{k}": v for k, v in state.hist.items()})
+    return out
+
+
+@pytest.mark.parametrize("heuristic", ["constant", "best_distance"])
+def test_generation_changes_its_state_only_in_place(cals, experts, heuristic):
+    """A CUDA graph replays the kernels of one capture on the same addresses: every tensor a
+    generation or an IWOA move reads or writes must stay the same tensor, run after run."""
+    cfg = dataclasses.replace(TINY, heuristic=heuristic)
+    state = _state(experts, cals, cfg, [5, 6])
+    before = {k: (v.data_ptr(), v.shape) for k, v in _tensors(state).items()}
+    first_tau = state.tau.clone()
+    for g in range(cfg.generations):
+        state.generation()
+        if state.iwoa_flags[g]:
+            state.iwoa()
+    after = {k: (v.data_ptr(), v.shape) for k, v in _tensors(state).items()}
+    assert after == before
+    assert int(state.g) == cfg.generations and int(state.c) == sum(state.iwoa_flags) == 3
+    assert not torch.equal(state.tau, first_tau) and (state.hist["ants"] != 0).all()
+
+
+def test_replay_wrapper_steps_the_same_search_as_direct_calls(cals, experts):
+    """The loop search_lockstep drives (through _Replayed, eager here) equals calling the steps by
+    hand, generation for generation: the graph path adds no step and skips none."""
+    from fleetlab.fusion.lockstep import _Replayed
+
+    seeds = [5, 6]
+    direct = _state(experts, cals, TINY, seeds)
+    wrapped = _state(experts, cals, TINY, seeds)
+    gen_step = _Replayed(wrapped.generation, torch.device("cpu"), wrapped.gens, "generation")
+    iwoa_step = _Replayed(wrapped.iwoa, torch.device("cpu"), wrapped.gens, "IWOA move")
+    assert not gen_step.enabled  # graphs only on CUDA
+    for g in range(TINY.generations):
+        direct.generation()
+        gen_step()
+        if direct.iwoa_flags[g]:
+            direct.iwoa()
+            iwoa_step()
+        for name, value in _tensors(direct).items():
+            assert torch.equal(value, _tensors(wrapped)[name]), (g, name)
+
+
+def test_failed_capture_warns_once_and_steps_eagerly(monkeypatch, capsys):
+    """Where a capture fails, the step runs eagerly from then on, after one warning line, and the
+    generators are where they were before the attempt."""
+    from fleetlab.fusion import lockstep
+
+    class NoGraph:
+        def __init__(self):
+            raise RuntimeError("operation not permitted when stream is capturing\nmore detail")
+
+    monkeypatch.setattr(lockstep.torch.cuda, "CUDAGraph", NoGraph)
+    gen = torch.Generator().manual_seed(3)
+    drawn = []
+    step = lambda: drawn.append(float(torch.rand(1, generator=gen)))  # noqa: E731
+    replay = lockstep._Replayed(step, torch.device("cpu"), [gen], "generation", warm=0)
+    replay.enabled = True  # as on a GPU
+    for _ in range(3):
+        replay()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "CUDA graph capture of the AcoMerge generation failed" in err[0]
+    assert "operation not permitted" in err[0] and not replay.replaying and not replay.enabled
+    reference = torch.Generator().manual_seed(3)
+    assert drawn == [float(torch.rand(1, generator=reference)) for _ in range(3)]
+
+
+def test_host_rng_draws_the_cpu_references_numbers():
+    """--rng host: CPU generators whatever the device, seeded as acomerge.search seeds its own."""
+    from fleetlab.fusion.lockstep import generators
+
+    host = generators([4, 9], torch.device("cuda"), "host")  # made on the CPU, no GPU needed
+    assert all(g.device.type == "cpu" for g in host)
+    for g, seed in zip(host, [4, 9]):
+        reference = torch.Generator().manual_seed(seed + 1_000_003)
+        assert torch.equal(torch.rand(5, generator=g), torch.rand(5, generator=reference))
+    with pytest.raises(ValueError, match="rng must be"):
+        generators([1], torch.device("cpu"), "gpu")
+    with pytest.raises(ValueError, match="rng must be"):
+        AcoMergeConfig(rng="gpu").validate()
+
+
+def test_scheduled_iwoa_coefficients_move_as_the_floats_do():
+    """The engine reads a and the inertia from a float32 schedule on the device; the move equals
+    the reference's with Python floats, bit for bit."""
+    from fleetlab.fusion.acomerge import _schedule, whale_update
+
+    pos = torch.randn(7, 48, 1, generator=torch.Generator().manual_seed(0))
+    leader = torch.randint(0, 48, (7,), generator=torch.Generator().manual_seed(1))
+    a, w = _schedule(3, 10)
+    by_float = whale_update(pos, leader, a, w, 1.0, torch.Generator().manual_seed(2))
+    by_tensor = whale_update(pos, leader, torch.tensor(a, dtype=torch.float32), torch.tensor(w, dtype=torch.float32),
+                             1.0, torch.Generator().manual_seed(2))
+    assert torch.equal(by_float, by_tensor)
+
+
+def test_rng_option_reaches_the_search_config():
+    import argparse
+
+    from fleetlab.cli import evaluate
+    from fleetlab.fusion.methods import aco_config
+
+    p = argparse.ArgumentParser()
+    evaluate.add_arguments(p)
+    settings = evaluate.settings_from_args(p.parse_args(["--data", "unused", "--rng", "host"]))
+    assert aco_config(settings.budget).rng == "host"
+    assert aco_config(evaluate.settings_from_args(p.parse_args(["--data", "unused"])).budget).rng == "device"

@@ -69,7 +69,9 @@ def served(emu: Path, nvm: Path, sector: int, models: dict) -> str:
     m = HASH_RE.search(res.stdout)
     assert m, res.stdout + res.stderr
     if m.group(1) == models["old"][2]:
+        # every vector of the old model (the example bundle's 1,200) bit-exact, as for the new one below
         assert m.group(2) == "PASS" and res.returncode == 0, res.stdout + res.stderr
+        assert "q_exact=1200 f32_within_1e-5=1200" in res.stdout, res.stdout + res.stderr
         return "old"
     assert m.group(1) == models["new"][2], f"served model {m.group(1)} is neither the old nor the new one"
     res = run(emu, "--nvm", str(nvm), "--nvm-sector", str(sector), "--vectors", str(models["new"][1]))

@@ -7,9 +7,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
-import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,9 @@ import pytest
 
 from fleetlab.host_tools.firmware import bench, build, figures, targets
 from fleetlab.paths import repo_root
+from doc_figures import assert_near
+from doc_figures import target_costs as published_costs
+from required import need_tools, path_without
 
 REPO = repo_root()
 
@@ -99,9 +103,7 @@ def test_no_cpu_is_named_in_code_outside_the_registry():
 
 # --------------------------------------------------------------------------- QEMU runs
 def _need(t: targets.Target) -> None:
-    missing = [tool for tool in t.tools if shutil.which(tool) is None]
-    if missing:
-        pytest.skip(f"{', '.join(missing)} not installed: run scripts/setup.sh (scripts/apt-packages.txt)")
+    need_tools(*t.tools)  # skips outside CI, fails under FLEETLAB_REQUIRE_TOOLS, naming the package
 
 
 @pytest.fixture(scope="module")
@@ -181,16 +183,50 @@ def test_soft_float_check_catches_rv32_float_code(cross_builds, tmp_path):
     assert verdict("present").returncode == 0
 
 
-@pytest.mark.parametrize("name", ["powerpc", "riscv32", "sparc-leon3"])
-def test_bench_counts_instructions_without_systick(cross_builds, name):
-    """`bench c --target` figures where there is no SysTick: the exec trace (user-mode PowerPC, bare-metal
-    SPARC) and minstret under -icount (RISC-V); integer-only targets have no float figure."""
+@pytest.mark.parametrize("name", ["powerpc", "riscv32", "sparc-leon3", "cortex-m0", "cortex-m7"])
+def test_bench_counts_instructions_as_published(cross_builds, name):
+    """`bench c --target` figures: the exec trace (user-mode PowerPC, bare-metal SPARC), minstret under
+    -icount (RISC-V), SysTick (M0, M7); each within +-10 % of the figure docs/integrating_slipest.md
+    publishes for the target; integer-only targets have no float figure."""
     t, bdir = _built(cross_builds, name)
     row = figures.target_figures(t, bdir)
-    assert 1_000 < row["instructions_per_inference_q"] < 20_000, row
-    assert 1_000 < row["instructions_per_sample_node_slcan"] < 50_000, row
-    assert (row["instructions_per_inference_f32"] is None) == t.integer_only
+    doc = published_costs()[name]
+    assert_near(row["instructions_per_inference_q"], doc["q"], f"{name} instructions per fixed-point inference")
+    assert_near(row["instructions_per_sample_node_slcan"], doc["sample"], f"{name} instructions per sample")
+    assert (row["instructions_per_inference_f32"] is None) == t.integer_only == (doc["f32"] is None)
+    if not t.integer_only:
+        assert_near(row["instructions_per_inference_f32"], doc["f32"], f"{name} instructions per float inference")
     if t.fpu:
         assert row["instructions_per_inference_f32"] < EMX_ONNX_CGEN_F32_INSTRUCTIONS, row
     assert 0 < row["stack_bytes_q"] <= row["stack_bytes_node_window"] < 4096
     assert 1_000 < row["flash_bytes_kernel_and_model"] < row["flash_bytes_can_node"]
+
+
+# --------------------------------------------------------------------------- required tools
+def test_a_missing_emulator_fails_the_configure_naming_its_package(tmp_path):
+    """CMake refuses a target whose QEMU is missing (it would register none of its QEMU tests), naming the
+    package, unless the build asks for no emulator."""
+    env = {**os.environ, "PATH": path_without("qemu-ppc", tmp_path / "bin")}
+    cmd = build.configure_command(tmp_path / "b", BUNDLE, target=targets.get("powerpc"))
+    res = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=300)
+    msg = " ".join(res.stderr.split())
+    assert res.returncode != 0 and "qemu-ppc not found: install the Debian package qemu-user" in msg, msg[-2000:]
+    res = subprocess.run([*cmd, "-DSLIPEST_ALLOW_NO_EMULATOR=ON"], capture_output=True, text=True, env=env,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+
+
+@pytest.mark.parametrize("required", [True, False])
+def test_a_missing_emulator_fails_the_target_tests_in_ci(tmp_path, required):
+    """The PowerPC run with qemu-ppc stripped from PATH: under FLEETLAB_REQUIRE_TOOLS=1 (CI) a failure naming
+    the package qemu-user, not a skip; outside CI a skip that says what to install."""
+    env = {**os.environ, "PATH": path_without("qemu-ppc", tmp_path / "bin"), "FLEETLAB_REQUIRE_TOOLS": str(int(required))}
+    res = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rs", "-p", "no:cacheprovider",
+                          f"{Path(__file__)}::test_target_runs_every_vector_bit_exact_and_sends_the_x86_frames[powerpc]"],
+                         capture_output=True, text=True, env=env, cwd=REPO, timeout=600)
+    out = " ".join(res.stdout.split())
+    assert "qemu-ppc not found on PATH: install the Debian package qemu-user" in out, out[-3000:]
+    if required:
+        assert res.returncode == 1 and "1 failed" in out and "FLEETLAB_REQUIRE_TOOLS is set" in out, out[-3000:]
+    else:
+        assert res.returncode == 0 and "1 skipped" in out, out[-3000:]

@@ -26,8 +26,6 @@ from .paths import repo_root
 
 _ACO = AcoMergeConfig()  # the paper's search budget: the full demo runs it as is
 
-REPO_ROOT = repo_root()
-
 
 @dataclass(frozen=True)
 class Profile:
@@ -137,7 +135,7 @@ def _run_stage(stage: Stage, log_dir: Path, env: dict) -> None:
         for cmd in stage.commands:
             fh.write(f"$ {shlex.join(cmd)}\n")
             fh.flush()
-            proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=fh, text=True, env=env, cwd=REPO_ROOT)
+            proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=fh, text=True, env=env, cwd=repo_root())
             fh.write(proc.stdout)
             stage.outputs["stdout"] = proc.stdout
             if proc.returncode != 0:

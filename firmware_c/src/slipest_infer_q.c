@@ -1,4 +1,4 @@
-/* SN-S fixed-point inference: integer arithmetic only (no FPU, no soft-float helpers).
+/* Fixed-point inference of any SlipNet: integer arithmetic only (no FPU, no soft-float helpers).
  *
  * Mirrors export/intref.py operation by operation; the scheme, its roundings and the
  * overflow bounds quoted in the comments are in docs/fixed_point.md. Notation:
@@ -140,10 +140,11 @@ HOT uint64_t mul64(uint64_t a, uint64_t b)
 }
 #endif
 
-/* M ~ sqrt(30) 2^28 / sqrt(v) for v > 0 (M = 0 for v = 0), so that z = rsr(e M, 16) is Q12:
+/* M ~ c 2^14 / sqrt(v) for v > 0 (M = 0 for v = 0), c = sqrt(H) 2^(fz + 2) (C30 for SN-S), so that
+ * z = rsr(e M, 16) is Q(fz):
  * seed table + 2 Newton steps on non-negative 64-bit values (UMULL on Cortex-M3/M4, mul64 on the M0),
  * no division. */
-static int32_t rsqrt_mult(const slipest_model_q_t *m, uint32_t v)
+static int32_t rsqrt_mult(const uint32_t *seed, uint32_t c, uint32_t v)
 {
     unsigned a;
     uint32_t w;
@@ -158,15 +159,15 @@ static int32_t rsqrt_mult(const slipest_model_q_t *m, uint32_t v)
     w = v << (2u * a);                                  /* w in [2^30, 2^32) */
     idx = (w >> 27) - 8u;                               /* in [0, 23] since w >= 2^30; the min only states it */
     idx = (idx < ((uint32_t)SLIPEST_Q_RSQRT_SEED_N - 1u)) ? idx : ((uint32_t)SLIPEST_Q_RSQRT_SEED_N - 1u);
-    y = m->rsqrt_seed[idx];                             /* Q30 of 1/sqrt(w / 2^32), <= 2^31 */
+    y = seed[idx];                                      /* Q30 of 1/sqrt(w / 2^32), <= 2^31 */
     w30 = (uint64_t)(w >> 2);                           /* < 2^30 */
     for (it = 0; it < 2; ++it) {
         uint64_t y2 = mul64(y, y) >> 30;                /* y^2 <= 2^62 */
         uint64_t t = mul64(w30, y2) >> 30;              /* < 2^62 before the shift */
         y = mul64(y, (UINT64_C(3) << 30) - t) >> 31;    /* t <= 3 2^30: y <= 1/sqrt(w) after a step */
     }
-    /* y C30 < 2^48, << a (a <= 15) < 2^63; result <= sqrt(30) 2^28 < 2^31 */
-    return (int32_t)(((mul64(y, (uint64_t)m->c30) << a) + (UINT64_C(1) << 31)) >> 32);
+    /* y c < 2^48 (c < 2^17), << a (a <= 15) < 2^63; result <= c 2^14 < 2^31 */
+    return (int32_t)(((mul64(y, (uint64_t)c) << a) + (UINT64_C(1) << 31)) >> 32);
 }
 
 /* GELU in Q(FY): max(u, 0) + GELU(-|u|), the latter from the table by linear interpolation
@@ -187,6 +188,34 @@ HOT int32_t gelu_q(const int16_t *table, unsigned to_q15, int32_t u)
         tneg = t0 + rsr32((t1 - t0) * (w & 0x7FFF), 15u);
     }
     return (u > 0 ? u : 0) + tneg;
+}
+
+/* The LayerNorm block shift k1 = max(0, bitlen(max|h|) - bits), max|h| from the row maximum and minimum
+ * (negated in unsigned arithmetic: defined for INT32_MIN). */
+HOT unsigned block_shift(int32_t hmax, int32_t hmin, unsigned bits)
+{
+    uint32_t mx = hmax < 0 ? 0u - (uint32_t)hmax : (uint32_t)hmax;
+    uint32_t mn = hmin < 0 ? 0u - (uint32_t)hmin : (uint32_t)hmin;
+    unsigned nb = bitlen32(mn > mx ? mn : mx);
+    return nb > bits ? nb - bits : 0u;
+}
+
+/* eps in the units of s = sum e^2: eps_m 2^(eps_e - 2(k1 + k2)), capped at 2^30 (a saturation, counted). */
+HOT uint32_t eps_scaled(int16_t eps_m, int8_t eps_e, int32_t eps_cap, unsigned k12, uint16_t *sat)
+{
+    int32_t t = eps_e - 2 * (int32_t)k12;
+    uint32_t eps;
+    if (eps_m == 0 || t <= -16) {
+        eps = 0u;
+    } else if (t >= 16) {
+        eps = (uint32_t)eps_cap;
+        ++*sat;
+    } else if (t >= 0) {
+        eps = (uint32_t)eps_m << (unsigned)t;
+    } else {
+        eps = (uint32_t)rsr32(eps_m, (unsigned)(-t));
+    }
+    return eps;
 }
 
 #if SLIPEST_DUAL_MAC
@@ -236,14 +265,14 @@ HOT int32_t norm_z(int32_t e, int32_t mult)
 }
 #endif
 
-/* One hidden unit after LayerNorm's centring: z = rsr(e M, 16) (Q12; |e M| <= sqrt(30) 2^28
- * (1 + 1e-5) because |e| <= sqrt(v), so |z| < 22500), u = rsr(gamma z, U_SHIFT) + beta saturated
- * to int16 (counted), then GELU. Returns g with |g| < 2^15. */
-HOT int32_t hidden_out(const slipest_model_q_t *m, unsigned u_shift, int32_t u_half, unsigned to_q15, int32_t e,
-                       int32_t mult, int i, uint16_t *sat)
+/* One hidden unit after LayerNorm's centring: z = rsr(e M, 16) (Q(fz); |e M| <= c 2^14 (1 + 1e-5)
+ * because |e| <= sqrt(v), so |z| < 2^15), u = rsr(gamma z, U_SHIFT) + beta saturated to int16
+ * (counted), then GELU. Returns g in [-2^15, 2^15). Both kernels: gamma, beta, table of the block. */
+HOT int32_t hidden_out(int32_t gamma, int32_t beta, const int16_t *table, unsigned u_shift, int32_t u_half,
+                       unsigned to_q15, int32_t e, int32_t mult, uint16_t *sat)
 {
     int32_t z = norm_z(e, mult);
-    int32_t u = rsr_h((int32_t)m->gamma[i] * z, u_half, u_shift) + m->beta[i];
+    int32_t u = rsr_h(gamma * z, u_half, u_shift) + beta;
     if (u > 32767) {
         u = 32767;
         ++*sat;
@@ -251,16 +280,18 @@ HOT int32_t hidden_out(const slipest_model_q_t *m, unsigned u_shift, int32_t u_h
         u = -32768;
         ++*sat;
     }
-    return gelu_q(m->gelu, to_q15, u);
+    return gelu_q(table, to_q15, u);
 }
 
-int slipest_infer_q(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_FEATURES],
-                    int32_t logits[SLIPEST_N_CLASSES], uint16_t *saturations)
+/* The SN-S path (a model without a layer table: 12 -> 30 -> 3, the fields w1..fy), unrolled for its
+ * fixed sizes: it keeps SN-S at its measured cost (docs/fixed_point.md, "Cost"). */
+static int infer_sn_s(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_FEATURES],
+                      int32_t logits[SLIPEST_N_CLASSES], uint16_t *saturations)
 {
     int32_t h[NH];
     int32_t hmax = INT32_MIN, hmin = INT32_MAX, sum, dmax, t, r, acc0, acc1, acc2;
     const int16_t *w2;
-    uint32_t mx, s, eps, v, usum = 0u;
+    uint32_t s, v, usum = 0u;
     unsigned nb, k1, k2;
     uint16_t sat = 0u;
     unsigned u_shift, to_q15;
@@ -268,9 +299,6 @@ int slipest_infer_q(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_F
     int32_t k2_half;
     int i, best;
 
-    if (m == 0 || feat_q == 0 || logits == 0) {
-        return SLIPEST_E_NULL;
-    }
     u_shift = (unsigned)m->fz + (unsigned)m->fg - (unsigned)m->fy;
     to_q15 = 15u - ((unsigned)m->fy - (unsigned)m->gelu_step_log2);
     u_half = (int32_t)(1u << u_shift) >> 1;
@@ -286,11 +314,7 @@ int slipest_infer_q(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_F
     }
 
     /* LayerNorm. Block shift k1 so that |h'| <= 2^h_bits <= 2^24 (max|h| = max(|hmax|, |hmin|)). */
-    mx = hmax < 0 ? 0u - (uint32_t)hmax : (uint32_t)hmax;
-    s = hmin < 0 ? 0u - (uint32_t)hmin : (uint32_t)hmin;
-    mx = s > mx ? s : mx;
-    nb = bitlen32(mx);
-    k1 = nb > m->h_bits ? nb - m->h_bits : 0u;          /* <= 31 - 23 */
+    k1 = block_shift(hmax, hmin, m->h_bits);            /* <= 31 - 23 */
     if (k1 != 0u) {
         usum = 0u;
         for (i = 0; i < NH; ++i) {
@@ -320,19 +344,8 @@ int slipest_infer_q(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_F
     }
 
     /* eps in the units of s: EPS_M 2^(EPS_E - 2(k1 + k2)), capped at 2^30 (a saturation). */
-    t = m->eps_e - 2 * (int32_t)(k1 + k2);
-    if (m->eps_m == 0 || t <= -16) {
-        eps = 0u;
-    } else if (t >= 16) {
-        eps = (uint32_t)m->eps_cap;
-        ++sat;
-    } else if (t >= 0) {
-        eps = (uint32_t)m->eps_m << (unsigned)t;
-    } else {
-        eps = (uint32_t)rsr32(m->eps_m, (unsigned)(-t));
-    }
-    v = s + eps;                                        /* < 2^31 + 2^30 */
-    r = rsqrt_mult(m, v);
+    v = s + eps_scaled(m->eps_m, m->eps_e, m->eps_cap, k1 + k2, &sat); /* < 2^31 + 2^30 */
+    r = rsqrt_mult(m->rsqrt_seed, (uint32_t)m->c30, v);
 
     /* Normalise, affine, GELU (hidden_out) and the head. */
     acc0 = m->b2[0];
@@ -342,8 +355,8 @@ int slipest_infer_q(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_F
      * 2^15 sum_i |w2_ci| + |b2_c| <= 2^31 - 1 because |g| < 2^15 (acc2_bound, checked at export) */
     w2 = m->w2;
     for (i = 0; i < NH; i += 2) {
-        int32_t g0 = hidden_out(m, u_shift, u_half, to_q15, h[i], r, i, &sat);
-        int32_t g1 = hidden_out(m, u_shift, u_half, to_q15, h[i + 1], r, i + 1, &sat);
+        int32_t g0 = hidden_out(m->gamma[i], m->beta[i], m->gelu, u_shift, u_half, to_q15, h[i], r, &sat);
+        int32_t g1 = hidden_out(m->gamma[i + 1], m->beta[i + 1], m->gelu, u_shift, u_half, to_q15, h[i + 1], r, &sat);
 #if SLIPEST_DUAL_MAC
         uint32_t gp = (uint32_t)(uint16_t)g0 | ((uint32_t)(uint16_t)g1 << 16); /* |g| < 2^15 */
         acc0 = __smlad(pair16(&w2[i]), gp, acc0);
@@ -367,4 +380,141 @@ int slipest_infer_q(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_F
         *saturations = sat;
     }
     return best;
+}
+
+/* --- The general kernel: any stack of blocks from the model's layer table ------------------------- */
+#if SLIPEST_LAYER_TABLE
+
+/* x clamped to [-2^b, 2^b - 1] for a bound b known only at run time (a block's h_bits or e_bits + 1):
+ * like SAT, placed where the proof bounds x inside already, so that the analyser sees it. */
+HOT int32_t sat_var(int32_t x, unsigned b)
+{
+    const int32_t hi = (int32_t)((UINT32_C(1) << b) - 1u);
+    const int32_t lo = -hi - 1;
+    return (x > hi) ? hi : ((x < lo) ? lo : x);
+}
+
+/* acc + sum_j w[j] x[j] over n int16 pairs; every partial sum is bounded by the row's worst case over
+ * int16 inputs (checked by slipest_model_q_check). Two products per SMLAD where the core has it. */
+HOT int32_t dot16(const int16_t *w, const int16_t *x, unsigned n, int32_t acc)
+{
+    unsigned j = 0u;
+#if SLIPEST_DUAL_MAC
+    for (; j + 7u < n; j += 8u) { /* 8 products per pass: the loop's own cost spread over 4 SMLADs */
+        acc = __smlad(pair16(&w[j]), pair16(&x[j]), acc);
+        acc = __smlad(pair16(&w[j + 2u]), pair16(&x[j + 2u]), acc);
+        acc = __smlad(pair16(&w[j + 4u]), pair16(&x[j + 4u]), acc);
+        acc = __smlad(pair16(&w[j + 6u]), pair16(&x[j + 6u]), acc);
+    }
+    for (; j + 1u < n; j += 2u) {
+        acc = __smlad(pair16(&w[j]), pair16(&x[j]), acc);
+    }
+#endif
+    for (; j < n; ++j) {
+        acc += w[j] * x[j];
+    }
+    return acc;
+}
+
+/* One Linear -> LayerNorm -> GELU block (docs/fixed_point.md, "A general block"): the n_in int16 inputs
+ * in io -> the block's width int16 outputs in Q(fy), written over io (the inputs are dead once the
+ * accumulators are in h). Every bound quoted is the proof's, for this block's width H. */
+static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, const int16_t *x, unsigned n_in,
+                    int32_t *h, int16_t *out, uint16_t *sat)
+{
+    const unsigned n = l->width;
+    const int32_t nh = (int32_t)n;
+    int32_t hmax = INT32_MIN, hmin = INT32_MAX, sum, dmax, t, mult, u_half, k2_half;
+    uint32_t s = 0u, usum = 0u, v;
+    unsigned i, nb, k1, k2, u_shift, to_q15;
+
+    for (i = 0u; i < n; ++i) {
+        int32_t a = dot16(&l->w[i * n_in], x, n_in, l->b[i]); /* <= 2^31 - 1 - 2^(32 - h_bits) */
+        h[i] = a;
+        hmax = a > hmax ? a : hmax;
+        hmin = a < hmin ? a : hmin;
+    }
+    k1 = block_shift(hmax, hmin, l->h_bits);            /* <= 31 - h_bits: the rounding term fits the margin */
+    for (i = 0u; i < n; ++i) {
+        h[i] = sat_var(rsr32(h[i], k1), l->h_bits + 1u); /* |h'| <= 2^h_bits: never acts */
+        usum += (uint32_t)h[i];
+    }
+    /* |sum h'| <= H 2^h_bits <= 2^29: the wrapped unsigned sum is exact (see infer_sn_s) */
+    sum = usum <= (uint32_t)INT32_MAX ? (int32_t)usum : -(int32_t)(0u - usum - 1u) - 1;
+    sum = SAT(sum, 30);
+    /* d_i = H h'_i - sum, |d| <= 2 H 2^h_bits <= 2^30; max|d| from hmax/hmin (d is monotonic in h') */
+    dmax = nh * sat_var(rsr32(hmax, k1), l->h_bits + 1u) - sum;
+    t = sum - nh * sat_var(rsr32(hmin, k1), l->h_bits + 1u);
+    dmax = t > dmax ? t : dmax;
+    nb = bitlen32((uint32_t)dmax);
+    k2 = nb > l->e_bits ? nb - l->e_bits : 0u;
+    k2_half = (int32_t)((1u << k2) >> 1);
+    s = 0u;
+    for (i = 0u; i < n; ++i) {
+        int32_t e = sat_var(rsr_h(nh * h[i] - sum, k2_half, k2), l->e_bits + 1u); /* |e| <= 2^e_bits */
+        h[i] = e;
+        s += (uint32_t)(e * e);                         /* <= H 4^e_bits <= 2^31 */
+    }
+    v = s + eps_scaled(l->eps_m, l->eps_e, m->eps_cap, k1 + k2, sat); /* < 2^31 + 2^30 */
+    mult = rsqrt_mult(m->rsqrt_seed, (uint32_t)l->c, v);
+    u_shift = (unsigned)l->fz + (unsigned)l->fg - (unsigned)l->fy;
+    to_q15 = 15u - ((unsigned)l->fy - (unsigned)m->gelu_step_log2);
+    u_half = (int32_t)(1u << u_shift) >> 1;
+    for (i = 0u; i < n; ++i) {
+        /* |z| < 2^15 (|e| <= sqrt(v), c <= SLIPEST_Q_C_MAX), |gamma z| < 2^30; the output is the next
+         * block's int16 input as it is: the requantisation is folded into its weights */
+        out[i] = (int16_t)hidden_out(l->gamma[i], l->beta[i], l->gelu, u_shift, u_half, to_q15, h[i], mult, sat);
+    }
+}
+
+/* The blocks of the table one after the other, then the head. Scratch: SLIPEST_MAX_WIDTH int32
+ * accumulators and SLIPEST_MAX_WIDTH int16 activations on the stack (slipest_model.h), in a frame of
+ * its own so that the SN-S path does not carry it. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static int infer_layers(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_FEATURES],
+                        int32_t logits[SLIPEST_N_CLASSES], uint16_t *saturations)
+{
+    int32_t h[SLIPEST_MAX_WIDTH];
+    int16_t act[SLIPEST_MAX_WIDTH];
+    const int16_t *x = feat_q;
+    unsigned k, c, n_in = SLIPEST_N_FEATURES;
+    uint16_t sat = 0u;
+    int best = 0;
+
+    for (k = 0u; k < m->n_layers && k < (unsigned)SLIPEST_MAX_LAYERS; ++k) {
+        block_q(m, &m->layers[k], x, n_in, h, act, &sat);
+        x = act;
+        n_in = m->layers[k].width;
+    }
+    for (c = 0u; c < SLIPEST_N_CLASSES; ++c) {
+        /* |g| < 2^15: every partial sum of row c <= 2^15 sum_i |w_ci| + |b_c| <= INT32_MAX (checked) */
+        logits[c] = dot16(&m->w2[c * n_in], x, n_in, m->b2[c]);
+        if (logits[c] > logits[best]) {
+            best = (int)c;
+        }
+    }
+    if (saturations != 0) {
+        *saturations = sat;
+    }
+    return best;
+}
+
+#endif /* SLIPEST_LAYER_TABLE */
+
+int slipest_infer_q(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N_FEATURES],
+                    int32_t logits[SLIPEST_N_CLASSES], uint16_t *saturations)
+{
+    if (m == 0 || feat_q == 0 || logits == 0) {
+        return SLIPEST_E_NULL;
+    }
+    if (m->layers != 0) {
+#if SLIPEST_LAYER_TABLE
+        return infer_layers(m, feat_q, logits, saturations);
+#else
+        return SLIPEST_E_ARCH; /* a build without the table kernel (slipest_model_q_check refuses it too) */
+#endif
+    }
+    return infer_sn_s(m, feat_q, logits, saturations);
 }

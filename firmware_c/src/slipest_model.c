@@ -8,7 +8,7 @@
 
 #include <stddef.h>
 
-/* Sum of |w_j| over a row of n weights (<= 30 * 2^15: no overflow in 64 bits). */
+/* Sum of |w_j| over a row of n weights (<= 256 * 2^15: no overflow in 64 bits). */
 static int64_t row_abs_sum(const int16_t *w, int n)
 {
     int64_t s = 0;
@@ -68,11 +68,96 @@ slipest_status_t slipest_model_q_check_scalars(const slipest_model_q_t *m)
     return SLIPEST_OK;
 }
 
+#if SLIPEST_LAYER_TABLE
+/* One block of the table after n_in inputs: pointers, the width-dependent shifts of the overflow proof
+ * (docs/fixed_point.md, "A general block"), every row bound and LayerNorm bias. */
+static slipest_status_t layer_q_check(const slipest_layer_q_t *l, unsigned n_in, unsigned gelu_step_log2)
+{
+    int32_t u_shift, gelu_shift;
+    int64_t limit;
+    unsigned i, width;
+
+    if (l->w == NULL || l->b == NULL || l->gamma == NULL || l->beta == NULL || l->gelu == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    width = l->width;
+    if (width < 2u || width > (unsigned)SLIPEST_MAX_WIDTH) {
+        return SLIPEST_E_ARCH;
+    }
+    /* |d| = |H h'_i - sum h'| <= 2 H 2^h_bits <= 2^30; S = sum e^2 <= H 4^e_bits <= 2^31 */
+    if (l->h_bits < 1u || l->h_bits > 24u || (2u * width) << l->h_bits > (UINT32_C(1) << 30) || l->e_bits < 1u ||
+        l->e_bits > 13u || (uint64_t)width << (2u * l->e_bits) > (UINT64_C(1) << 31)) {
+        return SLIPEST_E_RANGE;
+    }
+    gelu_shift = (int32_t)l->fy - (int32_t)gelu_step_log2;
+    u_shift = (int32_t)l->fz + (int32_t)l->fg - (int32_t)l->fy;
+    if (l->fz > 12u || gelu_shift < 0 || gelu_shift > 12 || u_shift < 1 || u_shift > 30 || l->c <= 0 ||
+        l->c > SLIPEST_Q_C_MAX || l->eps_m < 0 || l->eps_e < -64 || l->eps_e > 64) {
+        return SLIPEST_E_RANGE;
+    }
+    /* accumulator: room for the rounding term 2^(k1 - 1) of rsr(h, k1), k1 <= 31 - h_bits */
+    limit = (int64_t)INT32_MAX - ((int64_t)1 << (32u - l->h_bits));
+    for (i = 0u; i < width; ++i) {
+        if (!slipest_model_row_ok(row_abs_sum(&l->w[i * n_in], (int)n_in), l->b[i], limit) || l->beta[i] < -32768 ||
+            l->beta[i] > 32767) {
+            return SLIPEST_E_RANGE;
+        }
+    }
+    return SLIPEST_OK;
+}
+
+/* The checks of slipest_model_q_check() on the layer table (every block's shifts and rows, the head). */
+static slipest_status_t model_q_check_layers(const slipest_model_q_t *m)
+{
+    unsigned k, i, n_in = SLIPEST_N_FEATURES;
+    slipest_status_t st;
+
+    if (m->n_in != SLIPEST_N_FEATURES || m->n_out != SLIPEST_N_CLASSES || m->gelu_n != SLIPEST_Q_GELU_N ||
+        m->rsqrt_seed_n != SLIPEST_Q_RSQRT_SEED_N || m->n_layers < 1u || m->n_layers > SLIPEST_MAX_LAYERS) {
+        return SLIPEST_E_ARCH;
+    }
+    if (m->w2 == NULL || m->b2 == NULL || m->rsqrt_seed == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (m->eps_cap != 1073741824) {
+        return SLIPEST_E_RANGE;
+    }
+    for (k = 0u; k < m->n_layers; ++k) {
+        st = layer_q_check(&m->layers[k], n_in, m->gelu_step_log2);
+        if (st != SLIPEST_OK) {
+            return st;
+        }
+        n_in = m->layers[k].width;
+    }
+    for (i = 0u; i < SLIPEST_N_CLASSES; ++i) {
+        /* head accumulator bound <= INT32_MAX: |g| < 2^15 */
+        if (!slipest_model_row_ok(row_abs_sum(&m->w2[i * n_in], (int)n_in), m->b2[i], SLIPEST_Q_ACC2_LIMIT)) {
+            return SLIPEST_E_RANGE;
+        }
+    }
+    return SLIPEST_OK;
+}
+
+#endif /* SLIPEST_LAYER_TABLE */
+
 slipest_status_t slipest_model_q_check(const slipest_model_q_t *m)
 {
     int i;
     slipest_status_t st;
 
+    if (m != NULL && m->layers != NULL) {
+#if SLIPEST_LAYER_TABLE
+        st = model_q_check_layers(m);
+#else
+        st = SLIPEST_E_ARCH; /* this build has no layer-table kernel */
+#endif
+        for (i = 0; st == SLIPEST_OK && i < SLIPEST_Q_RSQRT_SEED_N; ++i) {
+            if (slipest_model_seed_ok(m->rsqrt_seed[i], i) == 0) {
+                st = SLIPEST_E_RANGE;
+            }
+        }
+        return st;
+    }
     if (m == NULL || m->w1 == NULL || m->b1 == NULL || m->gamma == NULL || m->beta == NULL || m->w2 == NULL ||
         m->b2 == NULL || m->gelu == NULL || m->rsqrt_seed == NULL) {
         return SLIPEST_E_NULL;

@@ -16,6 +16,10 @@
 /* round(sqrt(30) 2^14): the normalisation multiplier's scale. The kernel's bounds (M < 2^31, |z| < 22500)
  * hold for this value and any smaller one, not for a larger one. */
 #define SLIPEST_Q_C30_MAX 89739
+/* Largest normalisation constant of a general block: |e M| <= c 2^14 (1 + 1e-5) + 2^15 stays below
+ * 2^31 - 2^15 (docs/fixed_point.md, "A general block"); every width's round(sqrt(H) 2^(fz + 2)) is below it. */
+#define SLIPEST_Q_C_MAX 131066
+
 
 /* 1 when seed (entry i of the 1/sqrt seed table) keeps the kernel's Newton step from wrapping. */
 int slipest_model_seed_ok(uint32_t seed, int i);

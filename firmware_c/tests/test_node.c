@@ -199,7 +199,7 @@ static void test_model_switch(void)
     /* a model that breaks the scheme's bounds is refused by the full validation */
     b2[0] = 2147483647;
     CHECK(slipest_model_q_check(&other) == SLIPEST_E_RANGE);
-    other.n_hidden = 29;
+    other.n_in = (uint8_t)(SLIPEST_N_FEATURES - 1); /* refused with or without a layer table */
     CHECK(slipest_model_q_check(&other) == SLIPEST_E_ARCH);
 }
 

@@ -34,31 +34,33 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import sys
 from pathlib import Path
 
-from fleetlab.paths import default_bundle, repo_root
+from fleetlab.system_tools import need
+from fleetlab.paths import build_root, default_bundle, repo_root
 
 from . import targets as target_registry
 from .build import cmake_build
 from .figures import bench_figures, target_figures
 from .measure import host_timings, target_costs
 
-REPO = repo_root()
-DEFAULT_BUNDLE = default_bundle()
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--bundle", type=Path, default=DEFAULT_BUNDLE, help="export bundle (default: the example bundle)")
-    parser.add_argument("--build-dir", type=Path, default=REPO / "build" / "bench",
-                        help="where the host and target builds go (reused when present)")
+    parser.add_argument("--bundle", type=Path, default=None, help="export bundle (default: the example bundle)")
+    parser.add_argument("--build-dir", type=Path, default=None,
+                        help="where the host and target builds go, reused when present (default: bench/ under "
+                             "the build root: build/ in a clone, else the user's cache folder)")
     parser.add_argument("--iterations", type=int, default=2000,
                         help="onnxruntime/torch inferences per timing round (3 rounds, interleaved with the C bench)")
     parser.add_argument("--target", default=None,
                         help="CPU target (a file under firmware_c/cmake/, see --list-targets) or 'all' "
                              "(default: the reference target, whose figures are the <key>_* ones, m4_* on the M4)")
     parser.add_argument("--list-targets", action="store_true", help="list the CPU targets and exit")
+    parser.add_argument("--compare", type=Path, metavar="BUNDLE",
+                        help="a second bundle of another architecture (e.g. an SN-D export): its instructions per "
+                        "inference, flash and stack on the same targets, and host C against onnxruntime, beside "
+                        "the main bundle's (keys compare_*, a second table)")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
 
 
@@ -69,7 +71,8 @@ def _list_targets(as_json: bool) -> int:
         return 0
     for name, t in found.items():
         flags = ", ".join([t.endian + "-endian", "FPU" if t.fpu else "no FPU"] + (["integer-only"] if t.integer_only else []))
-        print(f"{name:14s} {t.description} [{flags}] -- {t.emulator}  ({t.file.relative_to(REPO) if t.file.is_relative_to(REPO) else t.file})")
+        tree = repo_root()
+        print(f"{name:14s} {t.description} [{flags}] -- {t.emulator}  ({t.file.relative_to(tree) if t.file.is_relative_to(tree) else t.file})")
     return 0
 
 
@@ -85,30 +88,26 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"target {names[-1]} is link-only (no emulator): nothing to measure")
     if ref.name not in names:
         names.insert(0, ref.name)  # the reference figures (and the issue's figures) are always measured
-    bundle = Path(args.bundle)
+    bundle = Path(args.bundle or default_bundle())
     if not (bundle / "vectors.bin").is_file():
         raise FileNotFoundError(f"{bundle}: no vectors.bin (not an export bundle?)")
-    if shutil.which("cmake") is None:
-        raise OSError("cmake not found (scripts/setup.sh installs it)")
+    args.build_dir = Path(args.build_dir or build_root() / "bench")
+    need("cmake", "fleetlab bench c")
     for name in names:
-        for tool in found[name].tools:
-            if shutil.which(tool) is None:
-                raise OSError(f"{tool} not found for target {name} (scripts/setup.sh installs it)")
-    steps = tqdm(total=2 + 2 * len(names), desc="bench c", disable=args.json or not sys.stderr.isatty())
-    host = cmake_build(args.build_dir / "host", bundle)
-    steps.update()
-    builds = {}
-    for name in names:
-        builds[name] = cmake_build(args.build_dir / name, bundle, target=found[name])
-        steps.update()
-    t = host_timings(host, bundle, args.iterations)
-    steps.update()
-    ref_cost = target_costs(ref, builds[ref.name])  # measured once: the reference row and figures share it
-    rows = {}
-    for name in names:
-        rows[name] = target_figures(found[name], builds[name], ref_cost if name == ref.name else None)
-        steps.update()
+        found[name].need_tools(f"fleetlab bench c --target {name}")
+    compare = Path(args.compare) if args.compare is not None else None
+    if compare is not None and not (compare / "vectors.bin").is_file():
+        raise FileNotFoundError(f"{compare}: no vectors.bin (not an export bundle?)")
+    steps = tqdm(total=(2 + 2 * len(names)) * (2 if compare else 1), desc="bench c",
+                 disable=args.json or not sys.stderr.isatty())
+    builds, t, ref_cost, rows = _measure(bundle, args.build_dir, names, found, ref, args.iterations, steps)
     result = bench_figures(ref, builds[ref.name], ref_cost, t, rows, bundle)
+    result["arch"] = _arch_of(bundle)
+    if compare is not None:
+        _, c_t, _, c_rows = _measure(compare, args.build_dir / "compare", names, found, None, args.iterations, steps)
+        result["compare"] = {"bundle": str(compare), "arch": _arch_of(compare), "host_ns_per_inference_q": c_t["q"],
+                             "host_ns_per_inference_f32": c_t["f32"], "onnxruntime_ns_per_inference": c_t["onnxruntime"],
+                             "speedup_vs_onnxruntime": c_t["onnxruntime"] / c_t["q"], "cpu_targets": c_rows}
     steps.close()
     if args.json:
         print(json.dumps(result))
@@ -117,8 +116,32 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _arch_of(bundle: Path) -> str:
+    return json.loads((Path(bundle) / "manifest.json").read_text()).get("arch", "?")
+
+
+def _measure(bundle: Path, build_dir: Path, names: list[str], found: dict, ref, iterations: int, steps):
+    """Build one bundle for the host and every target; host timings, the reference target's costs (measured
+    once, shared by its row and the figures; None when no reference figures are wanted) and one row per target."""
+    host = cmake_build(build_dir / "host", bundle)
+    steps.update()
+    builds = {}
+    for name in names:
+        builds[name] = cmake_build(build_dir / name, bundle, target=found[name])
+        steps.update()
+    t = host_timings(host, bundle, iterations)
+    steps.update()
+    ref_cost = target_costs(ref, builds[ref.name]) if ref is not None else None
+    rows = {}
+    for name in names:
+        rows[name] = target_figures(found[name], builds[name], ref_cost if ref is not None and name == ref.name else None)
+        steps.update()
+    return builds, t, ref_cost, rows
+
+
 def format_result(result: dict, key: str) -> str:
-    """The plain-text output: one line per scalar figure, the CANopen node's parts and goals, the targets table."""
+    """The plain-text output: one line per scalar figure, the CANopen node's parts and goals, the targets table,
+    and a second bundle's figures beside the first when --compare gave one."""
     lines = [f"{k:42s} {v:.1f}" if isinstance(v, float) else f"{k:42s} {v}"
              for k, v in result.items() if not isinstance(v, dict)]
     co_node = result[f"{key}_canopen_node"]
@@ -128,6 +151,27 @@ def format_result(result: dict, key: str) -> str:
     lines.append(f"{key + '_canopen_node_goals':42s} {_goal_line(co_node)}")
     lines.append("")
     lines.append(format_table(result["cpu_targets"]))
+    cmp_result = result.get("compare")
+    if cmp_result is not None:
+        lines += ["", f"{'compare_bundle':42s} {cmp_result['bundle']} ({cmp_result['arch']})"]
+        for k in ("host_ns_per_inference_q", "host_ns_per_inference_f32", "onnxruntime_ns_per_inference",
+                  "speedup_vs_onnxruntime"):
+            lines.append(f"{'compare_' + k:42s} {cmp_result[k]:.1f}")
+        lines += ["", format_compare_table(result["arch"], result["cpu_targets"], cmp_result["arch"],
+                                           cmp_result["cpu_targets"])]
+    return "\n".join(lines)
+
+
+def format_compare_table(arch_a: str, rows_a: dict[str, dict], arch_b: str, rows_b: dict[str, dict]) -> str:
+    """Two architectures side by side per target (docs/integrating_slipest.md, "Choosing an architecture")."""
+    head = (f"| target | instr./q inference {arch_a} | {arch_b} | instr./float inference {arch_a} | {arch_b} "
+            f"| flash kernel+model {arch_a} (B) | {arch_b} (B) | peak stack q {arch_a} (B) | {arch_b} (B) |")
+    lines = [head, "|" + "---|" * 9]
+    for name, a in rows_a.items():
+        b = rows_b[name]
+        cells = [(a[k], b[k]) for k in ("instructions_per_inference_q", "instructions_per_inference_f32",
+                                          "flash_bytes_kernel_and_model", "stack_bytes_q")]
+        lines.append(f"| {name} | " + " | ".join(f"{_cell(x)} | {_cell(y)}" for x, y in cells) + " |")
     return "\n".join(lines)
 
 

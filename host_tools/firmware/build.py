@@ -13,9 +13,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from fleetlab.system_tools import need
 from fleetlab.paths import repo_root
-
-REPO = repo_root()
 from .targets import Target, get
 
 
@@ -26,7 +25,7 @@ def _target(target: Target | str | None) -> Target | None:
 def configure_command(build_dir: Path, bundle: Path | None = None, *, target: Target | str | None = None,
                       options: dict[str, str] | None = None) -> list[str]:
     """argv of the CMake configure step (host build when target is None)."""
-    cmd = ["cmake", "-S", str(REPO), "-B", str(build_dir), "-DCMAKE_BUILD_TYPE=Release",
+    cmd = ["cmake", "-S", str(repo_root()), "-B", str(build_dir), "-DCMAKE_BUILD_TYPE=Release",
            f"-DPython3_EXECUTABLE={sys.executable}"]
     if bundle is not None:
         cmd.append(f"-DSLIPEST_BUNDLE={Path(bundle).resolve()}")
@@ -76,6 +75,10 @@ def cmake_build(build_dir: Path, bundle: Path | None = None, *, target: Target |
                 options: dict[str, str] | None = None, jobs: int = 2, targets: tuple[str, ...] = ()) -> Path:
     """Configure and build firmware_c into build_dir (host, or cross for `target`); returns build_dir."""
     build_dir = Path(build_dir)
+    need("cmake", "building the C estimator")
+    t = _target(target)
+    if t is not None:
+        t.need_tools(f"the build for CPU target {t.name}")
     run(configure_command(build_dir, bundle, target=target, options=options), what="cmake configure")
     run(build_command(build_dir, jobs, targets), what="cmake build")
     return build_dir

@@ -15,18 +15,17 @@ import shlex
 from dataclasses import dataclass
 from pathlib import Path
 
+from fleetlab.errors import FleetlabError
+from fleetlab.system_tools import need
 from fleetlab.paths import repo_root
 
-REPO = repo_root()
-
-TARGET_DIR = REPO / "firmware_c" / "cmake"
 ENV_DIRS = "FLEETLAB_TARGET_DIRS"
 _SET = re.compile(r"^\s*set\(\s*SLIPEST_TARGET_([A-Z_]+)\s+(.*?)\s*\)\s*(?:#.*)?$", re.M)
 REQUIRED = ("NAME", "DESCRIPTION", "COMPILER", "ENDIAN", "FPU", "INTEGER_ONLY", "QEMU", "QEMU_MODE", "REPORT", "VECTORS",
             "COUNTER")
 
 
-class TargetError(ValueError):
+class TargetError(FleetlabError, ValueError):
     """A target file that cannot be read as a target record."""
 
 
@@ -66,6 +65,11 @@ class Target:
     def tools(self) -> tuple[str, ...]:
         """Executables a build and run of this target need (compiler, emulator)."""
         return (self.compiler, self.qemu) if self.runs else (self.compiler,)
+
+    def need_tools(self, needed_for: str) -> None:
+        """errors.MissingTool, naming `needed_for` and the tool's Debian package, if a tool is not on PATH."""
+        for tool in self.tools:
+            need(tool, needed_for)
 
     @property
     def emulator(self) -> str:
@@ -119,7 +123,7 @@ def parse_target_file(path: Path) -> Target | None:
 
 def target_dirs() -> list[Path]:
     extra = [Path(p) for p in os.environ.get(ENV_DIRS, "").split(os.pathsep) if p.strip()]
-    return [TARGET_DIR, *extra]
+    return [repo_root() / "firmware_c" / "cmake", *extra]
 
 
 def discover() -> dict[str, Target]:

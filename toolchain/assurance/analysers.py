@@ -12,11 +12,10 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .sources import EXAMPLE_BUNDLE, FW, generate_dbc, include_dirs, library_sources, need, rel, run
+from .sources import fw, generate_dbc, include_dirs, library_sources, need, rel, run
 
 STRICT_WARNINGS = ["-Wall", "-Wextra", "-pedantic", "-Wconversion", "-Wsign-conversion", "-Wcast-align",
                    "-Wshadow", "-Wstrict-prototypes"]
-EVA_DRIVER = FW / "eva" / "eva_driver.c"
 # EVA entry points of the driver, the library files each one needs (the kernel's model included: without
 # its definition EVA stops at the first read of the model) and the precision options of each
 EVA_TARGETS = {
@@ -65,20 +64,20 @@ def _gcc(flags: list[str], name: str, bundle: Path) -> ToolResult:
     return out
 
 
-def strict_warnings(bundle: Path = EXAMPLE_BUNDLE) -> ToolResult:
+def strict_warnings(bundle: Path | None = None) -> ToolResult:
     return _gcc(STRICT_WARNINGS, "gcc " + " ".join(STRICT_WARNINGS[3:]), bundle)
 
 
-def gcc_analyzer(bundle: Path = EXAMPLE_BUNDLE) -> ToolResult:
+def gcc_analyzer(bundle: Path | None = None) -> ToolResult:
     return _gcc(["-fanalyzer"], "gcc -fanalyzer", bundle)
 
 
-def clang_tidy(bundle: Path = EXAMPLE_BUNDLE) -> ToolResult:
+def clang_tidy(bundle: Path | None = None) -> ToolResult:
     tidy = need("clang-tidy")
     t0 = time.perf_counter()
 
     def go(files, incs, gen):
-        res = run([tidy, "-quiet", f"--config-file={FW / '.clang-tidy'}", *files, "--", "-std=c99", *incs])
+        res = run([tidy, "-quiet", f"--config-file={fw() / '.clang-tidy'}", *files, "--", "-std=c99", *incs])
         out = ToolResult("clang-tidy (clang-analyzer-*, bugprone-*, cert-*)",
                          version=run([tidy, "--version"]).stdout.strip().splitlines()[-1].strip())
         out.findings = [l for l in (res.stdout + res.stderr).splitlines() if re.search(r": (warning|error):", l)]
@@ -99,8 +98,8 @@ class EvaResult:
     log: str
 
 
-def frama_c_eva(bundle: Path = EXAMPLE_BUNDLE, entries: list[str] | None = None,
-                options: list[str] | None = None, src_dir: Path = FW / "src") -> list[EvaResult]:
+def frama_c_eva(bundle: Path | None = None, entries: list[str] | None = None,
+                options: list[str] | None = None, src_dir: Path | None = None) -> list[EvaResult]:
     """Alarms of EVA per driver entry point (fixed-point library: -DSLIPEST_Q_ONLY). src_dir: where the
     library sources are read from (the tests give a modified copy to show that EVA finds a defect)."""
     frama = need("frama-c")
@@ -109,10 +108,10 @@ def frama_c_eva(bundle: Path = EXAMPLE_BUNDLE, entries: list[str] | None = None,
     def go(files, incs, gen):
         for entry in entries or list(EVA_TARGETS):
             names, precision = EVA_TARGETS[entry]
-            srcs = [src_dir / name for name in names]
+            srcs = [(src_dir or fw() / "src") / name for name in names]
             t0 = time.perf_counter()
             res = run([frama, "-no-autoload-plugins", "-load-module", "eva", *(options or EVA_OPTIONS + precision),
-                       f"-cpp-extra-args={' '.join(incs)} -DSLIPEST_Q_ONLY", EVA_DRIVER, *srcs,
+                       f"-cpp-extra-args={' '.join(incs)} -DSLIPEST_Q_ONLY", fw() / "eva" / "eva_driver.c", *srcs,
                        "-eva", "-main", entry], timeout=3600)
             text = res.stdout + res.stderr
             if res.returncode != 0 or f"done for function {entry}" not in text:

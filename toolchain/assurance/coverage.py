@@ -9,11 +9,13 @@ listed so the report can say why.
 from __future__ import annotations
 
 import json
+import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .sources import EXAMPLE_BUNDLE, REPO, need, rel, run
+from ..paths import default_bundle, repo_root
+from .sources import need, rel, run
 
 GOAL_LINES = 95.0
 GOAL_BRANCHES = 90.0
@@ -54,10 +56,11 @@ class CoverageResult:
                               self.ctest_summary, self.gcovr_version)
 
 
-def measure(build: Path, bundle: Path = EXAMPLE_BUNDLE) -> CoverageResult:
+def measure(build: Path, bundle: Path | None = None) -> CoverageResult:
+    tree = repo_root()
     need("gcov")
     build = Path(build)
-    run(["cmake", "-S", REPO, "-B", build, f"-DSLIPEST_BUNDLE={Path(bundle).resolve()}",
+    run(["cmake", "-S", tree, "-B", build, f"-DSLIPEST_BUNDLE={Path(bundle or default_bundle()).resolve()}",
          f"-DPython3_EXECUTABLE={sys.executable}", "-DCMAKE_BUILD_TYPE=Debug",
          "-DCMAKE_C_FLAGS=--coverage -O0", "-DCMAKE_EXE_LINKER_FLAGS=--coverage",
          "-DCMAKE_SHARED_LINKER_FLAGS=--coverage"], check=True)
@@ -68,18 +71,18 @@ def measure(build: Path, bundle: Path = EXAMPLE_BUNDLE) -> CoverageResult:
     summary = next((l for l in tests.stdout.splitlines() if "tests passed" in l), "")
     gen = build / "generated"
     out = build / "coverage.json"
-    # gcovr resolves gcov's working directory below --root: the build directory must be in the repo
-    if not build.resolve().is_relative_to(REPO):
-        raise ValueError(f"coverage build directory {build} must lie inside {REPO} (e.g. build/coverage)")
-    run([sys.executable, "-m", "gcovr", "--root", REPO, "--object-directory", build,
-         "--filter", str(REPO / "firmware_c" / "src"), "--filter", str(gen),
-         "--json", str(out), str(build / "CMakeFiles" / "slipest_obj.dir")], check=True, cwd=REPO)
+    # gcovr resolves gcov's working directory below --root: the folder holding both the sources and the build
+    # (the clone for build/coverage; for an installed wheel, whatever holds its tree and the user's cache)
+    root = Path(os.path.commonpath([tree, build.resolve()]))
+    run([sys.executable, "-m", "gcovr", "--root", root, "--object-directory", build,
+         "--filter", str(tree / "firmware_c" / "src"), "--filter", str(gen),
+         "--json", str(out), str(build / "CMakeFiles" / "slipest_obj.dir")], check=True, cwd=root)
     version = run([sys.executable, "-m", "gcovr", "--version"]).stdout.splitlines()[0]
     data = json.loads(out.read_text())
     files = []
     for entry in data["files"]:
         path = Path(entry["file"])
-        path = path if path.is_absolute() else REPO / path
+        path = path if path.is_absolute() else root / path
         lines = [l for l in entry["lines"] if not l.get("gcovr/noncode", False)]
         # gcovr may list a line once per function instance; keep one record per line number
         by_line: dict[int, dict] = {}

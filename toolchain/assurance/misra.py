@@ -15,9 +15,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .sources import EXAMPLE_BUNDLE, FW, generate_dbc, include_dirs, library_sources, need, rel, run
+from .sources import fw, generate_dbc, include_dirs, library_sources, need, rel, run
 
-DEVIATIONS = FW / "MISRA_DEVIATIONS.md"
 _FINDING = re.compile(r"^(?P<file>[^:\n]+):(?P<line>\d+):misra-c2012-(?P<rule>[\d.]+)$", re.M)
 # a counts-table row: | 15.5 | firmware_c/src/slipest_node.c | 12 | MD-15.5 |
 _ROW = re.compile(r"^\|\s*(?P<rule>\d+\.\d+)\s*\|\s*(?P<file>[^|\s]+)\s*\|\s*(?P<count>\d+)\s*\|\s*(?P<permit>MD-[\d.]+)\s*\|", re.M)
@@ -51,7 +50,7 @@ def _rule_key(rule: str) -> tuple[int, int]:
     return int(a), int(b)
 
 
-def run_cppcheck(bundle: Path = EXAMPLE_BUNDLE, work: Path | None = None) -> tuple[list[tuple[str, str, int]], list[str], str]:
+def run_cppcheck(bundle: Path | None = None, work: Path | None = None) -> tuple[list[tuple[str, str, int]], list[str], str]:
     """(rule, file, line) findings of the MISRA addon over src/*.c, their headers and the DBC codec."""
     cppcheck = need("cppcheck")
     with tempfile.TemporaryDirectory() as tmp:
@@ -72,7 +71,12 @@ def run_cppcheck(bundle: Path = EXAMPLE_BUNDLE, work: Path | None = None) -> tup
     return found, other, version
 
 
-def read_deviations(path: Path = DEVIATIONS) -> tuple[Counter, set]:
+def deviations_file() -> Path:
+    return fw() / "MISRA_DEVIATIONS.md"
+
+
+def read_deviations(path: Path | None = None) -> tuple[Counter, set]:
+    path = path or deviations_file()
     text = path.read_text()
     recorded: Counter = Counter()
     for m in _ROW.finditer(text):
@@ -83,18 +87,19 @@ def read_deviations(path: Path = DEVIATIONS) -> tuple[Counter, set]:
     return recorded, permits
 
 
-def check(bundle: Path = EXAMPLE_BUNDLE, deviations: Path = DEVIATIONS) -> MisraResult:
+def check(bundle: Path | None = None, deviations: Path | None = None) -> MisraResult:
     found, other, version = run_cppcheck(bundle)
     return compare(found, deviations, other=other, version=version)
 
 
-def compare(found: list[tuple[str, str, int]], deviations: Path = DEVIATIONS, *, other: list[str] | None = None,
+def compare(found: list[tuple[str, str, int]], deviations: Path | None = None, *, other: list[str] | None = None,
             version: str = "") -> MisraResult:
     """Findings (rule, file, line) against the deviation record."""
     res = MisraResult(other=other or [], version=version)
     for rule, file, line in found:
         res.findings[(rule, file)] += 1
         res.lines.setdefault((rule, file), []).append(line)
+    deviations = deviations or deviations_file()
     if not deviations.exists():
         res.unrecorded = [(r, f, n, 0) for (r, f), n in res.findings.items()]
         return res

@@ -17,9 +17,12 @@ from fleetlab.host_tools.firmware import targets as target_registry
 from fleetlab.host_tools.firmware.measure import target_costs
 from fleetlab.host_tools.firmware.build import cmake_build
 from . import analysers, coverage, misra, stack, wcet
-from .sources import REPO, run, tool_version
+from ..paths import build_root, default_bundle, in_clone, repo_root
+from .sources import need, run, tool_version
 
-DEFAULT_FUZZ_STATS = [REPO / "build" / "fuzz-long" / "fuzz-stats.json", REPO / "build" / "fuzz" / "fuzz-stats.json"]
+
+def default_fuzz_stats() -> list[Path]:
+    return [build_root() / "fuzz-long" / "fuzz-stats.json", build_root() / "fuzz" / "fuzz-stats.json"]
 
 
 def _section(title: str, body: str) -> str:
@@ -62,11 +65,29 @@ def float_free(build_m3: Path, description: str) -> tuple[bool, str]:
     return ok, body
 
 
-def assure(bundle: Path, out: Path, *, fuzz_stats: Path | None = None, eva: bool = True, target: bool = True) -> int:
-    """Run every check on `bundle`, write OUT/assurance.md and .html; 1 when a gating check fails.
-    `eva=False` skips Frama-C EVA, `target=False` the cross builds (float-free archive, measured cost)."""
+def required_tools(eva: bool, target: bool) -> list[str]:
+    """Every host tool a run of assure calls, so that a missing one stops it before the long work (the
+    target builds' compilers and emulators are checked beside it)."""
+    tools = ["cmake", "ctest", "gcc", "gcov", "cppcheck", "clang-tidy", "arm-none-eabi-gcc"]
+    if eva:
+        tools.append("frama-c")
+    if target:
+        tools.append("arm-none-eabi-nm")
+    return tools
+
+
+def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, eva: bool = True,
+           target: bool = True) -> int:
+    """Run every check on `bundle` (default: the example bundle), write OUT/assurance.md and .html; 1 when a
+    gating check fails. `eva=False` skips Frama-C EVA, `target=False` the cross builds (float-free archive,
+    measured cost)."""
+    for tool in required_tools(eva, target):
+        need(tool)
+    if target:
+        for t in (soft_float_target(), target_registry.reference()):
+            t.need_tools(f"fleetlab assure (the {t.name} build; --no-target skips it)")
     out.mkdir(parents=True, exist_ok=True)
-    bundle = bundle.resolve()
+    bundle = (bundle or default_bundle()).resolve()
     t_start = time.perf_counter()
     sections, summary, gating_ok = [], [], True
 
@@ -82,7 +103,7 @@ def assure(bundle: Path, out: Path, *, fuzz_stats: Path | None = None, eva: bool
     # target builds: float-free archive, measured stack and cost
     measured = {}
     if target:
-        work = REPO / "build" / "assure"
+        work = build_root() / "assure"
         soft = soft_float_target()
         cmake_build(work / soft.name, bundle, target=soft)
         ok, body = float_free(work / soft.name, soft.description)
@@ -156,7 +177,7 @@ def assure(bundle: Path, out: Path, *, fuzz_stats: Path | None = None, eva: bool
     body += "\n\n### Full library (with the float path)\n\n" + stack.table(rows_full[:6])
     sections.append(_section("Worst-case stack", body))
     if measured:
-        desc, wc = wcet.measure(REPO / "build" / "assure" / target_registry.reference().name, bundle)
+        desc, wc = wcet.measure(build_root() / "assure" / target_registry.reference().name, bundle)
         worst_fn = wcet.per_function(wc)
         summary_row(f"Worst-case instructions ({desc}, measured maximum)",
                     ", ".join(f"{fn} {n:.0f}" for fn, n in worst_fn.items()), None)
@@ -170,7 +191,7 @@ def assure(bundle: Path, out: Path, *, fuzz_stats: Path | None = None, eva: bool
                                  f"{measured['node_instructions_per_sample']:.0f} instructions per telemetry sample (3 frames)."))
 
     # coverage
-    cov = coverage.measure(REPO / "build" / "assure" / "coverage", bundle)
+    cov = coverage.measure(build_root() / "assure" / "coverage", bundle)
     hw = cov.handwritten()
     cov_ok = hw.line_pct >= coverage.GOAL_LINES and hw.branch_pct >= coverage.GOAL_BRANCHES
     summary_row("Coverage by the C tests (src/*.c)", f"{hw.line_pct:.1f} % statements, {hw.branch_pct:.1f} % branches "
@@ -179,7 +200,7 @@ def assure(bundle: Path, out: Path, *, fuzz_stats: Path | None = None, eva: bool
                              + coverage.table(cov)))
 
     # fuzzing
-    stats_file = fuzz_stats or next((p for p in DEFAULT_FUZZ_STATS if p.exists()), None)
+    stats_file = fuzz_stats or next((p for p in default_fuzz_stats() if p.exists()), None)
     if stats_file and stats_file.exists():
         st = json.loads(stats_file.read_text())
         # a long-mode file merges campaigns of several dates: each target carries its own date, clean flag and
@@ -203,8 +224,13 @@ def assure(bundle: Path, out: Path, *, fuzz_stats: Path | None = None, eva: bool
         "qemu-system-arm": tool_version(["qemu-system-arm", "--version"]),
     }
     sections.append(_section("Toolchain versions", "\n".join(f"- {k}: {v}" for k, v in versions.items())))
-    commit = run(["git", "-C", REPO, "rev-parse", "HEAD"]).stdout.strip()
-    dirty = bool(run(["git", "-C", REPO, "status", "--porcelain", "--untracked-files=no"]).stdout.strip())
+    if in_clone():
+        commit = run(["git", "-C", repo_root(), "rev-parse", "HEAD"]).stdout.strip()
+        dirty = bool(run(["git", "-C", repo_root(), "status", "--porcelain", "--untracked-files=no"]).stdout.strip())
+    else:  # an installed wheel: its version is what names the sources
+        from .. import __version__
+
+        commit, dirty = f"fleetlab {__version__} wheel, {repo_root()}", False
     head = (f"# slipest assurance evidence\n\nGenerated by `fleetlab assure` in {time.perf_counter() - t_start:.0f} s "
             f"on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; source commit `{commit}`"
             f"{' (with uncommitted changes)' if dirty else ''}.\n\n## Summary\n\n| Check | Result | Status |\n|---|---|---|\n"

@@ -2,52 +2,53 @@
 CAN codec, include paths, and a helper that runs a tool and keeps its output."""
 from __future__ import annotations
 
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 from fleetlab.host_tools.firmware.build import Result, execute
-from ..paths import default_bundle, repo_root
 
-REPO = repo_root()
-FW = REPO / "firmware_c"
-DBC = REPO / "dbc" / "slipest.dbc"
-EXAMPLE_BUNDLE = default_bundle()
+from ..paths import default_bundle, repo_root
+from .. import system_tools
+
 # sources that use float on purpose (the f32 reference path); the fixed-point library omits them
 FLOAT_SOURCES = ("slipest_features_f32.c", "slipest_infer_f32.c")
 
 
+def fw() -> Path:
+    """firmware_c/ of the C source tree (the clone, or the wheel's copy)."""
+    return repo_root() / "firmware_c"
+
+
 def library_sources(include_float: bool = True) -> list[Path]:
-    files = sorted((FW / "src").glob("*.c"))
+    files = sorted((fw() / "src").glob("*.c"))
     if not include_float:
         files = [f for f in files if f.name not in FLOAT_SOURCES]
     return files
 
 
 def public_headers() -> list[Path]:
-    return sorted((FW / "include").glob("*.h"))
+    return sorted((fw() / "include").glob("*.h"))
 
 
 def generate_dbc(out_dir: Path) -> Path:
     """cantools C codec from the repo DBC, integer-only: the CMake build's own generation script; beside it
     the CANopen object dictionary tables (slipest_co_od.h/.c), as CMake generates them."""
-    run(["cmake", f"-DPYTHON={sys.executable}", f"-DDBC={DBC}", f"-DGEN={out_dir}", "-P",
-         FW / "cmake" / "generate_dbc.cmake"], check=True)
-    run([sys.executable, str(REPO / "canopen_od" / "generate.py"), "c", str(out_dir)], check=True)
+    tree = repo_root()
+    run(["cmake", f"-DPYTHON={sys.executable}", f"-DDBC={tree / 'dbc' / 'slipest.dbc'}", f"-DGEN={out_dir}", "-P",
+         tree / "firmware_c" / "cmake" / "generate_dbc.cmake"], check=True)
+    run([sys.executable, str(tree / "canopen_od" / "generate.py"), "c", str(out_dir)], check=True)
     return out_dir / "slipest_dbc.c"
 
 
-def include_dirs(bundle: Path, gen_dir: Path) -> list[Path]:
-    return [FW / "include", Path(bundle), gen_dir]
+def include_dirs(bundle: Path | None, gen_dir: Path) -> list[Path]:
+    """The library's public headers, the bundle's (default: the example bundle), the generated codec."""
+    return [fw() / "include", Path(bundle or default_bundle()), gen_dir]
 
 
 def need(tool: str) -> str:
-    """Path of `tool`, or a clear error naming the package that provides it."""
-    path = shutil.which(tool)
-    if path is None:
-        raise RuntimeError(f"{tool} not found: install it (scripts/apt-packages.txt, scripts/setup.sh)")
-    return path
+    """Path of `tool`, or errors.MissingTool naming `fleetlab assure` and the tool's Debian package."""
+    return system_tools.need(tool, "fleetlab assure")
 
 
 def run(cmd: list[str], *, check: bool = False, cwd: Path | None = None, timeout: float = 1800) -> Result:
@@ -67,7 +68,7 @@ def rel(path: str | Path, gen_dir: Path | None = None) -> str:
     if (p.parent / "manifest.json").is_file():  # any export bundle, wherever it lives (the demo's is in demo_out/)
         return f"bundle/{p.name}"
     try:
-        r = p.relative_to(REPO)
+        r = p.relative_to(repo_root())
     except ValueError:
         return f"bundle/{p.name}"
     if r.parts[:2] == ("firmware_c", "bundles"):

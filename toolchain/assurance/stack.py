@@ -17,10 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fleetlab.host_tools.firmware import targets as target_registry
-from .sources import EXAMPLE_BUNDLE, FW, generate_dbc, include_dirs, library_sources, need, public_headers, run
+from .sources import fw, generate_dbc, include_dirs, library_sources, need, public_headers, run
 
-# the stack bound is computed for the reference target (the CPU whose painted stack bench c measures)
-CPU_FLAGS = list(target_registry.reference().cpu_flags)
 KERNEL_OPT = "-O3"   # firmware_c/cmake/target.cmake: inference kernels
 FRAME_OPT = "-Os"    # ... and per-frame code
 KERNELS = ("slipest_infer_q.c", "slipest_infer_f32.c", "slipest_features_f32.c")
@@ -100,25 +98,26 @@ class StackGraph:
 
 
 # the QEMU cost image's stack painter measures these wrappers (firmware_c/target/bench_target.c)
-BENCH = FW / "target" / "bench_target.c"
 BENCH_WRAPPERS = {"stack_q": "one_q", "stack_node_window": "node_last_frame"}
 
 
-def compile_graph(bundle: Path = EXAMPLE_BUNDLE, q_only: bool = True, with_bench: bool = False) -> StackGraph:
+def compile_graph(bundle: Path | None = None, q_only: bool = True, with_bench: bool = False) -> StackGraph:
     gcc = need("arm-none-eabi-gcc")
     graph = StackGraph()
     with tempfile.TemporaryDirectory() as tmp:
         gen = generate_dbc(Path(tmp) / "generated")
         incs = [f"-I{d}" for d in include_dirs(bundle, gen.parent)]
         defs = ["-DSLIPEST_Q_ONLY"] if q_only else []
-        for i, src in enumerate([*library_sources(include_float=not q_only), gen] + ([BENCH] if with_bench else [])):
+        bench = fw() / "target" / "bench_target.c"
+        for i, src in enumerate([*library_sources(include_float=not q_only), gen] + ([bench] if with_bench else [])):
             opt = KERNEL_OPT if src.name in KERNELS else FRAME_OPT
             extra = []
-            if src == BENCH:  # as target.cmake builds the cost image
+            if src == bench:  # as target.cmake builds the cost image
                 opt = KERNEL_OPT
-                extra = ["-fno-shrink-wrap", '-DSLIPEST_VECTORS_PATH="unused"', f"-I{FW / 'target'}", f"-I{FW / 'common'}"]
+                extra = ["-fno-shrink-wrap", '-DSLIPEST_VECTORS_PATH="unused"', f"-I{fw() / 'target'}", f"-I{fw() / 'common'}"]
             obj = Path(tmp) / f"{i}_{src.stem}.o"
-            run([gcc, *CPU_FLAGS, "-std=c99", opt, "-ffunction-sections", "-fdata-sections", *defs, *incs, *extra,
+            # the reference target's flags: the CPU whose painted stack bench c measures
+            run([gcc, *target_registry.reference().cpu_flags, "-std=c99", opt, "-ffunction-sections", "-fdata-sections", *defs, *incs, *extra,
                  "-fstack-usage", "-fcallgraph-info=su", "-c", src, "-o", obj], check=True, cwd=tmp)
             text = obj.with_suffix(".ci").read_text()
             for m in _NODE.finditer(text):
@@ -132,7 +131,7 @@ def compile_graph(bundle: Path = EXAMPLE_BUNDLE, q_only: bool = True, with_bench
     return graph
 
 
-def bench_bounds(bundle: Path = EXAMPLE_BUNDLE) -> dict[str, int]:
+def bench_bounds(bundle: Path | None = None) -> dict[str, int]:
     """Stack bound of each measured wrapper of the cost image (its frame plus the library call),
     keyed like fleetlab.host_tools.firmware.measure.target_costs, so bound and measurement compare 1:1."""
     graph = compile_graph(bundle, q_only=True, with_bench=True)
@@ -159,7 +158,7 @@ class StackRow:
     dynamic: bool
 
 
-def analyse(bundle: Path = EXAMPLE_BUNDLE, q_only: bool = True) -> tuple[list[StackRow], list[list[str]]]:
+def analyse(bundle: Path | None = None, q_only: bool = True) -> tuple[list[StackRow], list[list[str]]]:
     graph = compile_graph(bundle, q_only)
     cycles = graph.cycles()
     rows = []

@@ -18,7 +18,6 @@ from pathlib import Path
 from fleetlab.host_tools.firmware import targets as target_registry
 from fleetlab.host_tools.firmware.measure import parse_kv
 from fleetlab.host_tools.firmware.build import cmake_build, run_image
-from .sources import EXAMPLE_BUNDLE
 
 IMAGE = "slipest_wcet_target_q.elf"
 # (function, key in the image's output, overhead key, what the cases are)
@@ -55,7 +54,7 @@ def parse(text: str) -> list[WorstCase]:
     return rows
 
 
-def measure(build: Path, bundle: Path = EXAMPLE_BUNDLE, target: str | None = None) -> tuple[str, list[WorstCase]]:
+def measure(build: Path, bundle: Path | None = None, target: str | None = None) -> tuple[str, list[WorstCase]]:
     """Build the worst-case image for `target` (a SysTick target) and run it; (target description, rows)."""
     t = target_registry.get(target) if target else target_registry.reference()
     if t.counter != "systick":

@@ -14,6 +14,8 @@ import importlib
 import importlib.util
 import sys
 
+from ..errors import FleetlabError
+
 # name -> (module, one-line help): the one table of subcommands
 COMMANDS: dict[str, tuple[str, str]] = {
     "simulate": ("fleetlab.data.simulator.cli", "simulate rover telemetry and write window CSVs (built-in fleet scenario)"),
@@ -27,6 +29,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "upload": ("fleetlab.cli.upload", "send a model image to a running CANopen node (SDO block download) and activate it"),
     "bench": ("fleetlab.cli.bench", "benchmarks: featurisation and simulation, fusion, C inference"),
     "assure": ("fleetlab.cli.assure", "flight-software evidence: MISRA, analysers, stack, coverage, fuzzing report"),
+    "c-sources": ("fleetlab.cli.c_sources", "copy the slipest C library (sources, headers, CMake files) out for a firmware build"),
     "demo": ("fleetlab.demo", "the whole pipeline on built-in defaults, ending in a report"),
 }
 
@@ -65,7 +68,11 @@ def build_parser(selected: str | None = None) -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    args = build_parser(argv[0] if argv else None).parse_args(argv)
+    try:
+        args = build_parser(argv[0] if argv else None).parse_args(argv)
+    except FleetlabError as e:  # a subcommand's options could not be set up (e.g. its files are missing)
+        print(f"fleetlab: error: {e}", file=sys.stderr)
+        return 2
     if not getattr(args, "_module", None):
         build_parser().print_help()
         return 2
@@ -74,6 +81,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except FleetlabError as e:
+        # what the user can fix (a missing tool, a missing part of the installation): one line, exit 2
+        print(f"fleetlab {args.command}: error: {e}", file=sys.stderr)
+        return 2
     except (ValueError, OSError) as e:
         # Bad input: one clear line naming what is wrong, no traceback. Bugs still show theirs.
         print(f"fleetlab {args.command}: error: {e}", file=sys.stderr)

@@ -14,7 +14,7 @@ from fleetlab.host_tools.firmware import targets as target_registry
 
 from ..assurance import analysers, coverage, misra, stack, wcet
 from ..assurance.report import assure
-from ..assurance.sources import EXAMPLE_BUNDLE, REPO
+from ..paths import build_root
 
 __all__ = ["add_arguments", "run"]
 
@@ -52,7 +52,7 @@ def _analysers(args: argparse.Namespace) -> int:
 
 
 def _coverage(args: argparse.Namespace) -> int:
-    res = coverage.measure(args.build, args.bundle)
+    res = coverage.measure(args.build or build_root() / "coverage", args.bundle)
     print(coverage.table(res))
     print(f"statements {res.line_pct:.1f} % (goal {coverage.GOAL_LINES}), "
           f"branches {res.branch_pct:.1f} % (goal {coverage.GOAL_BRANCHES})")
@@ -71,7 +71,7 @@ def _stack(args: argparse.Namespace) -> int:
 
 def _wcet(args: argparse.Namespace) -> int:
     name = args.target or target_registry.reference().name
-    desc, rows = wcet.measure(args.build or REPO / "build" / f"wcet-{name}", args.bundle, args.target)
+    desc, rows = wcet.measure(args.build or build_root() / f"wcet-{name}", args.bundle, args.target)
     print(f"Worst-case instruction counts on {desc} (qemu -icount, measured maximum, not a bound):")
     print(wcet.table(rows))
     return 0
@@ -88,7 +88,7 @@ CHECKS = {
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--bundle", type=Path, default=EXAMPLE_BUNDLE, help="export bundle (default: the example bundle)")
+    p.add_argument("--bundle", type=Path, default=None, help="export bundle (default: the example bundle)")
     report = p.add_argument_group("the full report (no CHECK named)")
     report.add_argument("--out", type=Path, default=None, help="directory for assurance.md / assurance.html (required)")
     report.add_argument("--fuzz-stats", type=Path, default=None,
@@ -107,8 +107,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         elif name == "analysers":
             c.add_argument("--eva", action="store_true", help="also run Frama-C EVA")
         elif name == "coverage":
-            c.add_argument("--build", type=Path, default=REPO / "build" / "coverage",
-                           help="coverage build directory, inside the source tree (default: build/coverage)")
+            c.add_argument("--build", type=Path, default=None,
+                           help="coverage build directory (default: coverage/ under the build root: build/ in a clone)")
         elif name == "stack":
             c.add_argument("--full", action="store_true", help="the full library (float path too) instead of slipest_q")
         elif name == "wcet":

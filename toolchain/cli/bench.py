@@ -9,12 +9,17 @@ from __future__ import annotations
 import argparse
 import importlib
 
+from . import options
+
 KINDS: dict[str, tuple[str, str]] = {
     "data": ("fleetlab.data.bench", "featurisation (raw samples/s) and simulation speed (simulated s per wall s)"),
     "import": ("fleetlab.data.import_bench", "data import: windows/s from a 10-minute rosbag2 (vs in-memory featurisation, real time)"),
     "fusion": ("fleetlab.fusion.bench", "AcoMerge: batched vs one-ant-at-a-time generation, full-run time"),
+    "link": ("fleetlab.host_tools.bench_link", "host emulation loop over a link: frames/s vs the rover's 150, estimator latency at 50 Hz"),
     "c": ("fleetlab.host_tools.firmware.bench", "C estimator: host ns/inference vs onnxruntime and torch, Cortex-M4 cost and size"),
 }
+# kinds whose figures depend on the network: they take the shared --arch option (options.arch)
+ARCH_KINDS = {"fusion"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -24,6 +29,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         p.set_defaults(_bench_module=module)
         try:
             importlib.import_module(module).add_arguments(p)
+            if kind in ARCH_KINDS:
+                options.arch(p)
         except ModuleNotFoundError as e:
             if e.name != module:
                 raise

@@ -71,7 +71,7 @@ def settings_from_args(args: argparse.Namespace) -> EvalSettings:
         protocol=args.protocol, arch=args.arch, cal_sizes=tuple(args.cal_sizes or DEFAULT_CAL_SIZES),
         runs=args.runs, seed=args.seed, epochs=args.epochs,
         budget=Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, finetune_lr=args.finetune_lr,
-                      device=options.resolved_device(args)),
+                      device=options.resolved_device(args), rng=args.rng),
         methods=tuple(parse_methods(args.methods)), buffer_ablation=args.buffer_ablation,
         fleet_ablation=args.fleet_ablation,
     )

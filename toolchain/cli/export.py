@@ -13,8 +13,10 @@ DEFAULT_VECTORS = 1200
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = (
         "Export a fleetlab model (.pt from training or fusion) into a bundle directory: model.onnx, "
-        "slipest_model_f32.h, slipest_model_q.h (fixed-point, SN-S only), vectors.npz/.bin (inputs, torch "
-        "float and integer-reference logits) and manifest.json (scheme parameters, versions, hashes). "
+        "slipest_model_f32.h, slipest_model_q.h (fixed point), model.img (SN-S: the run-time model image), "
+        "vectors.npz/.bin (inputs, torch float and integer-reference logits) and manifest.json (scheme parameters, "
+        "versions, hashes). Any architecture (sn-s, sn-d, hidden sizes such as 64,32) exports; other than SN-S its "
+        "headers carry a layer table, and model.img is not written yet (image format 1 carries SN-S only). "
         "With --data, also writes accuracy.md/json: fixed-point vs float agreement on those windows."
     )
     p.add_argument("model", nargs="?", type=Path, help="model file written by fleetlab (save_model)")
@@ -41,7 +43,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="C name of the bundle's models: slipest_NAME_q / slipest_NAME_f32 (default main); give "
                    "two bundles different names to include both in one image")
     p.add_argument("--onnx-only", action="store_true",
-                   help="write model.onnx and the manifest only (the way to export an SN-D)")
+                   help="write model.onnx and the manifest only (no C headers, vectors or image)")
 
 
 def _data_windows(dirs: list[Path]) -> np.ndarray | None:
@@ -76,11 +78,6 @@ def run(args: argparse.Namespace) -> int:
     from fleetlab.export.vectors import draw_inputs, simulator_windows
 
     model, meta = load_model(args.model)
-    if meta["arch"] != "sn-s" and not args.onnx_only:
-        raise ValueError(
-            f"{args.model}: architecture {meta['arch']} cannot go to the fixed-point C path (SN-S only: "
-            "12->30->3 with one LayerNorm); use --onnx-only to export ONNX alone"
-        )
     windows, kind = _data_windows(args.data), "dataset windows"
     if windows is None and not (args.builtin_vectors or args.onnx_only):
         windows, kind = simulator_windows(args.seed), f"simulator windows (scenario seed {args.seed}, scale 0.05)"
@@ -97,8 +94,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {name:24s} {entry['bytes']:>9d} bytes")
     if b.qparams is not None:
         q = b.manifest["quantization"]
-        print(f"  fixed point: FY={q['fy']} FG={q['fg']} w1_max={q['w1_max']} w2_max={q['w2_max']} "
-              f"logit scale {q['logit_scale']:.6g}; vector agreement {b.manifest['vectors']['class_agreement']:.4%}")
+        shifts = (" ".join(f"[{b_['width']}: FY={b_['fy']} FG={b_['fg']} FZ={b_['fz']}]" for b_ in q["blocks"])
+                  if "blocks" in q else f"FY={q['fy']} FG={q['fg']} w1_max={q['w1_max']} w2_max={q['w2_max']}")
+        print(f"  fixed point: {shifts} logit scale {q['logit_scale']:.6g}; "
+              f"vector agreement {b.manifest['vectors']['class_agreement']:.4%}")
     acc = b.path / "accuracy.md"
     if acc.exists():
         print(acc.read_text())

@@ -83,7 +83,7 @@ def _fuse(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     budget = Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, copies=args.copies, threads=args.threads,
-                    device=device)
+                    device=device, rng=args.rng)
     if device != "cpu" and progress:
         print(f"{label}: searching on {options.device_label(device)}", file=sys.stderr)
     fused = fuse(args.method, src, cal.x_cal, cal.y_cal, seed=args.seed, buffer_seed=args.seed, budget=budget)

@@ -10,7 +10,7 @@ import torch
 
 from ..data.splits import PROTOCOLS
 from ..fusion.acomerge import AUTO_THREADS, MAX_THREADS, AcoMergeConfig
-from ..models import ARCHS
+from ..models.mlp import ARCHS, MAX_HIDDEN_LAYERS, MAX_UNITS, MIN_UNITS, canonical_arch
 from ..models.train import EXPERT_EPOCHS
 
 ACO = AcoMergeConfig()  # the paper's AcoMerge defaults: the one source of every search default below
@@ -22,8 +22,19 @@ def data_dir(p: argparse.ArgumentParser, help: str = "dataset folder: made by 'f
     p.add_argument("--data", required=True, type=Path, metavar="DIR", help=help)
 
 
-def arch(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--arch", default="sn-s", choices=sorted(ARCHS), help="network architecture (default: sn-s)")
+def arch(p: argparse.ArgumentParser, default: str = "sn-s") -> None:
+    """The one --arch option (training, fuse, evaluate, export, bench fusion): a name or hidden sizes."""
+
+    def parse(text: str) -> str:
+        try:
+            return canonical_arch(text)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+
+    p.add_argument("--arch", default=default, type=parse, metavar="ARCH",
+                   help=f"network architecture: {', '.join(ARCHS)} ({'; '.join(f'{k} = {list(v)}' for k, v in ARCHS.items())}), "
+                   f"or hidden sizes such as 64,32 (1-{MAX_HIDDEN_LAYERS} layers of {MIN_UNITS}-{MAX_UNITS} units; "
+                   f"default: {default})")
 
 
 def protocol(p: argparse.ArgumentParser) -> None:
@@ -64,6 +75,10 @@ def device(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="cpu", metavar="cpu|cuda|auto",
                    help="where AcoMerge searches: cpu (the reference, default), cuda or cuda:N (a GPU; results differ "
                         "from the CPU's in float rounding and random stream), auto (cuda when one is present)")
+    p.add_argument("--rng", default="device", choices=("device", "host"),
+                   help="where a GPU search draws its random numbers: device (fast, the default; another stream "
+                        "than the CPU's) or host (the CPU reference's generators, uploaded each generation: the "
+                        "GPU then differs from --device cpu by float rounding only; slower). No effect on the CPU")
 
 
 def resolved_device(args: argparse.Namespace) -> str:

@@ -50,7 +50,7 @@ from tqdm.auto import tqdm
 
 from ..data.dataset import TARGET, Dataset
 from ..data.splits import PROTOCOLS, make_split
-from ..models import ARCHS, batched_logits
+from ..models import batched_logits, canonical_arch
 from ..fusion import registry
 from ..fusion.pipeline import Sources, align_sources, fuse_many, needs_joint, train_expert_flats, train_joint_flat
 from ..fusion.registry import Budget
@@ -81,8 +81,7 @@ class EvalSettings:
     def __post_init__(self):
         if self.protocol not in PROTOCOLS:
             raise ValueError(f"unknown protocol {self.protocol!r}; choose one of {', '.join(PROTOCOLS)}")
-        if self.arch not in ARCHS:
-            raise ValueError(f"unknown architecture {self.arch!r}; choose one of {', '.join(ARCHS)}")
+        object.__setattr__(self, "arch", canonical_arch(self.arch))  # a ValueError names the accepted forms
         b = self.budget
         if self.runs < 1 or self.epochs < 1 or b.steps < 1 or b.ants < 1 or b.sigma < 0 or not b.finetune_lr > 0:
             raise ValueError("runs, epochs, generations and ants must all be at least 1, sigma not negative, "

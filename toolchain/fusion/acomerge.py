@@ -129,6 +129,9 @@ class AcoMergeConfig:
     # 'cpu' runs `search` (the reference); a GPU ('cuda', 'cuda:N') runs the lockstep engine
     # (lockstep.py), whose results differ from the CPU's in float rounding and random stream
     device: str = "cpu"
+    # where the random numbers are drawn on a GPU: 'device' (fast, the default) or 'host' (the CPU
+    # generators of the reference, uploaded: a GPU run then differs from the CPU's by rounding only)
+    rng: str = "device"
 
     def validate(self) -> None:
         bad = [p for p in self.phases if p not in PHASES]
@@ -152,6 +155,8 @@ class AcoMergeConfig:
             raise ValueError("chunk must be at least 1 and threads at least 0 (0: chosen from the free cores)")
         if self.device != "cpu" and not self.device.startswith("cuda"):
             raise ValueError(f"device must be 'cpu' or 'cuda[:N]', got {self.device!r}")
+        if self.rng not in ("device", "host"):
+            raise ValueError(f"rng must be 'device' or 'host', got {self.rng!r}")
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -222,7 +227,8 @@ def construct_ants(
 
 
 def whale_update(
-    pos: torch.Tensor, leader: torch.Tensor, a: float, inertia: float, b: float, gen: torch.Generator,
+    pos: torch.Tensor, leader: torch.Tensor, a: float | torch.Tensor, inertia: float | torch.Tensor, b: float,
+    gen: torch.Generator,
     clip: float | None = None,
 ) -> torch.Tensor:
     """One IWOA move of S independent swarms: pos (S, M, D), leader (S,) whale index -> new (S, M, D).
@@ -233,11 +239,12 @@ def whale_update(
     dev = pos.device
     rows = torch.arange(s, device=dev)
     best = pos[rows, leader].unsqueeze(1)  # (S, 1, D)
-    p = torch.rand(s, m, 1, generator=gen, device=dev)
-    lam = torch.rand(s, m, 1, generator=gen, device=dev).mul_(2).sub_(1)
-    big_a = a * (2 * torch.rand(s, m, d, generator=gen, device=dev) - 1)
-    big_c = 2 * torch.rand(s, m, d, generator=gen, device=dev)
-    partner = torch.randint(0, m, (s, m), generator=gen, device=dev)
+    here = gen.device  # drawn where the generator lives (a CPU one on a GPU run: --rng host), used on dev
+    p = torch.rand(s, m, 1, generator=gen, device=here).to(dev)
+    lam = torch.rand(s, m, 1, generator=gen, device=here).to(dev).mul_(2).sub_(1)
+    big_a = a * (2 * torch.rand(s, m, d, generator=gen, device=here).to(dev) - 1)
+    big_c = 2 * torch.rand(s, m, d, generator=gen, device=here).to(dev)
+    partner = torch.randint(0, m, (s, m), generator=gen, device=here).to(dev)
     other = pos[rows.unsqueeze(1), partner]  # (S, M, D) random swarm members
     encircle = best - inertia * big_a * (big_c * best - pos).abs()
     explore = other - inertia * big_a * (big_c * other - pos).abs()

@@ -29,7 +29,9 @@ Figures (one JSON object with --json):
 
 With `--device cuda` it measures the accelerator path instead (fusion/lockstep.py):
 generation_ms (one run's generation: construction, fitness of every ant, updates, IWOA
-amortised; _eager: without the CUDA graph of the fitness), fitness_ms (one generation's fitness
+amortised, the run's set-up and CUDA graph captures included; _eager: without any CUDA graph;
+_steady: what one more generation adds, from a full run less a run of a fifth of the
+generations, i.e. one replay of the generation's graph), fitness_ms (one generation's fitness
 call alone; _cuda_graph: replayed, with cuda_graph_max_abs_diff against the call), full_run_s, and the same with
 `--batch-runs` runs in lockstep (batched_generation_ms for all of them, per_run_generation_ms),
 against the goals of issue 30 (SN-S generation ≤ 0.15 ms, SN-D run ≤ 0.5 s on an H100-class GPU).
@@ -59,7 +61,6 @@ from torch.utils.data import DataLoader, TensorDataset
 
 from ..data.contracts import N_CLASSES
 from ..models import build, flatten, load_flat
-from ..models.mlp import ARCHS
 from ..models.train import class_weights
 from .acomerge import (
     AUTO_THREADS,
@@ -99,7 +100,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.add_argument("--data", type=Path, help="dataset folder: draw D_Cal from its target rows (default: synthetic)")
-    p.add_argument("--arch", default="sn-s", choices=sorted(ARCHS), help="architecture (default: sn-s)")
     aco = AcoMergeConfig()
     p.add_argument("--ants", type=int, default=aco.n_ants, help=f"ants per generation (default: {aco.n_ants})")
     p.add_argument("--generations", type=int, default=aco.generations,
@@ -287,13 +287,15 @@ def measure_device(args) -> dict:
     config = AcoMergeConfig(n_ants=args.ants, generations=args.generations, device=str(device))
     sync = torch.cuda.synchronize if device.type == "cuda" else (lambda: None)
 
+    results = {}
+
     def timed_runs(n_runs: int, generations: int, cuda_graph: bool = True) -> float:
         """Best wall seconds of a lockstep search of n_runs runs (different seeds)."""
         cfg = replace(config, generations=generations)
         fitness = StackedFitness(args.arch, [(x, y)] * n_runs, device)
         go = lambda: search_lockstep([experts] * n_runs, [buffer] * n_runs, fitness, cfg,  # noqa: E731
                                      [args.seed + r for r in range(n_runs)], device, cuda_graph=cuda_graph)
-        go()  # warm-up: kernels loaded, allocator primed
+        results[n_runs, generations, cuda_graph] = go()  # also the warm-up: kernels loaded, allocator primed
         sync()
         best = math.inf
         for _ in range(args.full_runs):
@@ -305,7 +307,12 @@ def measure_device(args) -> dict:
 
     run_s = timed_runs(1, args.generations)
     run_s_eager = timed_runs(1, args.generations, cuda_graph=False)
+    short = max(1, args.generations // 5)
+    steady_ms = (1e3 * (run_s - timed_runs(1, short)) / (args.generations - short)
+                 if args.generations > short else math.nan)
     batched_s = timed_runs(args.batch_runs, args.generations)
+    graphed_run, eager_run = results[1, args.generations, True][0], results[1, args.generations, False][0]
+    same_search = (graphed_run.history == eager_run.history and torch.equal(graphed_run.best_flat, eager_run.best_flat))
     fitness = StackedFitness(args.arch, [(x, y)], device)
     gen = torch.Generator(device=device).manual_seed(args.seed)
     ants = buffer.to(device)[torch.randint(0, buffer.shape[0], (1, args.ants), generator=gen, device=device)]
@@ -332,6 +339,8 @@ def measure_device(args) -> dict:
         "fitness_ms": round(1e3 * fit_best, 4), "fitness_ms_cuda_graph": round(1e3 * fit_graph, 4),
         "cuda_graph_max_abs_diff": graph_diff,
         "generation_ms": round(gen_ms, 4), "generation_ms_eager": round(1e3 * run_s_eager / args.generations, 4),
+        "generation_ms_steady": round(steady_ms, 4),
+        "cuda_graph_same_search": same_search,  # the replayed run's history and model equal the eager run's
         "full_run_s": round(run_s, 3), "full_run_s_eager": round(run_s_eager, 3),
         "batch_runs": args.batch_runs, "batched_generation_ms": round(1e3 * batched_s / args.generations, 4),
         "per_run_generation_ms": round(1e3 * batched_s / args.generations / args.batch_runs, 4),
@@ -366,9 +375,11 @@ def run(args: argparse.Namespace) -> int:
     if device.type != "cpu":
         print(f"AcoMerge on {result['device']}: {result['arch']}, {result['ants']} ants, |D_Cal| = {result['cal_size']}")
         for key, unit in (("fitness_ms", "ms"), ("fitness_ms_cuda_graph", "ms"), ("generation_ms", "ms"),
-                          ("generation_ms_eager", "ms"), ("full_run_s", "s"), ("full_run_s_eager", "s"),
+                          ("generation_ms_eager", "ms"), ("generation_ms_steady", "ms"), ("full_run_s", "s"),
+                          ("full_run_s_eager", "s"),
                           ("batched_generation_ms", "ms"), ("per_run_generation_ms", "ms"), ("batched_full_runs_s", "s")):
             print(f"  {key:40s} {result[key]:10.4f} {unit}")
+        print(f"  the graph-replayed run is the eager run's search: {result['cuda_graph_same_search']}")
         print(f"  goals: {result['goals']}")
         return 0
     print(f"AcoMerge benchmark: {result['arch']}, {result['ants']} ants, |D_Cal| = {result['cal_size']} "

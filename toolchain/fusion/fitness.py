@@ -21,7 +21,7 @@ import torch
 
 from ..data.contracts import N_CLASSES
 from ..models import batched_logits
-from ..models.mlp import ARCHS, LN_EPS, param_shapes
+from ..models.mlp import LN_EPS, hidden_sizes, param_shapes
 from ..models.train import class_weights
 
 
@@ -50,7 +50,7 @@ class CalibrationFitness:
         xt = torch.cat([self.x - self.mu, torch.ones(n, 1)], dim=1)  # x̃ = [x − μ, 1]
         self.xt_t = xt.T.contiguous()  # (13, N)
         self.xx = (xt[:, :, None] * xt[:, None, :]).reshape(n, -1).T.contiguous()  # (169, N)
-        self.fast = ARCHS[arch] == ARCHS["sn-s"]
+        self.fast = len(hidden_sizes(arch)) == 1  # one hidden block: the closed-form path below
 
     def __call__(self, flats: torch.Tensor) -> torch.Tensor:
         if flats.dim() == 1:
@@ -69,8 +69,8 @@ class CalibrationFitness:
         return per_row.sum(dim=1).div_(self.weight_total)
 
     def _snS(self, vals: torch.Tensor) -> torch.Tensor:
-        p, h = vals.shape[0], ARCHS["sn-s"][0]
-        sizes = [torch.Size(shape).numel() for shape in param_shapes("sn-s")]
+        p, h = vals.shape[0], hidden_sizes(self.arch)[0]
+        sizes = [torch.Size(shape).numel() for shape in param_shapes(self.arch)]
         w1, b1, g, beta, w2, b2 = torch.split(vals, sizes, dim=1)
         w1, w2 = w1.reshape(p, h, -1), w2.reshape(p, -1, h)
         b1 = b1 + w1 @ self.mu  # W x + b = W (x − μ) + (b + W μ)

@@ -22,9 +22,14 @@ Every run keeps its own torch.Generator, seeded as `acomerge.search` seeds it, s
 result does not depend on which runs it was batched with (tested on CPU: R runs together give
 the same results as each run alone).
 
-Results on a GPU differ from the CPU reference: other float rounding (GPU GEMMs), and the CUDA
-generator gives another random stream than the CPU one for the same seed. Both paths draw
-from the same distributions; scores agree within the spread over MCCV runs (docs/paper_table.md).
+On a GPU a whole generation is one CUDA graph, replayed (see _Lockstep and _Replayed): the
+state lives in tensors changed only in place, and the host only says "next generation".
+
+Results on a GPU differ from the CPU reference: other float rounding (GPU GEMMs), and by
+default (rng 'device') the CUDA generator gives another random stream than the CPU one for the
+same seed. Both draw from the same distributions. With rng 'host' the CPU generators of the
+reference are used and their numbers uploaded, so a GPU run differs from the CPU's by float
+rounding only (docs/scaling.md).
 """
 
 from __future__ import annotations
@@ -44,6 +49,8 @@ from ..models.train import class_weights
 from .acomerge import AcoMergeConfig, AcoMergeResult, _schedule, acomerge, checked_inputs, mmas_bounds, whale_update
 
 DEVICES = ("cpu", "cuda", "auto")
+RNGS = ("device", "host")  # where the search's random numbers are drawn, see `generators`
+HISTORY = ("best_so_far", "iteration_best", "tau_lowest", "tau_highest")  # per run and generation, on the device
 
 
 def resolve_device(name: str) -> torch.device:
@@ -187,15 +194,17 @@ def graphed(fitness: Callable[[torch.Tensor], torch.Tensor], example: torch.Tens
 
 
 def construct_ants_dense(
-    tau: torch.Tensor, eta: torch.Tensor | None, q0: float, n_ants: int, gens: Sequence[torch.Generator],
-    alpha: float = 1.0, beta: float = 1.0,
+    tau: torch.Tensor, eta: torch.Tensor | None, q0: float | torch.Tensor, n_ants: int,
+    gens: Sequence[torch.Generator], alpha: float = 1.0, beta: float = 1.0,
 ) -> torch.Tensor:
     """Paths (R, n_ants, T) int64 of R runs over pheromones tau (R, T, M), without reading back.
 
     The rule and the uniforms are those of `acomerge.construct_ants` (one uniform per
     decision, (T, n_ants) per run from that run's generator): u < π_t departs, and u/π_t is
     inverted in the cumulative weights of the non-greedy candidates. Here the inversion is
-    done for every decision and kept only where the ant departs.
+    done for every decision and kept only where the ant departs. q0 may be a float64 tensor of
+    one element (the engine's schedule, read on the device). The uniforms are drawn where each
+    generator lives and moved to tau's device (`--rng host`: CPU generators on a GPU run).
     """
     r, n_idx, m = tau.shape
     greedy = tau.argmax(dim=2, keepdim=True)  # (R, T, 1)
@@ -208,7 +217,8 @@ def construct_ants_dense(
     leave = ((1.0 - q0) * w_others / (w_others + w_greedy)).to(torch.float32)  # (R, T, 1): π_t
     cdf = weight.scatter(2, greedy, 0.0).cumsum_(dim=2).div_(w_others)
     cdf[..., -1] = 1.0
-    u = torch.stack([torch.rand(n_idx, n_ants, generator=g, device=tau.device) for g in gens])  # (R, T, P)
+    u = torch.stack([torch.rand(n_idx, n_ants, generator=g, device=g.device) for g in gens])
+    u = u.to(tau.device)  # (R, T, P)
     depart = u < leave
     v = u.to(torch.float64) / leave
     pick = torch.searchsorted(cdf, v.contiguous(), right=True).clamp_(max=m - 1)
@@ -220,6 +230,187 @@ def _heuristic(cfg: AcoMergeConfig, cand_t: torch.Tensor, best: torch.Tensor) ->
     if cfg.heuristic == "constant":
         return None
     return torch.exp(-(cand_t - best.unsqueeze(2)).abs())
+
+
+def generators(seeds: Sequence[int], device: torch.device, rng: str = "device") -> list[torch.Generator]:
+    """One generator per run, seeded as `acomerge.search` seeds its own.
+
+    rng 'device': on `device` (fast, graph-safe on a GPU; on a GPU another stream than the CPU's);
+    'host': on the CPU, whatever `device` is, so a GPU run draws exactly the CPU reference's
+    numbers (uploaded each generation) and differs from it by float rounding only.
+    """
+    if rng not in RNGS:
+        raise ValueError(f"rng must be one of {RNGS}, got {rng!r}")
+    where = torch.device("cpu") if rng == "host" else device
+    return [torch.Generator(device=where).manual_seed(s + 1_000_003) for s in seeds]
+
+
+class _Lockstep:
+    """The state of R lockstep runs on one device, changed only in place.
+
+    Why in place: a CUDA graph records the addresses its kernels read and write, so a
+    generation captured once replays correctly only if every later generation finds its
+    inputs in the same tensors. The generation counter, the q0 and global-best schedules, the
+    IWOA counter and schedule and the history are device tensors for the same reason: a
+    generation reads its own index from the device, and the host only says "next".
+    `generation()` and `iwoa()` are the only code paths, eager or replayed.
+    """
+
+    def __init__(self, ex, cand, fitness, cfg: AcoMergeConfig, gens: list[torch.Generator]):
+        dev = ex.device
+        self.cfg, self.fitness, self.gens = cfg, fitness, gens
+        n_runs, (m, n_t) = ex.shape[0], cand.shape[1:]
+        self.rows = torch.arange(n_runs, device=dev)
+        j_ex = torch.nan_to_num(fitness(ex), nan=math.inf)  # (R, K)
+        self.best_k = j_ex.argmin(dim=1)
+        self.j_ex = j_ex
+        self.best_fit = j_ex.gather(1, self.best_k.unsqueeze(1)).squeeze(1)  # (R,)
+        self.best_flat = ex[self.rows, self.best_k]  # (R, T)
+        self.best_gen = torch.zeros(n_runs, dtype=torch.long, device=dev)  # 0 = an expert, g = generation g
+        # The best expert's path exists when it is in the buffer (the first buffer row equal to it).
+        same = (cand == self.best_flat.unsqueeze(1)).all(dim=2)  # (R, M)
+        self.has_path = same.any(dim=1)
+        self.best_path = same.to(torch.int8).argmax(dim=1, keepdim=True).expand(n_runs, n_t).clone()  # (R, T)
+        self.pdec = mmas_bounds(1.0, 1.0, m, n_t, cfg.p_best)[0]  # τ_min / τ_max, a constant of (M, T, p_best)
+        tmin, tmax = self.bounds(self.best_fit)
+        self.tau = torch.full((n_runs, n_t, m), cfg.tau_init, device=dev)
+        self.tau.copy_(torch.minimum(torch.maximum(self.tau, tmin.view(-1, 1, 1)), tmax.view(-1, 1, 1)))
+        self.cand = cand.clone()  # (R, M, T)
+        self.cand_t = cand.transpose(1, 2).contiguous()  # (R, T, M)
+        self.eta = _heuristic(cfg, self.cand_t, self.best_flat)
+        n_gen = cfg.generations
+        self.q0s = [cfg.q0_start + (cfg.q0_end - cfg.q0_start) * (g / max(1, n_gen - 1)) for g in range(n_gen)]
+        self.q0_dev = torch.tensor(self.q0s, dtype=torch.float64, device=dev)
+        self.gb_dev = torch.tensor([cfg.gb_every > 0 and (g + 1) % cfg.gb_every == 0 for g in range(n_gen)],
+                                   device=dev)
+        n_outer = max(1, n_gen // cfg.iwoa_every)
+        with_iwoa = "iwoa" in cfg.phases
+        self.iwoa_flags = [with_iwoa and (g + 1) % cfg.iwoa_every == 0 and (g + 1) // cfg.iwoa_every <= n_outer
+                           for g in range(n_gen)]
+        sched = [_schedule(c, n_outer) for c in range(n_outer)]
+        self.iwoa_a = torch.tensor([a for a, _ in sched], dtype=torch.float32, device=dev)
+        self.iwoa_w = torch.tensor([w for _, w in sched], dtype=torch.float32, device=dev)
+        self.g = torch.zeros(1, dtype=torch.long, device=dev)  # the generation being run (0-based)
+        self.c = torch.zeros(1, dtype=torch.long, device=dev)  # IWOA calls done
+        # the per-generation scalars of a run side by side, so one kernel writes all of them
+        self.scalars = torch.zeros(n_runs, n_gen, len(HISTORY), device=dev)
+        self.hist = {k: self.scalars[..., i] for i, k in enumerate(HISTORY)}
+        self.hist["ants"] = torch.zeros(n_runs, n_gen, cfg.n_ants, device=dev)
+
+    def bounds(self, bf: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        tau_max = self.cfg.deposit / bf.clamp(min=1e-12)
+        return tau_max * self.pdec, tau_max
+
+    def generation(self) -> None:
+        """Ants, fitness, best-so-far, pheromone update and history of generation self.g; then g += 1."""
+        cfg, rows = self.cfg, self.rows
+        q0 = self.q0_dev.index_select(0, self.g)  # (1,) float64, as the reference's Python float
+        paths = construct_ants_dense(self.tau, self.eta, q0, cfg.n_ants, self.gens, cfg.alpha, cfg.beta)  # (R, P, T)
+        flats = self.cand.gather(1, paths)  # (R, P, T)
+        j = torch.nan_to_num(self.fitness(flats), nan=math.inf)  # (R, P)
+        ib = j.argmin(dim=1)
+        jb = j.gather(1, ib.unsqueeze(1)).squeeze(1)
+        ib_path = paths[rows, ib]  # (R, T)
+        better = jb < self.best_fit
+        torch.where(better, jb, self.best_fit, out=self.best_fit)
+        torch.where(better.unsqueeze(1), flats[rows, ib], self.best_flat, out=self.best_flat)
+        torch.where(better.unsqueeze(1), ib_path, self.best_path, out=self.best_path)
+        torch.where(better, self.g + 1, self.best_gen, out=self.best_gen)
+        self.has_path.logical_or_(better)
+        if self.eta is not None:
+            self.eta.copy_(_heuristic(cfg, self.cand_t, self.best_flat))
+        use_gb = self.has_path & self.gb_dev.index_select(0, self.g)
+        path = torch.where(use_gb.unsqueeze(1), self.best_path, ib_path)
+        j_dep = torch.where(use_gb, self.best_fit, jb)
+        # J >= 0, and +inf only where it was NaN (nan_to_num turns an infinite loss into the largest
+        # float): Q(1 - ρ)/J is then 0, the reference's "no deposit", without a test of its own
+        amount = (1.0 - cfg.evaporation) * cfg.deposit / j_dep
+        self.tau.mul_(cfg.evaporation)
+        self.tau.scatter_add_(2, path.unsqueeze(2), amount.view(-1, 1, 1).expand(*path.shape, 1))
+        tmin, tmax = self.bounds(self.best_fit)
+        torch.clamp(self.tau, tmin.view(-1, 1, 1), tmax.view(-1, 1, 1), out=self.tau)  # = min(max(τ, τ_min), τ_max)
+        # per generation only what is needed later; the statistics are computed once, after the run
+        now = torch.stack([self.best_fit, jb, self.tau.amin(dim=(1, 2)), self.tau.amax(dim=(1, 2))], dim=1)
+        self.scalars.index_copy_(1, self.g, now.unsqueeze(1))
+        self.hist["ants"].index_copy_(1, self.g, j.unsqueeze(1))
+        self.g.add_(1)
+
+    def iwoa(self) -> None:
+        """One IWOA move of every run's candidates (a and the inertia read from the schedule); c += 1."""
+        cfg = self.cfg
+        a = self.iwoa_a.index_select(0, self.c).squeeze(0)  # 0-dim: computes in float32 like a Python float
+        inertia = self.iwoa_w.index_select(0, self.c).squeeze(0)
+        leader = self.tau.argmax(dim=2)  # (R, T)
+        moved = torch.stack([
+            whale_update(self.cand_t[r].unsqueeze(-1), leader[r], a, inertia, cfg.spiral_b, self.gens[r],
+                         cfg.clip).squeeze(-1)
+            for r in range(len(self.gens))])
+        self.cand_t.copy_(moved)
+        self.cand.copy_(moved.transpose(1, 2))
+        if self.eta is not None:
+            self.eta.copy_(_heuristic(cfg, self.cand_t, self.best_flat))
+        self.c.add_(1)
+
+
+class _Replayed:
+    """step() run eagerly, or on a GPU: eagerly `warm` times, then captured once into a CUDA graph
+    and replayed from then on (one launch instead of hundreds of small ones per generation).
+
+    The step must change only tensors that live as long as this object (see _Lockstep). The
+    eager calls run on a side stream (kernels chosen, cuBLAS workspaces allocated outside the
+    capture) and are real steps of the search, not thrown away. The run's own generators are
+    registered with the graph, so every replay draws the next numbers of their streams, as an
+    eager call would. If the capture fails, one warning line and eager calls from then on; the
+    search is the same either way.
+    """
+
+    def __init__(self, step: Callable[[], None], device: torch.device, gens: Sequence[torch.Generator],
+                 name: str, enabled: bool = True, warm: int = 1):
+        self.step, self.device, self.gens, self.name, self.warm = step, device, list(gens), name, warm
+        self.enabled = enabled and device.type == "cuda" and all(g.device.type == "cuda" for g in gens)
+        self.graph: torch.cuda.CUDAGraph | None = None
+        self.calls = 0
+
+    @property
+    def replaying(self) -> bool:
+        return self.graph is not None
+
+    def __call__(self) -> None:
+        self.calls += 1
+        if self.graph is not None:
+            self.graph.replay()
+        elif not self.enabled:
+            self.step()
+        elif self.calls <= self.warm:
+            side = torch.cuda.Stream(device=self.device)
+            side.wait_stream(torch.cuda.current_stream(self.device))
+            with torch.cuda.stream(side):
+                self.step()
+            torch.cuda.current_stream(self.device).wait_stream(side)
+        else:
+            self.graph = self._capture()
+            if self.graph is None:
+                self.enabled = False
+                self.step()
+            else:
+                self.graph.replay()
+
+    def _capture(self) -> torch.cuda.CUDAGraph | None:
+        states = [g.get_state() for g in self.gens]
+        try:
+            graph = torch.cuda.CUDAGraph()
+            for g in self.gens:  # torch >= 2.4: a generator other than the default one, graph-safe
+                graph.register_generator_state(g)
+            with torch.cuda.graph(graph, capture_error_mode="thread_local"):  # CPU jobs may run beside it
+                self.step()
+            return graph
+        except (RuntimeError, AttributeError) as e:
+            for g, s in zip(self.gens, states):
+                g.set_state(s)
+            first = str(e).splitlines()[0] if str(e) else type(e).__name__
+            print(f"warning: CUDA graph capture of the AcoMerge {self.name} failed ({first}); running it eagerly",
+                  file=sys.stderr)
+            return None
 
 
 def search_lockstep(
@@ -237,9 +428,12 @@ def search_lockstep(
 
     experts[r] (K, T) and cands[r] (M, T) are run r's experts and buffer (the same K, M and
     T for every run); `fitness` maps (R, P, T) to (R, P); run r's draws come from its own
-    generator seeded with seeds[r] as in `acomerge.search`. The whole-model IWOA ablation is
-    not batched: it runs through `acomerge.search`. On a GPU the ants' fitness is replayed from
-    a CUDA graph (`cuda_graph`, see GraphedFitness).
+    generator seeded with seeds[r] as in `acomerge.search` (where: config.rng, see
+    `generators`). The whole-model IWOA ablation is not batched: it runs through
+    `acomerge.search`. On a GPU with device-side generators (`cuda_graph`), each whole
+    generation is replayed from one CUDA graph and each IWOA move from another (_Replayed);
+    with host generators (--rng host) only the fitness is (GraphedFitness), since the
+    uniforms come from the CPU.
     """
     config.validate()
     if "mmas" not in config.phases:
@@ -250,92 +444,27 @@ def search_lockstep(
         raise ValueError("one expert set, one buffer and one seed per run are required")
     ex = torch.stack([torch.as_tensor(e, dtype=torch.float32) for e in experts]).to(dev)  # (R, K, T)
     cand = torch.stack([torch.as_tensor(c, dtype=torch.float32) for c in cands]).to(dev)  # (R, M, T)
-    m, n_t = cand.shape[1:]
-    gens = [torch.Generator(device=dev).manual_seed(s + 1_000_003) for s in seeds]
-    rows_r = torch.arange(n_runs, device=dev)
-    cfg = config
-
-    j_ex = torch.nan_to_num(fitness(ex), nan=math.inf)  # (R, K)
-    best_k = j_ex.argmin(dim=1)
-    best_fit = j_ex.gather(1, best_k.unsqueeze(1)).squeeze(1)  # (R,)
-    best_flat = ex[rows_r, best_k]  # (R, T)
-    best_gen = torch.zeros(n_runs, dtype=torch.long, device=dev)  # 0 = an expert, g = generation g
-    # The best expert's path exists when it is in the buffer (the first buffer row equal to it).
-    same = (cand == best_flat.unsqueeze(1)).all(dim=2)  # (R, M)
-    has_path = same.any(dim=1)
-    best_path = same.to(torch.int8).argmax(dim=1, keepdim=True).expand(n_runs, n_t).clone()  # (R, T)
-
-    if cuda_graph:
-        fitness = graphed(fitness, torch.zeros(n_runs, cfg.n_ants, n_t, device=dev))
-    pdec_factor = mmas_bounds(1.0, 1.0, m, n_t, cfg.p_best)[0]  # τ_min / τ_max, a constant of (M, T, p_best)
-
-    def bounds(bf: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        tau_max = cfg.deposit / bf.clamp(min=1e-12)
-        return tau_max * pdec_factor, tau_max
-
-    tmin, tmax = bounds(best_fit)
-    tau = torch.full((n_runs, n_t, m), cfg.tau_init, device=dev)
-    tau = torch.minimum(torch.maximum(tau, tmin.view(-1, 1, 1)), tmax.view(-1, 1, 1))
-    cand_t = cand.transpose(1, 2).contiguous()  # (R, T, M)
-    eta = _heuristic(cfg, cand_t, best_flat)
-    with_iwoa = "iwoa" in cfg.phases
-    n_outer = max(1, cfg.generations // cfg.iwoa_every)
-    n_calls = 0
-    hist: dict[str, list[torch.Tensor]] = {k: [] for k in ("best_so_far", "iteration_best", "ants", "tau_lowest",
-                                                           "tau_highest")}
-    q0s, iwoa_flags = [], []
-    bar = tqdm(range(cfg.generations), desc=desc, disable=not progress, leave=False, unit="gen")
+    gens = generators(seeds, dev, config.rng)
+    whole = cuda_graph and config.rng == "device"
+    if cuda_graph and not whole:
+        fitness = graphed(fitness, torch.zeros(n_runs, config.n_ants, cand.shape[2], device=dev))
+    state = _Lockstep(ex, cand, fitness, config, gens)
+    generation = _Replayed(state.generation, dev, gens, "generation", enabled=whole)
+    iwoa = _Replayed(state.iwoa, dev, gens, "IWOA move", enabled=whole)
+    bar = tqdm(range(config.generations), desc=desc, disable=not progress, leave=False, unit="gen")
     for g in bar:
-        q0 = cfg.q0_start + (cfg.q0_end - cfg.q0_start) * (g / max(1, cfg.generations - 1))
-        paths = construct_ants_dense(tau, eta, q0, cfg.n_ants, gens, cfg.alpha, cfg.beta)  # (R, P, T)
-        flats = cand.gather(1, paths)  # (R, P, T)
-        j = torch.nan_to_num(fitness(flats), nan=math.inf)  # (R, P)
-        ib = j.argmin(dim=1)
-        jb = j.gather(1, ib.unsqueeze(1)).squeeze(1)
-        ib_path = paths[rows_r, ib]  # (R, T)
-        better = jb < best_fit
-        best_fit = torch.where(better, jb, best_fit)
-        best_flat = torch.where(better.unsqueeze(1), flats[rows_r, ib], best_flat)
-        best_path = torch.where(better.unsqueeze(1), ib_path, best_path)
-        best_gen = torch.where(better, g + 1, best_gen)
-        has_path = has_path | better
-        if cfg.heuristic != "constant":
-            eta = _heuristic(cfg, cand_t, best_flat)
-        gb_turn = cfg.gb_every > 0 and (g + 1) % cfg.gb_every == 0
-        use_gb = has_path if gb_turn else torch.zeros_like(has_path)
-        path = torch.where(use_gb.unsqueeze(1), best_path, ib_path)
-        j_dep = torch.where(use_gb, best_fit, jb)
-        amount = torch.where(torch.isfinite(j_dep), (1.0 - cfg.evaporation) * cfg.deposit / j_dep,
-                             torch.zeros_like(j_dep))
-        tau.mul_(cfg.evaporation)
-        tau.scatter_add_(2, path.unsqueeze(2), amount.view(-1, 1, 1).expand(n_runs, n_t, 1))
-        tmin, tmax = bounds(best_fit)
-        tau = torch.minimum(torch.maximum(tau, tmin.view(-1, 1, 1)), tmax.view(-1, 1, 1))
-        did_iwoa = with_iwoa and (g + 1) % cfg.iwoa_every == 0 and n_calls < n_outer
-        if did_iwoa:
-            a, inertia = _schedule(n_calls, n_outer)
-            leader = tau.argmax(dim=2)  # (R, T)
-            cand_t = torch.stack([
-                whale_update(cand_t[r].unsqueeze(-1), leader[r], a, inertia, cfg.spiral_b, gens[r], cfg.clip).squeeze(-1)
-                for r in range(n_runs)])
-            cand = cand_t.transpose(1, 2).contiguous()
-            n_calls += 1
-            if cfg.heuristic != "constant":
-                eta = _heuristic(cfg, cand_t, best_flat)
-        # per generation only what is needed later; the statistics are computed once, after the run
-        for key, value in (("best_so_far", best_fit), ("iteration_best", jb), ("ants", j),
-                           ("tau_lowest", tau.amin(dim=(1, 2))), ("tau_highest", tau.amax(dim=(1, 2)))):
-            hist[key].append(value)
-        q0s.append(q0)
-        iwoa_flags.append(did_iwoa)
+        generation()
+        if state.iwoa_flags[g]:
+            iwoa()
     bar.close()
-    stacked = {k: torch.stack(v, dim=1) for k, v in hist.items()}  # (R, G), "ants" (R, G, P)
+    stacked = dict(state.hist)  # (R, G), "ants" (R, G, P)
     ants = stacked.pop("ants")
     finite = torch.isfinite(ants)
     mean = torch.where(finite, ants, torch.zeros_like(ants)).sum(dim=2) / finite.sum(dim=2)
     stacked["iteration_mean"] = torch.where(finite.any(dim=2), mean, torch.full_like(mean, math.inf))
-    stacked["tau_min"], stacked["tau_max"] = bounds(stacked["best_so_far"])
-    return _results(stacked, q0s, iwoa_flags, best_flat, best_fit, best_gen, best_k, j_ex, cfg)
+    stacked["tau_min"], stacked["tau_max"] = state.bounds(stacked["best_so_far"])
+    return _results(stacked, state.q0s, state.iwoa_flags, state.best_flat, state.best_fit, state.best_gen,
+                    state.best_k, state.j_ex, config)
 
 
 def _results(hist, q0s, iwoa_flags, best_flat, best_fit, best_gen, best_k, j_ex, cfg) -> list[AcoMergeResult]:

@@ -41,7 +41,8 @@ def fleet_ablation_buffer(method: str, aligned: torch.Tensor, seed: int, sigma: 
 def aco_config(budget: Budget, phases: tuple[str, ...] | None = None) -> AcoMergeConfig:
     """AcoMerge's configuration under `budget` (the paper's values for everything else)."""
     cfg = dataclasses.replace(AcoMergeConfig(), generations=budget.steps, n_ants=budget.ants, copies=budget.copies,
-                              sigma=budget.sigma, threads=budget.threads, device=budget.device)
+                              sigma=budget.sigma, threads=budget.threads, device=budget.device,
+                              rng=budget.rng)
     return dataclasses.replace(cfg, phases=phases) if phases else cfg
 
 

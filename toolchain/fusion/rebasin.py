@@ -17,7 +17,7 @@ import torch
 from scipy.optimize import linear_sum_assignment
 
 from ..models import SlipNet, flatten
-from ..models.mlp import ARCHS, param_shapes
+from ..models.mlp import hidden_sizes, param_shapes
 
 MAX_SWEEPS = 100
 
@@ -40,7 +40,7 @@ def permute_flat(arch: str, flat: torch.Tensor, perms: list[np.ndarray]) -> torc
 
     The result computes the same function as `flat`.
     """
-    hidden = ARCHS[arch]
+    hidden = hidden_sizes(arch)
     if len(perms) != len(hidden) or any(len(p) != h for p, h in zip(perms, hidden)):
         raise ValueError(f"{arch} needs permutations of sizes {hidden}")
     params = _split(arch, flat)
@@ -74,7 +74,7 @@ def _match_layer(ref: list[np.ndarray], other: list[np.ndarray], perms: list[np.
 def match_permutations(arch: str, ref_flat: torch.Tensor, flat: torch.Tensor) -> list[np.ndarray]:
     """Permutations that bring `flat` closest to `ref_flat` (coordinate descent over layers)."""
     ref, other = _split(arch, ref_flat), _split(arch, flat)
-    perms = [np.arange(h) for h in ARCHS[arch]]
+    perms = [np.arange(h) for h in hidden_sizes(arch)]
     for _ in range(MAX_SWEEPS):
         changed = False
         for layer in range(len(perms)):

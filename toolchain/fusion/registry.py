@@ -33,6 +33,7 @@ class Budget:
     copies: int = _ACO.copies  # perturbed copies per expert in the buffer: 3 experts x (1 + 15) = 48
     threads: int = 1  # torch intra-op threads of a search that batches its candidates
     device: str = "cpu"  # where AcoMerge searches: 'cpu' (the reference) or a GPU, 'cuda[:N]'
+    rng: str = "device"  # where a GPU search draws its random numbers: 'device' or 'host' (AcoMergeConfig.rng)
 
 
 @dataclass(frozen=True)

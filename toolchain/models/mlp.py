@@ -1,4 +1,5 @@
-"""SN-S and SN-D (docs/architecture.md, contract 3) and the flat-parameter view used by fusion.
+"""SN-S, SN-D and any other stack of hidden blocks (docs/architecture.md, contract 3), and the flat-parameter
+view used by fusion. An architecture is a string: "sn-s", "sn-d", or hidden sizes such as "64,32".
 
 Flat order is `model.parameters()` order: for each hidden block Linear.weight,
 Linear.bias, LayerNorm.weight, LayerNorm.bias; then the output Linear.weight,
@@ -14,6 +15,11 @@ from torch.nn import functional as F
 from ..data.contracts import N_CLASSES, N_FEATURES
 
 ARCHS: dict[str, tuple[int, ...]] = {"sn-s": (30,), "sn-d": (128, 64, 32)}
+# Any other architecture is written as its hidden sizes, "64,32". The caps are those of the
+# fixed-point scheme and the C kernel (docs/fixed_point.md); a C build may lower them
+# (SLIPEST_MAX_LAYERS, SLIPEST_MAX_WIDTH), never raise them.
+MAX_HIDDEN_LAYERS = 4
+MIN_UNITS, MAX_UNITS = 2, 256
 DROPOUT = 0.2  # paper; dropout follows the first hidden block only
 LN_EPS = 1e-5
 
@@ -41,25 +47,50 @@ class SlipNet(nn.Module):
         yield from (self.head.weight, self.head.bias)
 
 
-def arch_of(model: SlipNet) -> str:
-    for name, hidden in ARCHS.items():
-        if hidden == model.hidden:
+def hidden_sizes(arch: str) -> tuple[int, ...]:
+    """Hidden widths of an architecture: a name of ARCHS or comma-separated sizes such as "64,32"."""
+    if arch in ARCHS:
+        return ARCHS[arch]
+    try:
+        sizes = tuple(int(t) for t in str(arch).split(","))
+    except ValueError:
+        sizes = ()
+    if not sizes:
+        raise ValueError(f"unknown architecture {arch!r}: give {' or '.join(ARCHS)}, or hidden sizes such as 64,32")
+    if len(sizes) > MAX_HIDDEN_LAYERS or any(not MIN_UNITS <= h <= MAX_UNITS for h in sizes):
+        raise ValueError(f"architecture {arch!r}: 1 to {MAX_HIDDEN_LAYERS} hidden layers of "
+                         f"{MIN_UNITS} to {MAX_UNITS} units are supported")
+    return sizes
+
+
+def arch_name(hidden: tuple[int, ...]) -> str:
+    """The canonical name of hidden sizes: sn-s / sn-d, or "64,32" (what metadata and bundles record)."""
+    for name, sizes in ARCHS.items():
+        if sizes == tuple(hidden):
             return name
-    raise ValueError(f"unknown architecture with hidden sizes {model.hidden}")
+    return ",".join(str(h) for h in hidden)
+
+
+def canonical_arch(arch: str) -> str:
+    """Validate an --arch value and return its canonical name ("30" -> "sn-s", " 64, 32" -> "64,32")."""
+    return arch_name(hidden_sizes(arch))
+
+
+def arch_of(model: SlipNet) -> str:
+    return canonical_arch(arch_name(model.hidden))
 
 
 def build(arch: str, seed: int | None = None) -> SlipNet:
-    if arch not in ARCHS:
-        raise ValueError(f"unknown architecture {arch!r}; choose one of {', '.join(ARCHS)}")
+    hidden = hidden_sizes(arch)
     if seed is not None:
         with torch.random.fork_rng():
             torch.manual_seed(seed)
-            return SlipNet(ARCHS[arch])
-    return SlipNet(ARCHS[arch])
+            return SlipNet(hidden)
+    return SlipNet(hidden)
 
 
 def param_shapes(arch: str) -> list[tuple[int, ...]]:
-    dims = (N_FEATURES, *ARCHS[arch])
+    dims = (N_FEATURES, *hidden_sizes(arch))
     shapes: list[tuple[int, ...]] = []
     for a, b in zip(dims[:-1], dims[1:]):
         shapes += [(b, a), (b,), (b,), (b,)]
@@ -108,7 +139,7 @@ def batched_logits(arch: str, flat: torch.Tensor, x: torch.Tensor) -> torch.Tens
         flat = flat.unsqueeze(0)
     params = _unflatten(arch, flat)
     h = x if x.dim() == 3 else x.unsqueeze(0).expand(flat.shape[0], *x.shape)
-    n_hidden = len(ARCHS[arch])
+    n_hidden = len(hidden_sizes(arch))
     for i in range(n_hidden):
         w, b, g, beta = params[4 * i : 4 * i + 4]
         h = torch.baddbmm(b.unsqueeze(1), h, w.transpose(1, 2))

@@ -1,0 +1,116 @@
+"""No traceback for a user's mistake or a missing tool (issue 26): one line naming what is missing, the
+command that needs it and how to install it, exit status 2; importing fleetlab touches no file."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from fleetlab import system_tools
+from fleetlab.host_tools.firmware import targets
+from fleetlab.paths import repo_root
+
+REPO = repo_root()
+
+
+def _apt_packages() -> set[str]:
+    lines = (REPO / "scripts" / "apt-packages.txt").read_text().splitlines()
+    return {line.split()[0] for line in lines if line.strip() and not line.lstrip().startswith("#")}
+
+
+def _path_without(tool: str, tmp: Path) -> str:
+    """PATH with `tool` hidden: each folder holding it is replaced by a folder of links to everything else."""
+    dirs = []
+    for i, d in enumerate(os.environ["PATH"].split(os.pathsep)):
+        if d and (Path(d) / tool).exists():
+            shadow = tmp / f"path{i}"
+            shadow.mkdir()
+            for entry in Path(d).iterdir():
+                if entry.name != tool:
+                    (shadow / entry.name).symlink_to(entry)
+            d = str(shadow)
+        dirs.append(d)
+    return os.pathsep.join(dirs)
+
+
+def _fleetlab(args: list[str], cwd: Path, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "fleetlab.cli", *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=300)
+
+
+def test_assure_without_cppcheck_is_one_line_and_exit_2(tmp_path):
+    env = {**os.environ, "PATH": _path_without("cppcheck", tmp_path)}
+    res = _fleetlab(["assure", "--out", str(tmp_path / "out")], tmp_path, env)
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert "cppcheck not found" in lines[0] and "fleetlab assure" in lines[0]
+    assert "bash scripts/setup.sh" in lines[0] and "apt-get install cppcheck" in lines[0]
+
+
+def test_a_missing_cross_compiler_names_the_target_and_its_package(tmp_path):
+    res = _fleetlab(["bench", "c", "--target", "cortex-m4", "--build-dir", str(tmp_path / "b")], tmp_path,
+                    {**os.environ, "PATH": _path_without("arm-none-eabi-gcc", tmp_path)})
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
+    assert "arm-none-eabi-gcc not found" in res.stderr and "--target cortex-m4" in res.stderr
+    assert "apt-get install gcc-arm-none-eabi" in res.stderr
+
+
+# the host tools fleetlab runs itself (builds, assure's analysers, stack and float checks)
+HOST_TOOLS = {"cmake", "ctest", "gcc", "gcov", "clang", "doxygen", "cppcheck", "clang-tidy", "frama-c",
+              "arm-none-eabi-gcc", "arm-none-eabi-nm"}
+
+
+def test_every_tool_has_a_package_that_setup_installs():
+    """A missing tool's error names its Debian package from scripts/apt-packages.txt: every tool fleetlab runs,
+    every CPU target's compiler and emulator included, must be listed there under a package setup installs."""
+    tools = set(HOST_TOOLS)
+    for t in targets.discover().values():
+        tools |= set(t.tools)
+    listed = system_tools.packages()
+    assert tools <= listed.keys(), sorted(tools - listed.keys())
+    assert set(listed.values()) <= _apt_packages()
+
+
+def test_help_works_outside_any_clone(tmp_path):
+    for args in (["--help"], ["bench", "c", "--help"], ["assure", "--help"], ["c-sources", "--help"]):
+        res = _fleetlab(args, tmp_path)
+        assert res.returncode == 0 and res.stdout.startswith("usage: fleetlab"), (args, res.stderr)
+
+
+def test_importing_any_module_touches_no_source_tree_location():
+    """Every module of fleetlab imports while the source tree cannot be found: no module computes a path of
+    the tree (or the bundle, or the build root) when it is imported."""
+    code = r"""
+import importlib, pkgutil
+import fleetlab, fleetlab.paths as paths
+
+def nowhere():
+    raise AssertionError("a module asked for the source tree at import time")
+
+paths._tree = nowhere
+names = [m.name for m in pkgutil.walk_packages(fleetlab.__path__, "fleetlab.") if not m.name.endswith("__main__")]
+for name in names:
+    importlib.import_module(name)
+print(len(names))
+"""
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert int(res.stdout.strip()) >= 60  # every module, not a few
+
+
+@pytest.mark.parametrize("args, says", [
+    (["export", "no-such-model.pt", "--out", "b"], "no-such-model.pt"),
+    (["emulate", "--bundle", "no-such-bundle"], "no-such-bundle"),
+    (["bench", "c", "--target", "no-such-cpu"], "no-such-cpu"),
+    (["c-sources", "--out", "."], "not an empty folder"),
+])
+def test_user_mistakes_are_one_line(tmp_path, args, says):
+    (tmp_path / "x").write_text("")  # so that "." is not empty
+    res = _fleetlab(args, tmp_path)
+    assert res.returncode in (1, 2) and "Traceback" not in res.stderr, res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and says in res.stderr, res.stderr

@@ -1,0 +1,211 @@
+"""Every architecture reaches C (issue 28): export of SN-D, an irregular shape and a model at the caps
+writes the whole bundle, the bundle reads back, and the C kernels (one layer-table kernel, its float
+twin) reproduce its vectors bit for bit under ASan/UBSan; agreement with float on real data."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+
+import numpy as np
+import pytest
+import torch
+
+from fleetlab.export import intref
+from fleetlab.export.bundle import check_bundle, export_bundle, load_bundle
+from fleetlab.export.quant import QNet
+from fleetlab.export.vectors import builtin_windows, draw_inputs
+from fleetlab.models import build
+from fleetlab.models.train import train_classifier
+
+from test_export_c import INCLUDE, build_check, need
+
+ARCHS = ["sn-d", "24,9", "256,256,256,256"]
+
+
+def quick_model(arch: str, seed: int = 4):
+    x = builtin_windows(400, np.random.default_rng(seed)).astype(np.float32)
+    y = np.digitize(x[:, 3] / np.maximum(x[:, 2], 1e-3), [0.08, 0.3]).astype(np.int64)
+    torch.set_num_threads(1)
+    return train_classifier(build(arch, seed=seed), x, y, steps=40, seed=seed)
+
+
+@pytest.fixture(scope="module", params=ARCHS)
+def arch_bundle(request, tmp_path_factory):
+    out = tmp_path_factory.mktemp("arch") / "bundle"
+    export_bundle(quick_model(request.param), out, inputs=draw_inputs(1000, None, seed=3))
+    return request.param, out
+
+
+def test_bundle_is_complete_and_reads_back(arch_bundle):
+    arch, out = arch_bundle
+    m = json.loads((out / "manifest.json").read_text())
+    assert m["arch"] == arch and m["headers"]["layer_table"] and m["model_image"] is None
+    assert not (out / "model.img").exists()  # image format 1 carries SN-S only (issue 28 item 4)
+    for name in ("model.onnx", "slipest_model_q.h", "slipest_model_f32.h", "vectors.npz", "vectors.bin"):
+        assert name in m["files"]
+    b = load_bundle(out)
+    assert isinstance(b.qparams, QNet) and ",".join(map(str, b.qparams.hidden)) in (arch, "128,64,32")
+    assert [blk["width"] for blk in m["quantization"]["blocks"]] == list(b.qparams.hidden)
+    lines = check_bundle(out)
+    assert any("bit for bit" in line for line in lines)
+
+
+def test_edited_layer_table_header_is_refused(arch_bundle, tmp_path):
+    import shutil
+
+    arch, out = arch_bundle
+    copy = tmp_path / "b"
+    shutil.copytree(out, copy)
+    q = copy / "slipest_model_q.h"
+    text = q.read_text()
+    q.write_text(re.sub(r"\.fy = (\d+)", lambda mm: f".fy = {int(mm[1]) - 1}", text, count=1))
+    with pytest.raises(ValueError):
+        load_bundle(copy)
+
+
+def test_c_kernels_match_the_vectors_sanitized(arch_bundle, tmp_path):
+    """The layer-table kernel and the float path on the bundle's vectors (edge rows at the int16 rails
+    included), gcc with ASan + UBSan: every logit and saturation count equal, floats within 1e-5."""
+    _, out = arch_bundle
+    exe = build_check(out, tmp_path, need("gcc"), ["-fsanitize=undefined,address", "-fno-sanitize-recover=all"])
+    res = subprocess.run([str(exe), str(out / "vectors.bin")], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert re.search(r"q mismatches 0 .*f32 > tol 0", res.stdout)
+
+
+def test_a_build_below_the_model_is_refused(arch_bundle, tmp_path):
+    """Caps lowered below the model's widest block stop the build (no kernel runs out of scratch)."""
+    _, out = arch_bundle
+    src = tmp_path / "one.c"
+    src.write_text('#include "slipest_model_q.h"\nint main(void) { return SLIPEST_MODEL_Q_INCLUDED.n_layers == 0; }\n')
+    res = subprocess.run([need("gcc"), "-std=c99", f"-I{INCLUDE}", f"-I{out}", "-DSLIPEST_MAX_WIDTH=8",
+                          "-fsyntax-only", str(src)], capture_output=True, text=True)
+    assert res.returncode != 0 and "width_check" in res.stderr
+
+
+def test_sn_s_still_exports_the_unrolled_layout_and_an_image(tmp_path):
+    out = tmp_path / "b"
+    export_bundle(quick_model("sn-s"), out, inputs=draw_inputs(1000, None, seed=3))
+    m = json.loads((out / "manifest.json").read_text())
+    assert "layer_table" not in m["headers"] and (out / "model.img").exists()
+    assert ".layers" not in (out / "slipest_model_q.h").read_text()
+
+
+@pytest.mark.parametrize("arch", ["sn-s", "sn-d"])
+def test_fixed_point_agrees_with_float_on_real_data(arch, real_data_dir, tmp_path):
+    """A model trained on the Fleet-To-Lab files, exported with --data: at least 99.5 % of the bundle's
+    vectors (drawn from those windows) and of all windows get the float model's class."""
+    from fleetlab.data.dataset import load_dataset
+
+    ds = load_dataset(real_data_dir)
+    x = np.concatenate([ds.xy(r)[0] for r in ds.roles])
+    y = np.concatenate([ds.xy(r)[1] for r in ds.roles])
+    torch.set_num_threads(1)
+    model = train_classifier(build(arch, seed=0), x, y, epochs=4, seed=0)
+    b = export_bundle(model, tmp_path / "b", inputs=draw_inputs(1200, x, seed=0), data_dirs=[real_data_dir])
+    assert b.manifest["vectors"]["class_agreement"] >= 0.995
+    rep = json.loads((tmp_path / "b" / "accuracy.json").read_text())
+    assert rep["datasets"][0]["all"]["agreement"] >= 0.995
+    assert intref.run(b.qparams, np.zeros((1, 12), np.int16))[1].tolist() == [0]
+
+
+# --- Frama-C EVA on the layer-table kernel -----------------------------------------------------
+
+@pytest.fixture(scope="module")
+def eva_bundle(tmp_path_factory):
+    """A small irregular two-block model (EVA analyses every row with its own weights)."""
+    out = tmp_path_factory.mktemp("eva") / "bundle"
+    export_bundle(quick_model("8,5"), out, inputs=draw_inputs(1000, None, seed=3))
+    return out
+
+
+LAYER_SAT = "int32_t e = sat_var(rsr_h(nh * h[i] - sum, k2_half, k2), l->e_bits + 1u);"
+
+
+def test_frama_c_eva_layer_kernel_over_all_int16_inputs(eva_bundle):
+    """EVA, sound: no alarm in the layer-table kernel (both blocks and the head) for every int16 input."""
+    need("frama-c")
+    from fleetlab.assurance import analysers
+
+    (res,) = analysers.frama_c_eva(eva_bundle, entries=["eva_infer_q"])
+    assert "Frama_C_show_each_class: {0; 1; 2}" in res.log  # the analysis ran through the whole kernel
+    assert res.alarms == [], "\n".join(res.alarms)
+
+
+def test_frama_c_eva_finds_a_removed_saturation_in_the_layer_kernel(eva_bundle, tmp_path):
+    """Without the clamp that states |e| <= 2^(e_bits+1) (a bound that holds only through e's relation to
+    max|d|), EVA reports the possible overflow of e * e in block_q: the zero above is not vacuous."""
+    need("frama-c")
+    from fleetlab.assurance import analysers
+    from fleetlab.assurance.sources import FW
+
+    src = (FW / "src" / "slipest_infer_q.c").read_text()
+    assert LAYER_SAT in src
+    for f in (FW / "src").iterdir():
+        (tmp_path / f.name).write_bytes(f.read_bytes())
+    (tmp_path / "slipest_infer_q.c").write_text(
+        src.replace(LAYER_SAT, "int32_t e = rsr_h(nh * h[i] - sum, k2_half, k2);"))
+    (res,) = analysers.frama_c_eva(eva_bundle, entries=["eva_infer_q"], src_dir=tmp_path)
+    assert any("e * e" in a for a in res.alarms), "\n".join(res.alarms)
+
+
+# --- the SN-D bundle served by the emulator, and on CPU targets under QEMU ------------------------
+
+@pytest.fixture(scope="module")
+def snd_bundle(tmp_path_factory):
+    out = tmp_path_factory.mktemp("snd") / "bundle"
+    export_bundle(quick_model("sn-d"), out, inputs=draw_inputs(1000, None, seed=3))
+    return out
+
+
+def test_emulator_serves_an_sn_d_bundle_bit_exact_over_slcan(snd_bundle):
+    """`fleetlab emulate --bundle SN-D --link slcan`: the emulator process built with the bundle's
+    layer-table headers, simulated telemetry over a real pty, every window bit-exact with intref."""
+    from fleetlab.host_tools.emulate import DEFAULT_SCALE, emulate
+    from fleetlab.host_tools.emulator import build
+    from fleetlab.host_tools.sources import sim_source
+
+    build(snd_bundle)
+    sim = sim_source(seed=0, scale=DEFAULT_SCALE)
+    s = emulate(snd_bundle, sim, "slcan", progress=False).summary()
+    assert s["windows"] == sim.n_windows and s["bit_exact"] == s["windows"], s["first_problems"]
+    assert s["mismatches"] == 0 and s["unexplained_windows"] == 0
+
+
+def _runnable_targets() -> list[str]:
+    from fleetlab.host_tools.firmware import targets
+
+    return [name for name, t in targets.discover().items() if t.runs]
+
+
+@pytest.fixture(scope="module")
+def irregular_bundle(tmp_path_factory):
+    out = tmp_path_factory.mktemp("irr") / "bundle"
+    export_bundle(quick_model("24,9"), out, inputs=draw_inputs(1000, None, seed=3))
+    return out
+
+
+# SN-D on every target with an emulator; the irregular 24,9 (odd widths: the SMLAD loop's tail) on the
+# DSP core and the integer-only ARMv6-M
+CASES = [("sn-d", name) for name in _runnable_targets()] + [("24,9", "cortex-m4"), ("24,9", "cortex-m0")]
+
+
+@pytest.mark.parametrize("arch,name", CASES)
+def test_bit_exact_under_qemu(snd_bundle, irregular_bundle, tmp_path, arch, name):
+    import shutil
+
+    from fleetlab.host_tools.firmware import build, targets
+
+    bundle = snd_bundle if arch == "sn-d" else irregular_bundle
+    t = targets.get(name)
+    missing = [tool for tool in t.tools if shutil.which(tool) is None]
+    if missing:
+        pytest.skip(f"{', '.join(missing)} not installed: run scripts/setup.sh (scripts/apt-packages.txt)")
+    out = build.ctest(build.cmake_build(tmp_path / name, bundle, target=t))
+    assert "100% tests passed" in out
+    passes = re.findall(r"vectors=\d+ q_fail=0 f32_fail=0 extractor_fail=0 model=\w+ PASS", out)
+    assert len(passes) == (1 if t.integer_only else 2), out[-3000:]
+    for what in ("slipest_test_q.elf", "libslipest_q.a"):
+        assert f"{what}: 0 soft-float helper symbols (expected absent)" in out

@@ -25,7 +25,6 @@ _WRITE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32, ctypes
 _ERASE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32)
 
 
-
 class CNvm(ctypes.Structure):
     _fields_ = [("read", _READ), ("write", _WRITE), ("erase", _ERASE), ("sector_size", ctypes.c_uint32),
                 ("n_sectors", ctypes.c_uint32), ("ctx", ctypes.c_void_p)]

@@ -14,8 +14,6 @@ from pathlib import Path
 
 import can
 
-from fleetlab.export import image_layout
-
 from .wire.dbc import Frame
 from .binding import CFrame
 from .status_codes import status
@@ -27,15 +25,22 @@ _WRITE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32, ctypes
 _ERASE = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32)
 
 
-
 class CNvm(ctypes.Structure):
     _fields_ = [("read", _READ), ("write", _WRITE), ("erase", _ERASE), ("sector_size", ctypes.c_uint32),
                 ("n_sectors", ctypes.c_uint32), ("ctx", ctypes.c_void_p)]
 
 
-def nvm_sectors(sector_size: int, image_max: int = image_layout.CURRENT.max_size) -> int:
-    """SLIPEST_STORE_NVM_SECTORS(s): two record sectors and two slots (of SLIPEST_IMAGE_MAX_SIZE)."""
-    return 2 + 2 * ((image_max + sector_size - 1) // sector_size)
+def nvm_sectors(lib_path: Path | str, sector_size: int = 256) -> int:
+    """Sectors the model store needs on an NVM of `sector_size`-byte sectors (two record sectors and two
+    slots), read from the C library (slipest_store_nvm_sectors(), i.e. SLIPEST_STORE_NVM_SECTORS) so that
+    the formula has one source. ValueError for a sector size the store does not accept."""
+    f = ctypes.CDLL(str(lib_path)).slipest_store_nvm_sectors
+    f.restype, f.argtypes = ctypes.c_uint32, [ctypes.c_uint32]
+    n = int(f(sector_size))
+    if n == 0:
+        raise ValueError(f"sector size {sector_size}: the model store does not accept it "
+                         "(SLIPEST_STORE_SECTOR_MIN..SLIPEST_STORE_SECTOR_MAX in slipest_store.h)")
+    return n
 
 
 class RamNvm:
@@ -43,9 +48,10 @@ class RamNvm:
     and as the C ram_nvm (firmware_c/common/ram_nvm.c): a write must be one whole, aligned, in-range
     sector that is erased; an erase one aligned, in-range sector. Anything else is refused (SLIPEST_E_NVM)."""
 
-    def __init__(self, sector_size: int = 256, n_sectors: int | None = None) -> None:
+    def __init__(self, n_sectors: int, sector_size: int = 256) -> None:
+        """`n_sectors`: the area's size, `nvm_sectors(lib)` for exactly what the store needs."""
         self.sector_size = sector_size
-        self.n_sectors = n_sectors or nvm_sectors(sector_size)
+        self.n_sectors = n_sectors
         self.mem = bytearray(b"\xff" * (self.sector_size * self.n_sectors))
         self.writes = self.erases = 0
         # keep the ctypes callbacks alive as long as the interface

@@ -25,7 +25,7 @@ import can
 import numpy as np
 
 from .canopen_master import EstimateCollector, SlipestMaster, telemetry_rpdos
-from .canopen_node import CanopenBridge, CCanopenNode, RamNvm
+from .canopen_node import CanopenBridge, CCanopenNode, RamNvm, nvm_sectors
 from .links import open_can_bus
 from .wire.dbc import Frame
 from .wire.serial_framing import PacketDecoder, Rejected, encode_packet
@@ -95,7 +95,7 @@ class CanopenSession:
             if lib is None:
                 raise ValueError("the inproc link needs the host library (libslipest_host.so)")
             channel = f"fleetlab-canopen-{os.getpid()}-{next(_channels)}"
-            self.nvm = nvm if nvm is not None else RamNvm()
+            self.nvm = nvm if nvm is not None else RamNvm(nvm_sectors(lib))
             self.node = CCanopenNode(lib, node_id, nvm=self.nvm)
             self.bridge = CanopenBridge(self.node, can.Bus(interface="virtual", channel=channel))
             master_bus = can.Bus(interface="virtual", channel=channel)

@@ -15,6 +15,7 @@ from fleetlab.canopen_od import objects as od
 from fleetlab.export import image_layout
 from fleetlab.host_tools.binding import CCounters
 from fleetlab.host_tools.canopen_node import nvm_sectors
+from fleetlab.host_tools.emulator import HOST_LIBRARY_TARGET, build, find_artifact
 from fleetlab.host_tools.status_codes import status
 
 
@@ -71,4 +72,13 @@ def test_counter_names_and_order_agree(c_side) -> None:
 
 def test_image_sizes_agree(c_side) -> None:
     assert c_side["IMAGE_MAX"] == image_layout.CURRENT.max_size
-    assert c_side["NVM_SECTORS_256"] == nvm_sectors(256) and c_side["NVM_SECTORS_64"] == nvm_sectors(64)
+
+
+def test_nvm_sectors_are_read_from_the_library(c_side) -> None:
+    """Python sizes an NVM through the library's slipest_store_nvm_sectors() (no second copy of
+    SLIPEST_STORE_NVM_SECTORS); it agrees with the macro the compiler sees, and a sector size the store
+    refuses is a clear error."""
+    lib = find_artifact(build(None, targets=(HOST_LIBRARY_TARGET,)), "libslipest_host.so")
+    assert c_side["NVM_SECTORS_256"] == nvm_sectors(lib, 256) and c_side["NVM_SECTORS_64"] == nvm_sectors(lib, 64)
+    with pytest.raises(ValueError, match="does not accept"):
+        nvm_sectors(lib, 32)

@@ -342,6 +342,14 @@ slipest_upload_state_t slipest_store_upload_state(const slipest_store_t *store);
  */
 const slipest_store_counters_t *slipest_store_counters(const slipest_store_t *store);
 
+/**
+ * @brief SLIPEST_STORE_NVM_SECTORS(sector_size), for tools that size an NVM area through the library
+ *        (the Python RamNvm reads it through ctypes, so the formula is written once, above).
+ * @return the sectors the store needs, or 0 for a sector size it does not accept
+ *         (outside SLIPEST_STORE_SECTOR_MIN..SLIPEST_STORE_SECTOR_MAX)
+ */
+uint32_t slipest_store_nvm_sectors(uint32_t sector_size);
+
 #ifdef __cplusplus
 }
 #endif

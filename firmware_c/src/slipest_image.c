@@ -5,6 +5,7 @@
  * allows, never used to size a read. */
 #include "slipest_image.h"
 #include "slipest_image_internal.h"
+#include "slipest_model_internal.h"
 
 #include <string.h>
 
@@ -28,7 +29,7 @@ uint32_t slipest_image_le32(const uint8_t *p)
     return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
 }
 
-slipest_status_t slipest_image_check_hash32(const uint8_t *hdr, const uint8_t *trailer)
+static slipest_status_t check_hash32(const uint8_t *hdr, const uint8_t *trailer)
 {
     uint32_t sha_head = ((uint32_t)trailer[SHA] << 24) | ((uint32_t)trailer[SHA + 1u] << 16) |
                         ((uint32_t)trailer[SHA + 2u] << 8) | (uint32_t)trailer[SHA + 3u]; /* sha256 bytes, big-endian */
@@ -44,14 +45,12 @@ static int16_t s16(uint16_t u)
     return (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): v fits int16_t (see above) */
 }
 
-uint32_t slipest_crc32_update(uint32_t crc_in, const uint8_t *data, size_t len)
+/* data is never NULL: slipest_crc32() checks its argument, the stream passes its own bytes */
+static uint32_t crc32_update(uint32_t crc_in, const uint8_t *data, size_t len)
 {
     uint32_t crc = crc_in;
     size_t i;
     int b;
-    if (data == NULL) {
-        return crc;
-    }
     for (i = 0; i < len; ++i) {
         crc ^= data[i];
         for (b = 0; b < 8; ++b) {
@@ -66,27 +65,7 @@ uint32_t slipest_crc32(const uint8_t *data, size_t len)
     if (data == NULL) {
         return 0u;
     }
-    return slipest_crc32_update(0xFFFFFFFFu, data, len) ^ 0xFFFFFFFFu;
-}
-
-/* Readers of n consecutive little-endian elements at *off (advanced); the caller has checked
- * that the whole payload lies inside the image. */
-static void get_i16(const uint8_t *img, size_t *off, int16_t *dst, size_t n)
-{
-    size_t i;
-    for (i = 0; i < n; ++i, *off += 2u) dst[i] = s16(le16(img + *off));
-}
-
-static void get_i32(const uint8_t *img, size_t *off, int32_t *dst, size_t n)
-{
-    size_t i;
-    for (i = 0; i < n; ++i, *off += 4u) dst[i] = s32(slipest_image_le32(img + *off));
-}
-
-static void get_u32(const uint8_t *img, size_t *off, uint32_t *dst, size_t n)
-{
-    size_t i;
-    for (i = 0; i < n; ++i, *off += 4u) dst[i] = slipest_image_le32(img + *off);
+    return crc32_update(0xFFFFFFFFu, data, len) ^ 0xFFFFFFFFu;
 }
 
 #ifndef SLIPEST_Q_ONLY
@@ -98,14 +77,9 @@ static float f32_of(uint32_t bits)
     return f;
 }
 
-static void get_f32(const uint8_t *img, size_t *off, float *dst, size_t n)
-{
-    size_t i;
-    for (i = 0; i < n; ++i, *off += 4u) dst[i] = f32_of(slipest_image_le32(img + *off));
-}
 #endif
 
-slipest_status_t slipest_image_check_header(const uint8_t *img, size_t len, uint16_t *flags, size_t *body)
+static slipest_status_t check_header(const uint8_t *img, size_t len, uint16_t *flags, size_t *body)
 {
     uint32_t payload;
     uint16_t f;
@@ -135,7 +109,7 @@ slipest_status_t slipest_image_check_header(const uint8_t *img, size_t len, uint
     return SLIPEST_OK;
 }
 
-void slipest_image_header_scalars(const uint8_t *img, slipest_model_q_t *q)
+static void header_scalars(const uint8_t *img, slipest_model_q_t *q)
 {
     memset(q, 0, sizeof *q);
     q->n_in = img[SLIPEST_IMAGE_OFF_N_IN];
@@ -157,25 +131,267 @@ void slipest_image_header_scalars(const uint8_t *img, slipest_model_q_t *q)
     q->hash32 = slipest_image_le32(img + SLIPEST_IMAGE_OFF_HASH32);
 }
 
+/* ------------------------------------------------------------------ the streaming reader
+ * The payload is a fixed sequence of little-endian arrays (slipest_image_layout.h); each element
+ * is checked as it arrives and, when the caller gave storage, stored. */
+#define K_W1 0u
+#define K_B1 1u
+#define K_GAMMA 2u
+#define K_BETA 3u
+#define K_W2 4u
+#define K_B2 5u
+#define K_GELU 6u
+#define K_RSQRT 7u
+#define K_FEPS 8u /* the float model: ln_eps, then its arrays */
+#define K_FW1 9u
+#define K_FB1 10u
+#define K_FGAMMA 11u
+#define K_FBETA 12u
+#define K_FW2 13u
+#define K_FB2 14u
+#define K_END 15u
+
+static uint32_t abs16(int16_t v) { return v < 0 ? (uint32_t)(-(int32_t)v) : (uint32_t)v; }
+
+static int f32_bits_finite(uint32_t b) { return (b & 0x7F800000u) != 0x7F800000u; }
+
+#ifndef SLIPEST_Q_ONLY
+/* where a float element of segment seg goes (ln_eps is kept as bits in the stream) */
+static float *f32_dst(slipest_image_f32_storage_t *fs, unsigned seg)
+{
+    switch (seg) {
+    case K_FW1: return fs->w1;
+    case K_FB1: return fs->b1;
+    case K_FGAMMA: return fs->gamma;
+    case K_FBETA: return fs->beta;
+    case K_FW2: return fs->w2;
+    case K_FB2: /* fall through: the last float array */
+    default: return fs->b2;
+    }
+}
+#endif
+
+/* Where a fixed-point element goes when loading. v is its value, sign-extended from its width:
+ * the 16-bit segments' values fit int16_t, so their narrowing keeps the value. */
+static void store_q(slipest_image_q_storage_t *qs, unsigned seg, unsigned i, int32_t v)
+{
+    switch (seg) {
+    case K_W1: qs->w1[i] = (int16_t)v; break;       /* NOLINT(bugprone-narrowing-conversions) */
+    case K_B1: qs->b1[i] = v; break;
+    case K_GAMMA: qs->gamma[i] = (int16_t)v; break; /* NOLINT(bugprone-narrowing-conversions) */
+    case K_BETA: qs->beta[i] = v; break;
+    case K_W2: qs->w2[i] = (int16_t)v; break;       /* NOLINT(bugprone-narrowing-conversions) */
+    case K_B2: qs->b2[i] = v; break;
+    case K_GELU: qs->gelu[i] = (int16_t)v; break;   /* NOLINT(bugprone-narrowing-conversions) */
+    default: qs->rsqrt_seed[i] = (uint32_t)v; break; /* K_RSQRT: back to its bits */
+    }
+}
+
+/* One complete element (its little-endian bytes in raw, `size` of them) of array seg, index i:
+ * checked, and stored when the caller gave storage. A failed check is kept in w->deferred (the
+ * first one), reported after the CRC and HMAC. */
+static void visit(slipest_image_stream_t *w, unsigned seg, unsigned i, uint32_t raw, unsigned size)
+{
+    int32_t v = (size == 2u) ? (int32_t)s16((uint16_t)raw) : s32(raw);
+    int ok = 1;
+    slipest_status_t bad = SLIPEST_E_RANGE;
+    if (seg >= K_FEPS) {
+        /* the float model: finite parameters, a positive finite LayerNorm eps */
+        bad = SLIPEST_E_NONFINITE;
+        if ((w->check_f32 != 0u) &&
+            ((f32_bits_finite(raw) == 0) || ((seg == K_FEPS) && ((raw == 0u) || (raw > 0x7F7FFFFFu))))) {
+            ok = 0;
+        }
+#ifndef SLIPEST_Q_ONLY
+        if (seg == K_FEPS) {
+            w->ln_eps_bits = raw;
+        } else if (w->fs != NULL) {
+            f32_dst(w->fs, seg)[i] = f32_of(raw);
+        } else {
+            /* checked only */
+        }
+#endif
+    } else if ((seg == K_W1) || (seg == K_W2)) {
+        /* sum |w| of the row: layer-1 rows first, then the head's */
+        unsigned row = (seg == K_W1) ? i / (unsigned)SLIPEST_N_FEATURES
+                                     : (unsigned)SLIPEST_N_HIDDEN + i / (unsigned)SLIPEST_N_HIDDEN;
+        w->row_abs[row] += abs16((int16_t)v);
+    } else if ((seg == K_B1) || (seg == K_B2)) {
+        /* the row's accumulator bound, now that its weights are summed */
+        unsigned row = (seg == K_B1) ? i : (unsigned)SLIPEST_N_HIDDEN + i;
+        ok = slipest_model_row_ok((int64_t)w->row_abs[row], v,
+                                  (seg == K_B1) ? SLIPEST_Q_ACC1_LIMIT : SLIPEST_Q_ACC2_LIMIT);
+    } else if (seg == K_BETA) {
+        if ((v < -32768) || (v > 32767)) {
+            ok = 0; /* the LayerNorm bias must fit int16 */
+        }
+    } else if (seg == K_RSQRT) {
+        ok = slipest_model_seed_ok(raw, (int)i);
+    } else {
+        /* K_GAMMA, K_GELU: any int16 is a valid LayerNorm weight or GELU entry */
+    }
+    if ((ok == 0) && (w->deferred == SLIPEST_OK)) {
+        w->deferred = bad;
+    }
+    if ((seg < K_FEPS) && (w->qs != NULL)) {
+        store_q(w->qs, seg, i, v);
+    }
+}
+
+/* one payload byte: assemble elements in layout order */
+static void payload_byte(slipest_image_stream_t *w, uint8_t b)
+{
+    static const uint16_t seg_n[K_END] = {SLIPEST_IMAGE_Q_W1_N, SLIPEST_IMAGE_Q_B1_N, SLIPEST_IMAGE_Q_GAMMA_N,
+                                          SLIPEST_IMAGE_Q_BETA_N, SLIPEST_IMAGE_Q_W2_N, SLIPEST_IMAGE_Q_B2_N,
+                                          SLIPEST_IMAGE_Q_GELU_N, SLIPEST_IMAGE_Q_RSQRT_SEED_N, 1u,
+                                          SLIPEST_IMAGE_F32_W1_N, SLIPEST_IMAGE_F32_B1_N, SLIPEST_IMAGE_F32_GAMMA_N,
+                                          SLIPEST_IMAGE_F32_BETA_N, SLIPEST_IMAGE_F32_W2_N, SLIPEST_IMAGE_F32_B2_N};
+    static const uint8_t seg_size[K_END] = {
+        SLIPEST_IMAGE_Q_W1_BYTES, SLIPEST_IMAGE_Q_B1_BYTES, SLIPEST_IMAGE_Q_GAMMA_BYTES, SLIPEST_IMAGE_Q_BETA_BYTES,
+        SLIPEST_IMAGE_Q_W2_BYTES, SLIPEST_IMAGE_Q_B2_BYTES, SLIPEST_IMAGE_Q_GELU_BYTES, SLIPEST_IMAGE_Q_RSQRT_SEED_BYTES,
+        4u, /* the float LayerNorm eps */
+        SLIPEST_IMAGE_F32_W1_BYTES, SLIPEST_IMAGE_F32_B1_BYTES, SLIPEST_IMAGE_F32_GAMMA_BYTES,
+        SLIPEST_IMAGE_F32_BETA_BYTES, SLIPEST_IMAGE_F32_W2_BYTES, SLIPEST_IMAGE_F32_B2_BYTES};
+    /* the payload size, checked with the header, ends the bytes where the layout ends (K_FEPS without
+     * the float model); this bound only keeps the table reads inside the tables */
+    if (w->seg >= K_END) return;
+    w->acc |= (uint32_t)b << (8u * w->nb);
+    w->nb = (uint8_t)(w->nb + 1u);
+    if (w->nb < seg_size[w->seg]) {
+        return;
+    }
+    visit(w, w->seg, w->idx, w->acc, seg_size[w->seg]);
+    w->acc = 0u;
+    w->nb = 0u;
+    w->idx = (uint16_t)(w->idx + 1u); /* < seg_n[seg] <= SLIPEST_IMAGE_F32_W1_N */
+    if (w->idx == seg_n[w->seg]) {
+        w->idx = 0u;
+        w->seg = (uint8_t)(w->seg + 1u); /* <= K_END */
+    }
+}
+
+slipest_status_t slipest_image_stream_init(slipest_image_stream_t *w, size_t len, slipest_image_q_storage_t *qs,
+                                           slipest_image_f32_storage_t *fs, int check_f32)
+{
+    if (len < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE || len > SLIPEST_IMAGE_MAX_SIZE) {
+        return SLIPEST_E_LENGTH;
+    }
+    memset(w, 0, sizeof *w);
+    w->len = len;
+    w->body = len; /* until the header gives it: every header byte is covered */
+    w->qs = qs;
+#ifndef SLIPEST_Q_ONLY
+    w->fs = fs;
+#else
+    (void)fs; /* no float model in this build */
+#endif
+    w->check_f32 = (check_f32 != 0) ? 1u : 0u;
+    w->crc = 0xFFFFFFFFu;
+    return SLIPEST_OK;
+}
+
+slipest_status_t slipest_image_stream_feed(slipest_image_stream_t *w, const uint8_t *p, size_t n)
+{
+    size_t i, pos;
+    for (i = 0; i < n; ++i) {
+        pos = w->pos;
+        if (pos >= w->len) {
+            return SLIPEST_E_LENGTH; /* more bytes than the image was said to have */
+        }
+        w->pos = pos + 1u;
+        if (pos < SLIPEST_IMAGE_HEADER_SIZE) {
+            w->hdr[pos] = p[i];
+            if (pos + 1u == SLIPEST_IMAGE_HEADER_SIZE) {
+                slipest_status_t st = check_header(w->hdr, w->len, &w->flags, &w->body);
+                if (st != SLIPEST_OK) {
+                    return st;
+                }
+            }
+        } else if (pos >= w->body) {
+            w->tail[pos - w->body] = p[i]; /* pos < len == body + trailer (+ tag): checked with the header */
+            continue;
+        } else {
+            payload_byte(w, p[i]);
+        }
+        w->crc = crc32_update(w->crc, &p[i], 1u);
+    }
+    return SLIPEST_OK;
+}
+
+slipest_status_t slipest_image_stream_seal(const slipest_image_stream_t *w)
+{
+    if (slipest_image_le32(&w->tail[SLIPEST_IMAGE_TRAILER_OFF_CRC32]) != (w->crc ^ 0xFFFFFFFFu)) {
+        return SLIPEST_E_CRC;
+    }
+    return check_hash32(w->hdr, w->tail);
+}
+
+slipest_status_t slipest_image_stream_model(const slipest_image_stream_t *w, slipest_model_q_t *q,
+                                            slipest_model_f32_t *mf)
+{
+    slipest_status_t st;
+    header_scalars(w->hdr, q);
+    st = slipest_model_q_check_scalars(q);
+    if (st != SLIPEST_OK) {
+        return st;
+    }
+    if (w->deferred != SLIPEST_OK) {
+        return w->deferred;
+    }
+    /* No second slipest_model_q_check() on the storage: every value stored is the very value visit()
+     * checked (the scalars, every seed, every row bound and LayerNorm bias, in the order of that
+     * check), so it could only repeat them (fuzz_store traps if a loaded model ever fails it) */
+    if (w->qs != NULL) {
+        q->w1 = w->qs->w1;
+        q->b1 = w->qs->b1;
+        q->gamma = w->qs->gamma;
+        q->beta = w->qs->beta;
+        q->w2 = w->qs->w2;
+        q->b2 = w->qs->b2;
+        q->gelu = w->qs->gelu;
+        q->rsqrt_seed = w->qs->rsqrt_seed;
+    }
+#ifndef SLIPEST_Q_ONLY
+    if (mf != NULL && w->fs != NULL) {
+        mf->ln_eps = f32_of(w->ln_eps_bits);
+        mf->w1 = w->fs->w1;
+        mf->b1 = w->fs->b1;
+        mf->gamma = w->fs->gamma;
+        mf->beta = w->fs->beta;
+        mf->w2 = w->fs->w2;
+        mf->b2 = w->fs->b2;
+        mf->n_in = q->n_in;
+        mf->n_hidden = q->n_hidden;
+        mf->n_out = q->n_out;
+        mf->version = q->version;
+        mf->hash32 = q->hash32;
+        return slipest_model_f32_check(mf);
+    }
+#else
+    (void)mf;
+#endif
+    return SLIPEST_OK;
+}
+
 slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t expect32, slipest_model_q_t *mq,
                                     slipest_image_q_storage_t *qs, slipest_model_f32_t *mf,
                                     slipest_image_f32_storage_t *fs)
 {
+    slipest_image_stream_t w;
     slipest_model_q_t q;
-    uint16_t flags;
-    uint32_t hash32;
-    size_t body, off;
+    slipest_model_f32_t f;
     slipest_status_t st;
 
     if (img == NULL || mq == NULL || qs == NULL || (mf != NULL && fs == NULL)) return SLIPEST_E_NULL;
-    st = slipest_image_check_header(img, len, &flags, &body);
+    /* the one validator, fed the whole buffer: floats are checked only when the float model is asked for */
+    st = slipest_image_stream_init(&w, len, qs, (mf != NULL) ? fs : NULL, (mf != NULL) ? 1 : 0);
     if (st != SLIPEST_OK) return st;
-    if (slipest_image_le32(img + body + SLIPEST_IMAGE_TRAILER_OFF_CRC32) != slipest_crc32(img, body)) return SLIPEST_E_CRC;
-    hash32 = slipest_image_le32(&img[SLIPEST_IMAGE_OFF_HASH32]);
-    if (slipest_image_check_hash32(img, &img[body]) != SLIPEST_OK || (expect32 != 0u && hash32 != expect32)) {
-        return SLIPEST_E_HASH;
-    }
-    if (mf != NULL && !(flags & SLIPEST_IMAGE_FLAG_F32)) {
+    st = slipest_image_stream_feed(&w, img, len);
+    if (st != SLIPEST_OK) return st;
+    st = slipest_image_stream_seal(&w);
+    if (st != SLIPEST_OK) return st;
+    if (expect32 != 0u && slipest_image_le32(&w.hdr[SLIPEST_IMAGE_OFF_HASH32]) != expect32) return SLIPEST_E_HASH;
+    if (mf != NULL && !(w.flags & SLIPEST_IMAGE_FLAG_F32)) {
         return SLIPEST_E_STATE;
     }
 #ifdef SLIPEST_Q_ONLY
@@ -183,65 +399,43 @@ slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t exp
         return SLIPEST_E_STATE;
     }
 #endif
-
-    slipest_image_header_scalars(img, &q);
-    off = SLIPEST_IMAGE_HEADER_SIZE;
-    get_i16(img, &off, qs->w1, SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES);
-    get_i32(img, &off, qs->b1, SLIPEST_N_HIDDEN);
-    get_i16(img, &off, qs->gamma, SLIPEST_N_HIDDEN);
-    get_i32(img, &off, qs->beta, SLIPEST_N_HIDDEN);
-    get_i16(img, &off, qs->w2, SLIPEST_N_CLASSES * SLIPEST_N_HIDDEN);
-    get_i32(img, &off, qs->b2, SLIPEST_N_CLASSES);
-    get_i16(img, &off, qs->gelu, SLIPEST_Q_GELU_N);
-    get_u32(img, &off, qs->rsqrt_seed, SLIPEST_Q_RSQRT_SEED_N);
-    q.w1 = qs->w1;
-    q.b1 = qs->b1;
-    q.gamma = qs->gamma;
-    q.beta = qs->beta;
-    q.w2 = qs->w2;
-    q.b2 = qs->b2;
-    q.gelu = qs->gelu;
-    q.rsqrt_seed = qs->rsqrt_seed;
-    st = slipest_model_q_check(&q); /* architecture, every shift range, the accumulator bounds */
+    memset(&f, 0, sizeof f);
+    st = slipest_image_stream_model(&w, &q, (mf != NULL) ? &f : NULL);
     if (st != SLIPEST_OK) return st;
-
-#ifndef SLIPEST_Q_ONLY
     if (mf != NULL) {
-        slipest_model_f32_t f;
-        memset(&f, 0, sizeof f);
-        f.ln_eps = f32_of(slipest_image_le32(img + off));
-        off += 4u;
-        get_f32(img, &off, fs->w1, SLIPEST_N_HIDDEN * SLIPEST_N_FEATURES);
-        get_f32(img, &off, fs->b1, SLIPEST_N_HIDDEN);
-        get_f32(img, &off, fs->gamma, SLIPEST_N_HIDDEN);
-        get_f32(img, &off, fs->beta, SLIPEST_N_HIDDEN);
-        get_f32(img, &off, fs->w2, SLIPEST_N_CLASSES * SLIPEST_N_HIDDEN);
-        get_f32(img, &off, fs->b2, SLIPEST_N_CLASSES);
-        f.w1 = fs->w1;
-        f.b1 = fs->b1;
-        f.gamma = fs->gamma;
-        f.beta = fs->beta;
-        f.w2 = fs->w2;
-        f.b2 = fs->b2;
-        f.n_in = q.n_in;
-        f.n_hidden = q.n_hidden;
-        f.n_out = q.n_out;
-        f.version = q.version;
-        f.hash32 = hash32;
-        st = slipest_model_f32_check(&f);
-        if (st != SLIPEST_OK) return st;
         *mf = f;
     }
-#endif
     *mq = q;
     return SLIPEST_OK;
 }
 
 #if SLIPEST_LAYER_TABLE
-/* The element readers for the format-2 reader (slipest_image_table.c), one copy for both formats. */
-void slipest_image_get_i16(const uint8_t *img, size_t *off, int16_t *dst, size_t n) { get_i16(img, off, dst, n); }
-void slipest_image_get_i32(const uint8_t *img, size_t *off, int32_t *dst, size_t n) { get_i32(img, off, dst, n); }
+/* The element readers of the format-2 reader (slipest_image_table.c), on this file's byte decoders (le16,
+ * slipest_image_le32, s16, s32, f32_of): one copy of each for both formats. */
+void slipest_image_get_i16(const uint8_t *img, size_t *off, int16_t *dst, size_t n)
+{
+    size_t i;
+    for (i = 0u; i < n; ++i) {
+        dst[i] = s16(le16(img + *off));
+        *off += 2u;
+    }
+}
+void slipest_image_get_i32(const uint8_t *img, size_t *off, int32_t *dst, size_t n)
+{
+    size_t i;
+    for (i = 0u; i < n; ++i) {
+        dst[i] = s32(slipest_image_le32(img + *off));
+        *off += 4u;
+    }
+}
 #ifndef SLIPEST_Q_ONLY
-void slipest_image_get_f32(const uint8_t *img, size_t *off, float *dst, size_t n) { get_f32(img, off, dst, n); }
+void slipest_image_get_f32(const uint8_t *img, size_t *off, float *dst, size_t n)
+{
+    size_t i;
+    for (i = 0u; i < n; ++i) {
+        dst[i] = f32_of(slipest_image_le32(img + *off));
+        *off += 4u;
+    }
+}
 #endif
 #endif /* SLIPEST_LAYER_TABLE */

@@ -10,12 +10,10 @@
 #include <string.h>
 
 #include "slipest_image_internal.h"
-#include "slipest_model_internal.h"
 
 #define REC_LAYOUT 1u
 #define REC_BODY (SLIPEST_STORE_RECORD_SIZE - 4u) /* bytes covered by the record CRC */
 #define NO_SLOT ((int8_t)SLIPEST_STORE_NO_SLOT)
-#define N_ROWS (SLIPEST_N_HIDDEN + SLIPEST_N_CLASSES)
 
 #if SLIPEST_STORE_SECTOR_MAX < SLIPEST_STORE_SECTOR_MIN
 #error "slipest_store.c: SLIPEST_STORE_SECTOR_MAX below SLIPEST_STORE_SECTOR_MIN"
@@ -28,14 +26,6 @@ static void put_le32(uint8_t *p, uint32_t v)
     p[1] = (uint8_t)(v >> 8);
     p[2] = (uint8_t)(v >> 16);
     p[3] = (uint8_t)(v >> 24);
-}
-
-static int32_t to_s32(uint32_t u) { return u > 0x7FFFFFFFu ? -(int32_t)(~u) - 1 : (int32_t)u; }
-
-static int16_t to_s16(uint32_t u)
-{
-    int32_t v = u > 0x7FFFu ? -(int32_t)(uint16_t)~u - 1 : (int32_t)u; /* u < 2^16 here */
-    return (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): v is in int16_t range */
 }
 
 /* ------------------------------------------------------------------ NVM access */
@@ -71,164 +61,6 @@ static slipest_status_t nvm_erase(slipest_store_t *s, uint32_t addr)
     return SLIPEST_OK;
 }
 
-/* ------------------------------------------------------------------ streaming image walk
- * The payload is a fixed sequence of little-endian arrays (docs/fixed_point.md "Model image",
- * slipest_image_layout.h);
- * each element is checked as it arrives and, when loading, stored. */
-#define K_W1 0u
-#define K_B1 1u
-#define K_GAMMA 2u
-#define K_BETA 3u
-#define K_W2 4u
-#define K_B2 5u
-#define K_GELU 6u
-#define K_RSQRT 7u
-#define K_FEPS 8u /* the float model: ln_eps, then its arrays */
-#define K_FW1 9u
-#define K_FB1 10u
-#define K_FGAMMA 11u
-#define K_FBETA 12u
-#define K_FW2 13u
-#define K_FB2 14u
-#define K_END 15u
-
-typedef struct {
-    slipest_store_t *s;
-    int load;                       /* 1: decode into the store's model storage */
-    uint8_t hdr[SLIPEST_IMAGE_HEADER_SIZE];
-    uint8_t tail[SLIPEST_IMAGE_TRAILER_SIZE + SLIPEST_IMAGE_HMAC_SIZE];
-    uint16_t flags;
-    size_t body;                    /* header + payload bytes */
-    uint32_t crc;                   /* running CRC-32 register over the body */
-    slipest_hmac_sha256_t mac;      /* running HMAC over the body (key provisioned) */
-    uint32_t row_abs[N_ROWS];       /* sum |w| per layer-1 row, then per head row */
-    unsigned seg, idx, nb;          /* element being assembled: segment, index, bytes so far */
-    uint32_t acc;                   /* its little-endian bytes */
-    slipest_status_t deferred;      /* first parameter check that failed (reported after CRC/HMAC) */
-} walk_t;
-
-static uint32_t abs16(int16_t v) { return v < 0 ? (uint32_t)(-(int32_t)v) : (uint32_t)v; }
-
-static int f32_bits_finite(uint32_t b) { return (b & 0x7F800000u) != 0x7F800000u; }
-
-#ifndef SLIPEST_Q_ONLY
-/* where a float element of segment seg goes (ln_eps is handled by the caller) */
-static float *f32_dst(slipest_store_t *s, unsigned seg)
-{
-    switch (seg) {
-    case K_FW1: return s->fs.w1;
-    case K_FB1: return s->fs.b1;
-    case K_FGAMMA: return s->fs.gamma;
-    case K_FBETA: return s->fs.beta;
-    case K_FW2: return s->fs.w2;
-    case K_FB2: /* fall through: the last float array */
-    default: return s->fs.b2;
-    }
-}
-
-static float bits_to_f32(uint32_t bits)
-{
-    float f;
-    memcpy(&f, &bits, sizeof f); /* bit pattern assembled byte-order-independently */
-    return f;
-}
-#endif
-
-/* Where a fixed-point element goes when loading. v is its value, sign-extended from its width:
- * the 16-bit segments' values fit int16_t, so their narrowing keeps the value. */
-static void store_q(slipest_store_t *s, unsigned seg, unsigned i, int32_t v)
-{
-    switch (seg) {
-    case K_W1: s->qs.w1[i] = (int16_t)v; break;       /* NOLINT(bugprone-narrowing-conversions) */
-    case K_B1: s->qs.b1[i] = v; break;
-    case K_GAMMA: s->qs.gamma[i] = (int16_t)v; break; /* NOLINT(bugprone-narrowing-conversions) */
-    case K_BETA: s->qs.beta[i] = v; break;
-    case K_W2: s->qs.w2[i] = (int16_t)v; break;       /* NOLINT(bugprone-narrowing-conversions) */
-    case K_B2: s->qs.b2[i] = v; break;
-    case K_GELU: s->qs.gelu[i] = (int16_t)v; break;   /* NOLINT(bugprone-narrowing-conversions) */
-    default: s->qs.rsqrt_seed[i] = (uint32_t)v; break; /* K_RSQRT: back to its bits */
-    }
-}
-
-/* one complete element of width `size` bytes: check it and, when loading, store it */
-static void visit(walk_t *w, unsigned seg, unsigned i, uint32_t raw, unsigned size)
-{
-    int32_t v = (size == 2u) ? (int32_t)to_s16(raw) : to_s32(raw);
-    int ok = 1;
-    switch (seg) {
-    case K_W1: w->row_abs[i / (unsigned)SLIPEST_N_FEATURES] += abs16((int16_t)v); break;
-    case K_W2: w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i / (unsigned)SLIPEST_N_HIDDEN] += abs16((int16_t)v); break;
-    case K_B1: ok = slipest_model_row_ok((int64_t)w->row_abs[i], v, SLIPEST_Q_ACC1_LIMIT); break;
-    case K_B2:
-        ok = slipest_model_row_ok((int64_t)w->row_abs[(unsigned)SLIPEST_N_HIDDEN + i], v, SLIPEST_Q_ACC2_LIMIT);
-        break;
-    case K_BETA:
-        if ((v < -32768) || (v > 32767)) {
-            ok = 0;
-        }
-        break;
-    case K_RSQRT: ok = slipest_model_seed_ok(raw, (int)i); break;
-    case K_GAMMA: /* fall through: any int16 is a valid LayerNorm weight or GELU entry */
-    case K_GELU: break;
-    default: /* the float model: finite parameters, positive finite LayerNorm eps */
-        if ((f32_bits_finite(raw) == 0) || ((seg == K_FEPS) && ((raw == 0u) || (raw > 0x7F7FFFFFu)))) {
-            if (w->deferred == SLIPEST_OK) {
-                w->deferred = SLIPEST_E_NONFINITE;
-            }
-        }
-#ifndef SLIPEST_Q_ONLY
-        if (w->load != 0) {
-            if (seg == K_FEPS) {
-                w->s->mf.ln_eps = bits_to_f32(raw);
-            } else {
-                f32_dst(w->s, seg)[i] = bits_to_f32(raw);
-            }
-        }
-#endif
-        return;
-    }
-    if (ok == 0 && w->deferred == SLIPEST_OK) {
-        w->deferred = SLIPEST_E_RANGE;
-    }
-    if (w->load != 0) {
-        store_q(w->s, seg, i, v);
-    }
-}
-
-/* one payload byte: assemble elements in layout order */
-static void payload_byte(walk_t *w, uint8_t b)
-{
-    static const uint16_t seg_n[K_END] = {SLIPEST_IMAGE_Q_W1_N, SLIPEST_IMAGE_Q_B1_N, SLIPEST_IMAGE_Q_GAMMA_N,
-                                          SLIPEST_IMAGE_Q_BETA_N, SLIPEST_IMAGE_Q_W2_N, SLIPEST_IMAGE_Q_B2_N,
-                                          SLIPEST_IMAGE_Q_GELU_N, SLIPEST_IMAGE_Q_RSQRT_SEED_N, 1u,
-                                          SLIPEST_IMAGE_F32_W1_N, SLIPEST_IMAGE_F32_B1_N, SLIPEST_IMAGE_F32_GAMMA_N,
-                                          SLIPEST_IMAGE_F32_BETA_N, SLIPEST_IMAGE_F32_W2_N, SLIPEST_IMAGE_F32_B2_N};
-    static const uint8_t seg_size[K_END] = {
-        SLIPEST_IMAGE_Q_W1_BYTES, SLIPEST_IMAGE_Q_B1_BYTES, SLIPEST_IMAGE_Q_GAMMA_BYTES, SLIPEST_IMAGE_Q_BETA_BYTES,
-        SLIPEST_IMAGE_Q_W2_BYTES, SLIPEST_IMAGE_Q_B2_BYTES, SLIPEST_IMAGE_Q_GELU_BYTES, SLIPEST_IMAGE_Q_RSQRT_SEED_BYTES,
-        4u, /* the float LayerNorm eps */
-        SLIPEST_IMAGE_F32_W1_BYTES, SLIPEST_IMAGE_F32_B1_BYTES, SLIPEST_IMAGE_F32_GAMMA_BYTES,
-        SLIPEST_IMAGE_F32_BETA_BYTES, SLIPEST_IMAGE_F32_W2_BYTES, SLIPEST_IMAGE_F32_B2_BYTES};
-    unsigned last = K_FEPS;
-    if ((w->flags & SLIPEST_IMAGE_FLAG_F32) != 0u) {
-        last = K_END;
-    }
-    if (w->seg >= last) return; /* cannot happen: the payload size was checked against the layout */
-    w->acc |= (uint32_t)b << (8u * w->nb);
-    w->nb += 1u;
-    if (w->nb < seg_size[w->seg]) {
-        return;
-    }
-    visit(w, w->seg, w->idx, w->acc, seg_size[w->seg]);
-    w->acc = 0u;
-    w->nb = 0u;
-    w->idx += 1u;
-    if (w->idx == seg_n[w->seg]) {
-        w->idx = 0u;
-        w->seg += 1u;
-    }
-}
-
 /* what a walk that passed learns about the image */
 typedef struct {
     uint32_t crc;     /* its CRC-32 field */
@@ -236,78 +68,69 @@ typedef struct {
     uint32_t hash32;  /* content hash32 */
 } image_id_t;
 
-/* Stream an image of len bytes from slot through every check of slipest_image_read() plus the
- * HMAC; with load, also decode it into the store's model storage. Returns the first failure in
- * the order header, CRC, hash, HMAC, parameters; on success *id describes the image. */
+/* Stream an image of len bytes from slot through the image reader's one validator
+ * (slipest_image_internal.h) plus the HMAC; with load, also decode it into the store's model
+ * storage. Returns the first failure in the order header, CRC, hash, HMAC, parameters; on
+ * success *id describes the image. */
 static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t len, int load, image_id_t *id)
 {
-    walk_t w;
-    uint32_t pos = 0u, base = slot_addr(s, slot), S = s->nvm.sector_size, i, n;
+    slipest_image_stream_t w;
+    slipest_hmac_sha256_t mac;
+    uint32_t pos = 0u, base = slot_addr(s, slot), S = s->nvm.sector_size, n;
     uint8_t tag[SLIPEST_SHA256_SIZE];
     slipest_model_q_t q;
+    slipest_model_f32_t *mf = NULL;
     slipest_status_t st;
 
-    if (len < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE || len > SLIPEST_IMAGE_MAX_SIZE) {
-        return SLIPEST_E_LENGTH;
+    /* the store checks the float model whatever the build: a Q-only node keeps it valid for others */
+#ifdef SLIPEST_Q_ONLY
+    st = slipest_image_stream_init(&w, len, (load != 0) ? &s->qs : NULL, NULL, 1);
+#else
+    st = slipest_image_stream_init(&w, len, (load != 0) ? &s->qs : NULL, (load != 0) ? &s->fs : NULL, 1);
+#endif
+    if (st != SLIPEST_OK) {
+        return st;
     }
-    memset(&w, 0, sizeof w);
-    w.s = s;
-    w.load = load;
-    w.crc = 0xFFFFFFFFu;
     if (s->auth != NULL) {
-        s->auth->init(&w.mac, s->auth->key, s->auth->key_len);
+        s->auth->init(&mac, s->auth->key, s->auth->key_len);
     }
-    /* len <= SLIPEST_IMAGE_MAX_SIZE, so at most SLIPEST_STORE_SLOT_SECTORS(S) iterations */
+    /* len <= SLIPEST_IMAGE_MAX_SIZE (init), so at most SLIPEST_STORE_SLOT_SECTORS(S) iterations */
     while (pos < len) {
         n = (len - pos < S) ? len - pos : S;
         st = nvm_read(s, base + pos, s->buf, n);
+        if (st == SLIPEST_OK) {
+            st = slipest_image_stream_feed(&w, s->buf, n);
+        }
         if (st != SLIPEST_OK) {
-            return st;
+            return st; /* the NVM's failure or the image's first refusal */
         }
-        for (i = 0; i < n; ++i, ++pos) {
-            uint8_t b = s->buf[i];
-            if (pos < SLIPEST_IMAGE_HEADER_SIZE) {
-                w.hdr[pos] = b;
-                if (pos + 1u == SLIPEST_IMAGE_HEADER_SIZE) {
-                    st = slipest_image_check_header(w.hdr, len, &w.flags, &w.body);
-                    if (st != SLIPEST_OK) {
-                        return st;
-                    }
-                }
-            } else if (pos >= w.body) {
-                w.tail[pos - w.body] = b; /* len == body + trailer (+ tag): checked with the header */
-                continue;
-            } else {
-                payload_byte(&w, b);
-            }
-            w.crc = slipest_crc32_update(w.crc, &b, 1u);
-            if (s->auth != NULL) {
-                s->auth->update(&w.mac, &b, 1u);
-            }
+        /* the tag covers header and payload: w.body bytes (len until the header is complete) */
+        if ((s->auth != NULL) && (pos < w.body)) {
+            s->auth->update(&mac, s->buf, (w.body - pos < n) ? w.body - pos : n);
         }
+        pos += n;
     }
-    if (slipest_image_le32(&w.tail[SLIPEST_IMAGE_TRAILER_OFF_CRC32]) != (w.crc ^ 0xFFFFFFFFu)) {
-        return SLIPEST_E_CRC;
-    }
-    if (slipest_image_check_hash32(w.hdr, w.tail) != SLIPEST_OK) {
-        return SLIPEST_E_HASH;
+    st = slipest_image_stream_seal(&w);
+    if (st != SLIPEST_OK) {
+        return st;
     }
     if (s->auth != NULL) {
         if ((w.flags & SLIPEST_IMAGE_FLAG_HMAC) == 0u) {
             return SLIPEST_E_AUTH;
         }
-        s->auth->final(&w.mac, tag);
+        s->auth->final(&mac, tag);
         if (0 == slipest_ct_equal(tag, &w.tail[SLIPEST_IMAGE_TRAILER_SIZE], SLIPEST_SHA256_SIZE)) {
             return SLIPEST_E_AUTH;
         }
     }
-    slipest_image_header_scalars(w.hdr, &q);
-    st = slipest_model_q_check_scalars(&q);
+#ifndef SLIPEST_Q_ONLY
+    if ((load != 0) && ((w.flags & SLIPEST_IMAGE_FLAG_F32) != 0u)) {
+        mf = &s->mf;
+    }
+#endif
+    st = slipest_image_stream_model(&w, &q, mf);
     if (st != SLIPEST_OK) {
         return st;
-    }
-    if (w.deferred != SLIPEST_OK) {
-        return w.deferred;
     }
     id->crc = slipest_image_le32(&w.tail[SLIPEST_IMAGE_TRAILER_OFF_CRC32]);
     id->version = q.version;
@@ -315,41 +138,10 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
     if (load == 0) {
         return SLIPEST_OK;
     }
-
-    /* loaded: point the model at the storage. No second slipest_model_q_check() on RAM: every
-     * value stored above is the very value visit() checked (the scalars, every seed, every row
-     * bound and LayerNorm bias, in the order of that check), so it could only repeat them
-     * (fuzz_store traps if a loaded model ever fails slipest_model_q_check(); test_co checks it) */
-    q.w1 = s->qs.w1;
-    q.b1 = s->qs.b1;
-    q.gamma = s->qs.gamma;
-    q.beta = s->qs.beta;
-    q.w2 = s->qs.w2;
-    q.b2 = s->qs.b2;
-    q.gelu = s->qs.gelu;
-    q.rsqrt_seed = s->qs.rsqrt_seed;
-    s->mq = q;
+    s->mq = q; /* its arrays point into s->qs (and s->mf's into s->fs) */
     memcpy(s->sha256, &w.tail[SLIPEST_IMAGE_TRAILER_OFF_SHA256], sizeof s->sha256);
 #ifndef SLIPEST_Q_ONLY
-    s->have_f32 = 0u;
-    if ((w.flags & SLIPEST_IMAGE_FLAG_F32) != 0u) {
-        s->mf.w1 = s->fs.w1;
-        s->mf.b1 = s->fs.b1;
-        s->mf.gamma = s->fs.gamma;
-        s->mf.beta = s->fs.beta;
-        s->mf.w2 = s->fs.w2;
-        s->mf.b2 = s->fs.b2;
-        s->mf.n_in = q.n_in;
-        s->mf.n_hidden = q.n_hidden;
-        s->mf.n_out = q.n_out;
-        s->mf.version = q.version;
-        s->mf.hash32 = q.hash32;
-        st = slipest_model_f32_check(&s->mf);
-        if (st != SLIPEST_OK) {
-            return st;
-        }
-        s->have_f32 = 1u;
-    }
+    s->have_f32 = (mf != NULL) ? 1u : 0u;
 #endif
     return SLIPEST_OK;
 }
@@ -357,7 +149,8 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t le
 /* Load slot's image as the active model; on failure no model is active. */
 static slipest_status_t load_slot(slipest_store_t *s, unsigned slot)
 {
-    image_id_t id;
+    image_id_t id = {0u, 0u, 0u}; /* set by a walk that passed; gcc -fanalyzer cannot follow the status out of
+                                     the image stream's calls in another file */
     slipest_status_t st;
     s->have_model = 0u;
     st = walk_slot(s, slot, s->rec.length[slot], 1, &id);
@@ -839,4 +632,12 @@ slipest_upload_state_t slipest_store_upload_state(const slipest_store_t *store)
 const slipest_store_counters_t *slipest_store_counters(const slipest_store_t *store)
 {
     return store == NULL ? NULL : &store->c;
+}
+
+uint32_t slipest_store_nvm_sectors(uint32_t sector_size)
+{
+    if ((sector_size < SLIPEST_STORE_SECTOR_MIN) || (sector_size > SLIPEST_STORE_SECTOR_MAX)) {
+        return 0u;
+    }
+    return SLIPEST_STORE_NVM_SECTORS(sector_size);
 }

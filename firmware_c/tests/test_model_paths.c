@@ -13,6 +13,7 @@
 #include "image_edit.h"
 #include "slipest_bundle.h"
 #include "slipest_image.h"
+#include "slipest_image_internal.h"
 #include "slipest_infer.h"
 #include "slipest_model.h"
 #include "slipest_status.h"
@@ -181,6 +182,18 @@ static int load(const char *path)
 
 #define FRESH() memcpy(img, img0, len0)
 
+/* The streaming validator (the store's and slipest_image_read()'s) refuses a byte past the length it
+ * was started with: that bound keeps the trailer buffer safe whatever a caller feeds. */
+static void stream_refuses_extra_bytes(void)
+{
+    slipest_image_stream_t w;
+    const uint8_t extra = 0u;
+    CHECK(slipest_image_stream_init(&w, len0, NULL, NULL, 0) == SLIPEST_OK);
+    CHECK(slipest_image_stream_feed(&w, img0, len0) == SLIPEST_OK);
+    CHECK(slipest_image_stream_feed(&w, &extra, 1u) == SLIPEST_E_LENGTH);
+    CHECK(slipest_image_stream_seal(&w) == SLIPEST_OK); /* the image fed before it is intact */
+}
+
 static void image_rejects(void)
 {
     slipest_image_q_storage_t qs;
@@ -288,6 +301,7 @@ int main(int argc, char **argv)
         return 2;
     }
     image_rejects();
+    stream_refuses_extra_bytes();
     kernel_branches();
     CHECK_DONE();
 }

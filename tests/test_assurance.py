@@ -207,8 +207,9 @@ def test_frama_c_eva_finds_an_overflow_in_the_feature_extractor(tmp_path):
     """Negative control of the extractor's proof: with the 64-bit widening of S * S removed from the variance
     of a closed window, EVA reports the signed overflow (reached only through a closed window)."""
     from fleetlab.assurance import analysers
-    from fleetlab.assurance.sources import FW
+    from fleetlab.assurance.sources import fw
 
+    FW = fw()
     src = (FW / "src" / "slipest_features.c").read_text()
     wide = "uint64_t d = (uint64_t)(nn * q - (int64_t)s * s);"
     assert wide in src

@@ -139,8 +139,9 @@ def test_frama_c_eva_finds_a_removed_saturation_in_the_layer_kernel(eva_bundle, 
     max|d|), EVA reports the possible overflow of e * e in block_q: the zero above is not vacuous."""
     need("frama-c")
     from fleetlab.assurance import analysers
-    from fleetlab.assurance.sources import FW
+    from fleetlab.assurance.sources import fw
 
+    FW = fw()
     src = (FW / "src" / "slipest_infer_q.c").read_text()
     assert LAYER_SAT in src
     for f in (FW / "src").iterdir():

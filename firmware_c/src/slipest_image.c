@@ -416,7 +416,7 @@ void slipest_image_get_i16(const uint8_t *img, size_t *off, int16_t *dst, size_t
 {
     size_t i;
     for (i = 0u; i < n; ++i) {
-        dst[i] = s16(le16(img + *off));
+        dst[i] = s16(le16(&img[*off]));
         *off += 2u;
     }
 }
@@ -424,7 +424,7 @@ void slipest_image_get_i32(const uint8_t *img, size_t *off, int32_t *dst, size_t
 {
     size_t i;
     for (i = 0u; i < n; ++i) {
-        dst[i] = s32(slipest_image_le32(img + *off));
+        dst[i] = s32(slipest_image_le32(&img[*off]));
         *off += 4u;
     }
 }
@@ -433,7 +433,7 @@ void slipest_image_get_f32(const uint8_t *img, size_t *off, float *dst, size_t n
 {
     size_t i;
     for (i = 0u; i < n; ++i) {
-        dst[i] = f32_of(slipest_image_le32(img + *off));
+        dst[i] = f32_of(slipest_image_le32(&img[*off]));
         *off += 4u;
     }
 }

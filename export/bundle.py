@@ -117,18 +117,16 @@ def export_bundle(
         onnx_diff = onnx_export.check_onnx(out / ONNX_FILE, inputs, tl)
         content = _flat_hash(model)
         vec_info = None
-    elif arch == "sn-s":
-        fp = FloatParams.from_model(model)
-        qp = quantize(fp)
-        content = manifest.content_hash(qp, fp)
-        names += [p.name for p in headers.write_headers(out, qp, fp, content, c_name, model_version)]
-        names.append(model_image.write_image(out, qp, fp, content, model_version, hmac_key).name)
-        steps.update()
-    else:  # any other architecture: the layer-table headers and a format-2 image (the layer table)
-        fp = FloatNet.from_model(model)
-        qp = quantize_net(fp)
-        content = manifest.content_hash_net(qp, fp)
-        names += [p.name for p in headers.write_net_headers(out, qp, fp, content, c_name, model_version)]
+    else:
+        # SN-S: its own headers and a format-1 image; any other architecture: the layer-table headers and a
+        # format-2 image (write_image picks the format from the parameters)
+        from_model, quant, content_hash, write_headers = (
+            (FloatParams.from_model, quantize, manifest.content_hash, headers.write_headers) if arch == "sn-s"
+            else (FloatNet.from_model, quantize_net, manifest.content_hash_net, headers.write_net_headers))
+        fp = from_model(model)
+        qp = quant(fp)
+        content = content_hash(qp, fp)
+        names += [p.name for p in write_headers(out, qp, fp, content, c_name, model_version)]
         names.append(model_image.write_image(out, qp, fp, content, model_version, hmac_key).name)
         steps.update()
     if not onnx_only:

@@ -345,6 +345,7 @@ const slipest_store_counters_t *slipest_store_counters(const slipest_store_t *st
 /**
  * @brief SLIPEST_STORE_NVM_SECTORS(sector_size), for tools that size an NVM area through the library
  *        (the Python RamNvm reads it through ctypes, so the formula is written once, above).
+ * @param[in] sector_size  bytes of one NVM erase sector
  * @return the sectors the store needs, or 0 for a sector size it does not accept
  *         (outside SLIPEST_STORE_SECTOR_MIN..SLIPEST_STORE_SECTOR_MAX)
  */

@@ -17,6 +17,7 @@ import pytest
 
 from fleetlab.paths import repo_root
 from doc_figures import assert_near, worst_case_instructions
+from planted import planted_src
 
 REPO = repo_root()
 
@@ -144,17 +145,11 @@ def test_frama_c_eva_finds_an_overflow(tmp_path):
     """The kernel's zero is not vacuous: without the saturation that states |e| < 2^14 (a bound that holds
     only through e's relation to max|d|), EVA reports the possible overflow of e * e."""
     from fleetlab.assurance import analysers
-    from fleetlab.assurance.sources import fw
 
-    FW = fw()
-    src = (FW / "src" / "slipest_infer_q.c").read_text()
-    with_sat = "int32_t e = SAT(rsr_h(NH * SAT(h[i], 25) - sum, k2_half, k2), 14);"
-    assert with_sat in src
-    for f in (FW / "src").iterdir():
-        (tmp_path / f.name).write_bytes(f.read_bytes())
-    (tmp_path / "slipest_infer_q.c").write_text(
-        src.replace(with_sat, "int32_t e = rsr_h(NH * SAT(h[i], 25) - sum, k2_half, k2);"))
-    (res,) = analysers.frama_c_eva(BUNDLE, entries=["eva_infer_q"], src_dir=tmp_path)
+    src = planted_src(tmp_path, "slipest_infer_q.c",
+                      "int32_t e = SAT(rsr_h(NH * SAT(h[i], 25) - sum, k2_half, k2), 14);",
+                      "int32_t e = rsr_h(NH * SAT(h[i], 25) - sum, k2_half, k2);")
+    (res,) = analysers.frama_c_eva(BUNDLE, entries=["eva_infer_q"], src_dir=src)
     assert any("e * e" in a for a in res.alarms), "\n".join(res.alarms)
 
 
@@ -207,16 +202,10 @@ def test_frama_c_eva_finds_an_overflow_in_the_feature_extractor(tmp_path):
     """Negative control of the extractor's proof: with the 64-bit widening of S * S removed from the variance
     of a closed window, EVA reports the signed overflow (reached only through a closed window)."""
     from fleetlab.assurance import analysers
-    from fleetlab.assurance.sources import fw
 
-    FW = fw()
-    src = (FW / "src" / "slipest_features.c").read_text()
-    wide = "uint64_t d = (uint64_t)(nn * q - (int64_t)s * s);"
-    assert wide in src
-    for f in (FW / "src").iterdir():
-        (tmp_path / f.name).write_bytes(f.read_bytes())
-    (tmp_path / "slipest_features.c").write_text(src.replace(wide, "uint64_t d = (uint64_t)(nn * q - s * s);"))
-    (res,) = analysers.frama_c_eva(BUNDLE, entries=["eva_features"], src_dir=tmp_path)
+    src = planted_src(tmp_path, "slipest_features.c", "uint64_t d = (uint64_t)(nn * q - (int64_t)s * s);",
+                      "uint64_t d = (uint64_t)(nn * q - s * s);")
+    (res,) = analysers.frama_c_eva(BUNDLE, entries=["eva_features"], src_dir=src)
     assert window_features_reached(res.log)
     assert any("slipest_features.c" in a and "overflow" in a and "s * s" in a for a in res.alarms), \
         "\n".join(res.alarms)

@@ -19,6 +19,7 @@ from fleetlab.export.vectors import builtin_windows, draw_inputs
 from fleetlab.models import build
 from fleetlab.models.train import train_classifier
 
+from planted import planted_src
 from test_export_c import INCLUDE, build_check, need
 
 ARCHS = ["sn-d", "24,9", "256,256,256,256"]
@@ -139,16 +140,9 @@ def test_frama_c_eva_finds_a_removed_saturation_in_the_layer_kernel(eva_bundle, 
     max|d|), EVA reports the possible overflow of e * e in block_q: the zero above is not vacuous."""
     need("frama-c")
     from fleetlab.assurance import analysers
-    from fleetlab.assurance.sources import fw
 
-    FW = fw()
-    src = (FW / "src" / "slipest_infer_q.c").read_text()
-    assert LAYER_SAT in src
-    for f in (FW / "src").iterdir():
-        (tmp_path / f.name).write_bytes(f.read_bytes())
-    (tmp_path / "slipest_infer_q.c").write_text(
-        src.replace(LAYER_SAT, "int32_t e = rsr_h(nh * h[i] - sum, k2_half, k2);"))
-    (res,) = analysers.frama_c_eva(eva_bundle, entries=["eva_infer_q"], src_dir=tmp_path)
+    src = planted_src(tmp_path, "slipest_infer_q.c", LAYER_SAT, "int32_t e = rsr_h(nh * h[i] - sum, k2_half, k2);")
+    (res,) = analysers.frama_c_eva(eva_bundle, entries=["eva_infer_q"], src_dir=src)
     assert any("e * e" in a for a in res.alarms), "\n".join(res.alarms)
 
 

@@ -5,8 +5,8 @@ it would pass on every CPU. Each line carries one transmitted frame three ways: 
 and compared with the torch integer reference (fleetlab.export.intref) for the inputs that
 firmware_c/target/node_frames.c feeds the node.
 
-Plain profile only: the CANopen profile has no golden file (its node is checked end to end under QEMU by
-co_node_target.c and by tests/test_canopen_node.py against the python `canopen` PDO maps)."""
+The CANopen profile's golden file (co_frames_example.txt) is decoded with the python `canopen` package by
+tests/test_golden_co_frames.py, which reads it with golden_lines() here."""
 
 from __future__ import annotations
 
@@ -27,28 +27,44 @@ DBC = cantools.database.load_file(str(REPO / "dbc" / "slipest.dbc"))
 NO_FLOAT_CLASS = 255  # the fixed-point-only node (slipest_q) sends no float class
 
 
-def golden_frames(path=GOLDEN) -> tuple[list[tuple[int, bytes]], int]:
-    """(id, data) of every line, after checking that its SLCAN and COBS forms carry the same frame; and the
-    frame count of the closing line."""
+def golden_lines(path=GOLDEN) -> tuple[list[tuple[list[str], int, bytes]], int]:
+    """(leading fields, id, data) of every line, after checking that its SLCAN and COBS forms carry the same
+    frame; and the frame count of the closing line. The leading fields are those before the id (the CANopen
+    golden's tick and direction; none in the plain one)."""
     lines = path.read_text().splitlines()
     assert lines[-1].startswith("frames=") and lines[-1].endswith(" END"), lines[-1]
     frames = []
     for n, line in enumerate(lines[:-1], 1):
         head, slcan, packet = (part.strip() for part in line.split("|"))
-        can_id, dlc, data = head.split()
+        *lead, can_id, dlc, data = head.split()
         data = bytes.fromhex(data)
         assert int(dlc) == len(data), f"line {n}: dlc {dlc}, {len(data)} bytes"
         for other in (parse_slcan_line(slcan.encode()), decode_packet(bytes.fromhex(packet)[:-1])):
             assert (other.can_id, other.data) == (int(can_id), data), f"line {n}: {other}"
         assert packet.endswith("00") and "00" not in [packet[i:i + 2] for i in range(0, len(packet) - 2, 2)]
-        frames.append((int(can_id), data))
+        frames.append((lead, int(can_id), data))
     return frames, int(lines[-1].split("=")[1].split()[0])
 
 
-def node_frames_stream() -> np.ndarray:
-    """The 250 raw telemetry samples of node_frames.c (its main(), second loop), channels in DBC order:
-    wheel_speed, motor_current, acc_x, acc_y, acc_z, roll, pitch."""
-    i = np.arange(250)
+def golden_frames(path=GOLDEN) -> tuple[list[tuple[int, bytes]], int]:
+    """(id, data) of every line of the plain profile's golden file, and its closing frame count."""
+    lines, count = golden_lines(path)
+    return [(can_id, data) for _, can_id, data in lines], count
+
+
+def golden_line(frame, lead: str = "") -> str:
+    """The golden-file line of a frame (as firmware_c/target/frame_print.c writes it), after `lead`."""
+    from fleetlab.host_tools.wire.serial_framing import encode_packet, slcan_line
+
+    return (f"{lead}{frame.can_id} {len(frame.data)} {frame.data.hex()} | {slcan_line(frame)[:-1].decode()} | "
+            f"{encode_packet(frame).hex()}\n")
+
+
+def node_frames_stream(n: int = 250) -> np.ndarray:
+    """The raw telemetry samples of node_frames.c (its main(), second loop: 250 of them; co_frames.c sends
+    more of the same formula), channels in DBC order: wheel_speed, motor_current, acc_x, acc_y, acc_z, roll,
+    pitch."""
+    i = np.arange(n)
     w1 = [1000 + (i * 7) % 300 - 150 * k for k in range(3)]
     w2 = [200 - i % 50 + 11 * k for k in range(3)]
     w3 = 9810 - (i % 13) * 2  # IMU (k = 1) only
@@ -136,15 +152,13 @@ def test_a_wrong_golden_is_caught(tmp_path):
     """The checks can fail: one logit byte changed in all three encodings of a line decodes to a logit the
     reference does not give; changed in the data column alone, the line's encodings disagree."""
     from fleetlab.host_tools.wire.dbc import Frame
-    from fleetlab.host_tools.wire.serial_framing import encode_packet, slcan_line
 
     lines = GOLDEN.read_text().splitlines(keepends=True)
     can_id, dlc, data = lines[1].split("|")[0].split()
     assert int(can_id) == DBC.get_message_by_name("SLIP_LOGITS_01").frame_id
     f = Frame(int(can_id), bytes([bytes.fromhex(data)[0] ^ 1]) + bytes.fromhex(data)[1:])
     bad = tmp_path / "golden.txt"
-    bad.write_text("".join(lines[:1] + [f"{can_id} {dlc} {f.data.hex()} | {slcan_line(f)[:-1].decode()} | "
-                                         f"{encode_packet(f).hex()}\n"] + lines[2:]))
+    bad.write_text("".join(lines[:1] + [golden_line(f)] + lines[2:]))
     got = decode(bad)[2][0]["logits"]
     want = q_logits_of(load_bundle(BUNDLE).qparams, np.load(BUNDLE / "vectors.npz")["q_inputs"][:1])[0].tolist()
     assert got != want and got[1:] == want[1:]

@@ -26,6 +26,7 @@ REPO = repo_root()
 
 BUNDLE = REPO / "firmware_c" / "bundles" / "example"
 GOLDEN = REPO / "firmware_c" / "tests" / "golden" / "node_frames_example.txt"
+CO_GOLDEN = REPO / "firmware_c" / "tests" / "golden" / "co_frames_example.txt"
 NEW_TARGETS = ["powerpc", "sparc-leon3", "riscv32", "cortex-m0", "cortex-m7"]
 # issue 15: the ONNX->C compiler emx-onnx-cgen took this many instructions per float inference of the
 # same model on the M4 (-O3); fleetlab's float path must stay below it on every target with an FPU
@@ -128,8 +129,9 @@ def test_target_runs_every_vector_bit_exact_and_sends_the_x86_frames(cross_build
     passes = re.findall(rf"vectors={n} q_fail=0 f32_fail=0 extractor_fail=0 model=\w+ PASS", out)
     # fixed-point image everywhere, plus the full (float) image where the target has the float path
     assert len(passes) == (1 if t.integer_only else 2), out[-3000:]
-    assert re.search(rf"node_frames_golden_{re.escape(name)} \.+ +Passed", out)
-    assert f"identical to {GOLDEN}" in out
+    for test, golden in (("node_frames", GOLDEN), ("co_frames", CO_GOLDEN)):  # plain and CANopen profiles
+        assert re.search(rf"{test}_golden_{re.escape(name)} \.+ +Passed", out)
+        assert f"identical to {golden}" in out
     for what in ("slipest_test_q.elf", "libslipest_q.a"):
         assert f"{what}: 0 soft-float helper symbols (expected absent)" in out
 

@@ -50,7 +50,8 @@ if(SLIPEST_TARGET_KERNEL_OPT)
 endif()
 
 # runtime of the test images: startup + host I/O (semihosting on bare metal, stdio in user mode)
-set(rt_sources ${TGT}/target_vectors.c ${TGT}/target_measure.c ${TGT}/target_nvm.c ${FW}/common/ram_nvm.c)
+set(rt_sources ${TGT}/target_vectors.c ${TGT}/target_measure.c ${TGT}/target_nvm.c ${TGT}/frame_print.c
+                ${FW}/common/ram_nvm.c)
 foreach(s ${SLIPEST_TARGET_STARTUP})
   list(APPEND rt_sources ${TGT}/${s})
 endforeach()
@@ -175,6 +176,16 @@ if(SLIPEST_QEMU AND EXISTS "${NODE_GOLDEN}"
            COMMAND ${CMAKE_COMMAND} "-DRUN=${SLIPEST_QEMU};${SLIPEST_RUN};${SLIPEST_RUN_IMAGE};$<TARGET_FILE:slipest_node_frames>"
                    -DGOLDEN=${NODE_GOLDEN} -P ${FW}/cmake/compare_output.cmake)
   set_tests_properties(node_frames_golden_${SLIPEST_CPU} PROPERTIES TIMEOUT 120)
+endif()
+# the CANopen profile's frames (firmware_c/target/co_frames.c) equal its x86-64 golden file
+slipest_image(slipest_co_frames slipest_q ${TGT}/co_frames.c)
+set(CO_GOLDEN "${FW}/tests/golden/co_frames_example.txt")
+if(SLIPEST_QEMU AND EXISTS "${CO_GOLDEN}"
+   AND "${SLIPEST_BUNDLE}" STREQUAL "${CMAKE_CURRENT_SOURCE_DIR}/firmware_c/bundles/example")
+  add_test(NAME co_frames_golden_${SLIPEST_CPU}
+           COMMAND ${CMAKE_COMMAND} "-DRUN=${SLIPEST_QEMU};${SLIPEST_RUN};${SLIPEST_RUN_IMAGE};$<TARGET_FILE:slipest_co_frames>"
+                   -DGOLDEN=${CO_GOLDEN} -P ${FW}/cmake/compare_output.cmake)
+  set_tests_properties(co_frames_golden_${SLIPEST_CPU} PROPERTIES TIMEOUT 120)
 endif()
 
 # --- the CANopen node with two model slots (slipest_co.h + slipest_store.h): the bundle's model.img

@@ -5,6 +5,7 @@
  * hash in the status frames, whatever the CPU's byte order. */
 #include <stdint.h>
 
+#include "frame_print.h"
 #include "semihost.h"
 #include "slipest_bundle.h"
 #include "slipest_codec.h"
@@ -15,66 +16,11 @@
 
 static slipest_node_t node;
 
-static void put_hex(const uint8_t *p, size_t n)
-{
-    static const char digits[] = "0123456789abcdef";
-    char two[3];
-    size_t i;
-    two[2] = 0;
-    for (i = 0; i < n; i++) {
-        two[0] = digits[p[i] >> 4];
-        two[1] = digits[p[i] & 15u];
-        semihost_puts(two);
-    }
-}
-
-/* one transmitted frame; returns nonzero when an encoder fails */
-static int put_frame(const slipest_frame_t *f)
-{
-    char line[32];
-    uint8_t pkt[32];
-    int a = slipest_slcan_format(f, line, sizeof line);
-    int b = slipest_cobs_format(f, pkt, sizeof pkt);
-    if (a < 0 || b < 0) return 1;
-    semihost_put_uint(f->id);
-    semihost_puts(" ");
-    semihost_put_uint(f->dlc);
-    semihost_puts(" ");
-    put_hex(f->data, f->dlc);
-    semihost_puts(" | ");
-    line[a < (int)sizeof line ? a : (int)sizeof line - 1] = 0;
-    {
-        /* SLCAN lines end in '\r': print it as text so the golden file stays one frame per line */
-        int k;
-        for (k = 0; k < a && (unsigned char)line[k] >= 0x20u; k++) {
-        }
-        line[k] = 0;
-    }
-    semihost_puts(line);
-    semihost_puts(" | ");
-    put_hex(pkt, (size_t)b);
-    semihost_puts("\n");
-    return 0;
-}
-
-/* a frame of 16-bit little-endian fields (the DBC's byte order), built byte by byte */
-static void le16_frame(slipest_frame_t *f, uint32_t id, const uint16_t *v, unsigned n)
-{
-    unsigned k;
-    f->id = id;
-    f->dlc = (uint8_t)(2u * n);
-    for (k = 0; k < 8u; k++) f->data[k] = 0;
-    for (k = 0; k < n; k++) {
-        f->data[2u * k] = (uint8_t)(v[k] & 0xFFu);
-        f->data[2u * k + 1u] = (uint8_t)(v[k] >> 8);
-    }
-}
-
 static int handle(const slipest_frame_t *in, uint32_t *n_out)
 {
     slipest_frame_t out[SLIPEST_NODE_MAX_OUT];
     int n = slipest_node_handle(&node, in, out, SLIPEST_NODE_MAX_OUT), i, bad = 0;
-    for (i = 0; i < n; i++) bad |= put_frame(&out[i]);
+    for (i = 0; i < n; i++) bad |= frame_print(&out[i]);
     if (n > 0) *n_out += (uint32_t)n;
     return bad;
 }
@@ -109,7 +55,7 @@ int main(void)
             w[1] = (uint16_t)q[3 * k];
             w[2] = (uint16_t)q[3 * k + 1];
             w[3] = (uint16_t)q[3 * k + 2];
-            le16_frame(&f, feat_ids[k], w, 4u);
+            frame_le16(&f, feat_ids[k], w, 4u);
             bad |= handle(&f, &n_out);
         }
     }
@@ -121,14 +67,14 @@ int main(void)
             w[1] = (uint16_t)(int16_t)(1000 + (int32_t)((i * 7u) % 300u) - 150 * k);
             w[2] = (uint16_t)(int16_t)(200 - (int32_t)(i % 50u) + 11 * k);
             w[3] = (uint16_t)(int16_t)(9810 - (int32_t)(i % 13u) * (k + 1));
-            le16_frame(&f, telem_ids[k], w, k == 1 ? 4u : 3u);
+            frame_le16(&f, telem_ids[k], w, k == 1 ? 4u : 3u);
             bad |= handle(&f, &n_out);
         }
     }
     /* status frames: model hash, counters */
     n = slipest_node_status(&node, st, SLIPEST_NODE_MAX_OUT);
     if (n < 0) bad = 1;
-    for (k = 0; k < n; k++) bad |= put_frame(&st[k]);
+    for (k = 0; k < n; k++) bad |= frame_print(&st[k]);
     semihost_puts("frames=");
     semihost_put_uint(n_out + (uint32_t)(n > 0 ? n : 0));
     semihost_puts(bad ? " FAIL\n" : " END\n");

@@ -30,6 +30,7 @@ from .wire.dbc import (
     frame_id,
 )
 from .emulator import EmulatorProcess, build, default_bundle, find_artifact
+from .pacing import Pacer, WallClock
 from .links import ALIASES, InprocLink, Link, canonical_link, estimator_links, link_class
 from .sources import FeatureSource, TelemetrySource, sim_source
 from .verify.reference import Reference
@@ -52,6 +53,7 @@ class SegmentResult:
     expected_received: int
     frames_sent: int
     statuses: list[StatusReport] = field(default_factory=list)  # every STATUS report, periodic ones included
+    pacer: Pacer | None = None  # the real-time schedule kept (a realtime run only)
 
 
 @dataclass
@@ -197,7 +199,11 @@ def emulate(
     timeout: float = 20.0,
     progress: bool = True,
     realtime: bool = False,
+    clock=None,
 ) -> EmulationResult:
+    """Stream `source` (with the planned faults) to the node over `link_kind` and compare its answers with
+    the reference. A realtime run sends one sample per period on `clock` (the wall clock unless a test gives
+    fleetlab.host_tools.pacing's SimulatedClock); its schedule is kept in the segment results' pacers."""
     if link_kind not in LINKS:
         raise ValueError(f"--link must be one of {', '.join(LINKS)}, got {link_kind!r}")
     link_kind = canonical_link(link_kind)
@@ -219,7 +225,7 @@ def emulate(
             if si > 0:
                 link = endpoint.restart()
                 result.restarts += 1
-            result.segments.append(_run_segment(link, seg, ref, timeout, bar, result, realtime))
+            result.segments.append(_run_segment(link, seg, ref, timeout, bar, result, realtime, clock))
             result.samples_lost_to_restart += seg.samples_lost_to_restart
             result.samples_skipped_by_restart += seg.samples_skipped_by_restart
             result.windows_lost_to_restart += seg.windows_lost_to_restart
@@ -233,7 +239,7 @@ def emulate(
 
 
 def _run_segment(link: Link, seg: fault_mod.Segment, ref: Reference, timeout: float, bar: tqdm,
-                 result: EmulationResult, realtime: bool = False) -> SegmentResult:
+                 result: EmulationResult, realtime: bool = False, clock=None) -> SegmentResult:
     model = EstimatorModel()
     asm = OutputAssembler()
     windows: list[WindowEstimate] = []
@@ -253,13 +259,12 @@ def _run_segment(link: Link, seg: fault_mod.Segment, ref: Reference, timeout: fl
         period, starts = 0.0, list(range(0, len(items), CHUNK))
     bounds = starts + [len(items)]
     t_start = time.perf_counter()
+    pacer = Pacer(clock or WallClock()) if period else None
     for c in range(len(starts)):
         i, chunk = bounds[c], items[bounds[c] : bounds[c + 1]]
         item_chunk[bounds[c] : bounds[c + 1]] = c
-        if period:
-            delay = t_start + c * period - time.perf_counter()
-            if delay > 0:
-                time.sleep(delay)
+        if pacer is not None:
+            pacer.wait(c * period)
         ta = time.perf_counter()
         link.write(chunk)
         chunk_times.append((ta, time.perf_counter()))
@@ -299,7 +304,7 @@ def _run_segment(link: Link, seg: fault_mod.Segment, ref: Reference, timeout: fl
             f"STATUS_MODEL hash {final.model_hash:08x} != bundle {ref.model_hash32:08x}")
     result.host_rx_errors.extend(errors + asm.errors)
     return SegmentResult(verdicts, unexplained, final, problems, expected_counters.frames_received, len(items),
-                         statuses)
+                         statuses, pacer)
 
 
 def _expected_at(items: list, positions: set[int]) -> dict[int, tuple[int, int]]:

@@ -20,6 +20,7 @@ from tqdm import tqdm
 from fleetlab.data.features_int import SAMPLES_PER_WINDOW
 
 from .links import Link, to_message
+from .pacing import Pacer, WallClock
 from .sources import FeatureSource, TelemetrySource, log_frames
 from .wire.dbc import (
     CONTROL_RESET,
@@ -48,6 +49,7 @@ class StreamStats:
     status: StatusReport | None = None
     rx_errors: list[str] = field(default_factory=list)
     wall_s: float = 0.0
+    pacer: Pacer | None = None  # the real-time schedule kept (a realtime stream only)
 
 
 def timed_frames(source: TelemetrySource | FeatureSource | Path, limit: int = 0) -> Iterator[tuple[Frame, float | None, bool]]:
@@ -92,9 +94,14 @@ class TrafficLog:
 
 
 def stream(link: Link, frames: Iterable[tuple[Frame, float | None, bool]], realtime: bool, log: TrafficLog,
-           wait_s: float = 5.0, on_estimate=None, total: int | None = None, progress: bool = True) -> StreamStats:
-    """Send CONTROL reset, the frames, CONTROL status; collect every answer."""
+           wait_s: float = 5.0, on_estimate=None, total: int | None = None, progress: bool = True,
+           clock=None) -> StreamStats:
+    """Send CONTROL reset, the frames, CONTROL status; collect every answer. A realtime stream sends each
+    frame at its due time on `clock` (the wall clock unless a test gives fleetlab.host_tools.pacing's
+    SimulatedClock)."""
     stats = StreamStats()
+    if realtime:
+        stats.pacer = Pacer(clock or WallClock())
     asm = OutputAssembler()
 
     def drain() -> None:
@@ -124,10 +131,8 @@ def stream(link: Link, frames: Iterable[tuple[Frame, float | None, bool]], realt
     send(control_frame(CONTROL_RESET))
     bar = tqdm(total=total, unit="frame", desc=f"stream {link.name}", disable=not progress, unit_scale=True)
     for frame, due, closes in frames:
-        if realtime and due is not None:
-            delay = t0 + due - time.perf_counter()
-            if delay > 0:
-                time.sleep(delay)
+        if stats.pacer is not None and due is not None:
+            stats.pacer.wait(due)
         send(frame)
         stats.windows_sent += int(closes)
         bar.update(1)

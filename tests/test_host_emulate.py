@@ -16,6 +16,7 @@ from fleetlab.host_tools.wire.dbc import OutputAssembler, StatusReport, control_
 from fleetlab.host_tools.emulate import DEFAULT_SCALE, emulate, soak_source
 from fleetlab.host_tools.emulator import EmulatorProcess, build, default_bundle, find_artifact
 from fleetlab.host_tools.binding import CEstimator
+from fleetlab.host_tools.pacing import SimulatedClock
 from fleetlab.host_tools.links import SlcanLink
 from fleetlab.host_tools.wire.items import WireItem
 from fleetlab.host_tools.sources import TelemetrySource, sim_source
@@ -157,16 +158,19 @@ def test_emulator_answers_slcan_adapter_commands_and_counts_garbage(bundle):
 
 def test_realtime_pacing_measures_the_estimator_latency(bundle, sim):
     one = TelemetrySource("one window", sim.samples_q[:100], [])
-    res = emulate(bundle, one, "serial", progress=False, realtime=True)
+    clock = SimulatedClock()  # the schedule on a simulated clock; the latency stays a wall-clock figure
+    res = emulate(bundle, one, "serial", progress=False, realtime=True, clock=clock)
     s = res.summary()
     # the window is emitted when its last slot fills, not with the next sample: these 100 samples are all
     # there is, so a node that waited for a 101st would send no estimate at all
     assert s["windows"] == s["bit_exact"] == 1 and s["realtime"] and s["frames_sent"] == 300 + 2  # + CONTROL reset, status
-    # pacing can only make the run longer than the schedule (the 100th sample is due 1.98 s after the
-    # first), never shorter, whatever the load; the latency is a figure of fleetlab bench link, not an
+    # one chunk (a sample's three frames, then CONTROL status) per 20 ms period after the leading CONTROL
+    # reset: 101 waits, the clock standing at the status chunk's due time; the latency is a figure of fleetlab bench link, not an
     # assertion (its value is the machine's: under load the interpolated send time of the window's last
     # item can fall after the answer's arrival, and the figure is clamped to 0)
-    assert res.stream_s >= 99 / 50 - 0.05
+    (seg,) = res.segments
+    assert seg.pacer.waits == 101
+    assert seg.pacer.elapsed() == pytest.approx(101 / 50)
     assert len(res.latencies_us) == 1 and res.latencies_us[0] >= 0
 
 

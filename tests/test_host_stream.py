@@ -13,6 +13,7 @@ import pytest
 from fleetlab.cli import main as fleetlab_main
 from fleetlab.export.vectors import read_vectors
 from fleetlab.host_tools.emulator import build, default_bundle, find_artifact
+from fleetlab.host_tools.pacing import SimulatedClock
 from fleetlab.host_tools.links import InprocLink, open_can_bus
 from fleetlab.host_tools.monitor import monitor_bus, monitor_log
 from fleetlab.host_tools.sources import FeatureSource
@@ -94,12 +95,14 @@ def test_realtime_pacing_follows_50_hz(lib):
     from fleetlab.host_tools.sources import TelemetrySource
 
     src = TelemetrySource("noise", rng.integers(-500, 500, size=(100, 7)).astype(np.int16), [])
+    clock = SimulatedClock()  # moves only when the stream waits for a due time: no wall time in the check
     with InprocLink(lib) as link:
-        stats = stream(link, timed_frames(src), True, TrafficLog(None), progress=False)
+        stats = stream(link, timed_frames(src), True, TrafficLog(None), progress=False, clock=clock)
     assert len(stats.estimates) == 1 and stats.frames_sent == 300 + 2  # with CONTROL reset and status
-    # paced: the 100th sample is due 1.98 s after the first, so the run cannot be shorter (a load can only
-    # make it longer, so there is no upper bound here)
-    assert stats.wall_s >= 99 / 50 - 0.05
+    # paced at 50 Hz: the stream waited once per sample after the first (its three frames share a due time)
+    # and its clock stands at the 100th sample's due time, 99 periods after the first
+    assert stats.pacer.waits == 99
+    assert stats.pacer.elapsed() == pytest.approx(99 / 50)
 
 
 def _socketcan_available(channel: str) -> bool:

@@ -62,7 +62,7 @@ def expected_logits(bundle: Path, samples: np.ndarray) -> np.ndarray:
 def wait_emcy(node, code: int, timeout: float = 2.0) -> bool:
     """True when the node's EMCY log (python canopen's EMCY consumer) holds `code`."""
     deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
+    while time.monotonic() < deadline:  # safety net: the wait ends on the EMCY, False when it never comes
         if any(e.code == code for e in node.emcy.log):
             return True
         time.sleep(0.01)

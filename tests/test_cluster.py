@@ -49,7 +49,7 @@ def local(data):
 
 def _wait_for(predicate, timeout: float, what: str, proc: subprocess.Popen | None = None):
     end = time.monotonic() + timeout
-    while time.monotonic() < end:
+    while time.monotonic() < end:  # safety net: the wait ends on the predicate, then fails naming `what`
         value = predicate()
         if value:
             return value

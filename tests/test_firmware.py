@@ -420,7 +420,7 @@ class Emulator:
         the assertions on what was read then fail."""
         got, view = bytearray(), memoryview(data)
         deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and (len(view) or not done(bytes(got))):
+        while time.monotonic() < deadline and (len(view) or not done(bytes(got))):  # safety net
             r, w, _ = select.select([self.fd], [self.fd] if len(view) else [], [], 0.1)
             if r:
                 got += os.read(self.fd, 65536)

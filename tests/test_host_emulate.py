@@ -141,7 +141,7 @@ def test_emulator_answers_slcan_adapter_commands_and_counts_garbage(bundle):
         link.write([WireItem(control_frame(2))])
         asm, status = OutputAssembler(), None
         deadline = time.monotonic() + 5
-        while status is None and time.monotonic() < deadline:
+        while status is None and time.monotonic() < deadline:  # safety net: ends on the STATUS answer
             try:
                 f, _ = link.rx.get(timeout=0.1)
             except queue.Empty:

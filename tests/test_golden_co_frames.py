@@ -13,13 +13,19 @@ from __future__ import annotations
 import canopen
 import numpy as np
 import pytest
-from test_golden_frames import NO_FLOAT_CLASS, golden_line, golden_lines, node_frames_stream
+from test_golden_frames import (
+    NO_FLOAT_CLASS,
+    assert_windows_equal_the_reference,
+    golden_line,
+    golden_lines,
+    node_frames_stream,
+)
 
 from fleetlab.canopen_od import generate
 from fleetlab.canopen_od import objects as od
 from fleetlab.data.features_int import featurise_int
 from fleetlab.export.bundle import load_bundle
-from fleetlab.export.intref import argmax_lowest, q_logits_of
+from fleetlab.export.intref import q_logits_of
 from fleetlab.host_tools.status_codes import status
 from fleetlab.paths import repo_root
 
@@ -122,17 +128,9 @@ def test_rpdos_carry_node_frames_telemetry(decoded):
 
 
 def test_estimate_tpdos_equal_the_torch_integer_reference(decoded):
-    samples, counters = decoded.telemetry()
-    ref = featurise_int(samples, counters)
-    logits, sat = q_logits_of(load_bundle(BUNDLE).qparams, ref.features, return_saturations=True)
     est = decoded.estimates()
-    assert len(est) == len(ref.features) == 10
-    assert [e["window_counter"] for e in est] == ref.window_index.tolist()
-    assert [e["logits"] for e in est] == logits.tolist()
-    assert [e["slip_class"] for e in est] == argmax_lowest(logits).tolist()
-    assert [e["n_samples"] for e in est] == ref.n_samples.tolist()
-    assert [e["saturations"] for e in est] == (sat + ref.saturations).tolist()
-    assert [e["flags"] for e in est] == ref.flags.tolist()
+    ref = assert_windows_equal_the_reference(est, *decoded.telemetry())
+    assert len(est) == 10
     assert {e["slip_class_f32"] for e in est} == {NO_FLOAT_CLASS}
     # each window's TPDOs go out on the tick of the sample that closes it
     imu_ticks = [t for t, _ in decoded.pdos["Telemetry IMU"]]

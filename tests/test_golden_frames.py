@@ -90,6 +90,21 @@ def decode(path=GOLDEN):
     return frames, count, estimates, status
 
 
+def assert_windows_equal_the_reference(est: list[dict], samples: np.ndarray, counters: np.ndarray):
+    """The decoded estimates of telemetry windows equal the integer features (fleetlab.data.features_int) and
+    the torch integer reference's logits for those samples, field by field; returns the features."""
+    ref = featurise_int(samples, counters)
+    logits, sat = q_logits_of(load_bundle(BUNDLE).qparams, ref.features, return_saturations=True)
+    assert len(est) == len(ref.features)
+    assert [e["window_counter"] for e in est] == ref.window_index.tolist()
+    assert [e["logits"] for e in est] == logits.tolist()
+    assert [e["slip_class"] for e in est] == argmax_lowest(logits).tolist()
+    assert [e["n_samples"] for e in est] == ref.n_samples.tolist()
+    assert [e["saturations"] for e in est] == (sat + ref.saturations).tolist()
+    assert [e["flags"] for e in est] == ref.flags.tolist()
+    return ref
+
+
 @pytest.fixture(scope="module")
 def decoded():
     return decode()
@@ -117,18 +132,10 @@ def test_feature_set_estimates_equal_the_torch_integer_reference(decoded):
 
 def test_telemetry_windows_equal_the_integer_features_and_reference(decoded):
     """The second part: 250 telemetry samples, two closed windows, features by fleetlab.data.features_int."""
-    b = load_bundle(BUNDLE)
     n_vectors = len(np.load(BUNDLE / "vectors.npz")["q_inputs"])
-    ref = featurise_int(node_frames_stream(), np.arange(250))
-    logits, sat = q_logits_of(b.qparams, ref.features, return_saturations=True)
     est = decoded[2][n_vectors:]
-    assert len(est) == len(ref.features) == 2
-    assert [e["window_counter"] for e in est] == ref.window_index.tolist()
-    assert [e["logits"] for e in est] == logits.tolist()
-    assert [e["slip_class"] for e in est] == argmax_lowest(logits).tolist()
-    assert [e["n_samples"] for e in est] == ref.n_samples.tolist()
-    assert [e["saturations"] for e in est] == (sat + ref.saturations).tolist()
-    assert [e["flags"] for e in est] == ref.flags.tolist()
+    ref = assert_windows_equal_the_reference(est, node_frames_stream(), np.arange(250))
+    assert len(est) == 2
 
 
 def test_closing_status_frames_count_what_the_node_received(decoded):

@@ -167,26 +167,19 @@ if(NOT SLIPEST_TARGET_VECTORS STREQUAL "embed" AND EXISTS "${SLIPEST_BUNDLE}/mod
   slipest_qemu_test(store_${SLIPEST_CPU} slipest_store_target)
 endif()
 
-# --- endianness: the node's transmitted frames equal the x86-64 golden file ---
-slipest_image(slipest_node_frames slipest_q ${TGT}/node_frames.c)
-set(NODE_GOLDEN "${FW}/tests/golden/node_frames_example.txt")
-if(SLIPEST_QEMU AND EXISTS "${NODE_GOLDEN}"
-   AND "${SLIPEST_BUNDLE}" STREQUAL "${CMAKE_CURRENT_SOURCE_DIR}/firmware_c/bundles/example")
-  add_test(NAME node_frames_golden_${SLIPEST_CPU}
-           COMMAND ${CMAKE_COMMAND} "-DRUN=${SLIPEST_QEMU};${SLIPEST_RUN};${SLIPEST_RUN_IMAGE};$<TARGET_FILE:slipest_node_frames>"
-                   -DGOLDEN=${NODE_GOLDEN} -P ${FW}/cmake/compare_output.cmake)
-  set_tests_properties(node_frames_golden_${SLIPEST_CPU} PROPERTIES TIMEOUT 120)
-endif()
-# the CANopen profile's frames (firmware_c/target/co_frames.c) equal its x86-64 golden file
-slipest_image(slipest_co_frames slipest_q ${TGT}/co_frames.c)
-set(CO_GOLDEN "${FW}/tests/golden/co_frames_example.txt")
-if(SLIPEST_QEMU AND EXISTS "${CO_GOLDEN}"
-   AND "${SLIPEST_BUNDLE}" STREQUAL "${CMAKE_CURRENT_SOURCE_DIR}/firmware_c/bundles/example")
-  add_test(NAME co_frames_golden_${SLIPEST_CPU}
-           COMMAND ${CMAKE_COMMAND} "-DRUN=${SLIPEST_QEMU};${SLIPEST_RUN};${SLIPEST_RUN_IMAGE};$<TARGET_FILE:slipest_co_frames>"
-                   -DGOLDEN=${CO_GOLDEN} -P ${FW}/cmake/compare_output.cmake)
-  set_tests_properties(co_frames_golden_${SLIPEST_CPU} PROPERTIES TIMEOUT 120)
-endif()
+# --- endianness: the frames of the plain node (node_frames.c) and of the CANopen node (co_frames.c) equal
+# their x86-64 golden files ---
+foreach(f node_frames co_frames)
+  slipest_image(slipest_${f} slipest_q ${TGT}/${f}.c)
+  set(golden "${FW}/tests/golden/${f}_example.txt")
+  if(SLIPEST_QEMU AND EXISTS "${golden}"
+     AND "${SLIPEST_BUNDLE}" STREQUAL "${CMAKE_CURRENT_SOURCE_DIR}/firmware_c/bundles/example")
+    add_test(NAME ${f}_golden_${SLIPEST_CPU}
+             COMMAND ${CMAKE_COMMAND} "-DRUN=${SLIPEST_QEMU};${SLIPEST_RUN};${SLIPEST_RUN_IMAGE};$<TARGET_FILE:slipest_${f}>"
+                     -DGOLDEN=${golden} -P ${FW}/cmake/compare_output.cmake)
+    set_tests_properties(${f}_golden_${SLIPEST_CPU} PROPERTIES TIMEOUT 120)
+  endif()
+endforeach()
 
 # --- the CANopen node with two model slots (slipest_co.h + slipest_store.h): the bundle's model.img
 # arrives by SDO block download, is validated and activated, then one window of RPDOs gives its

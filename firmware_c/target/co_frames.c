@@ -76,12 +76,7 @@ int main(void)
         run_ticks(now, now + SAMPLE_MS);
         now += SAMPLE_MS;
         for (k = 0; k < 3; k++) {
-            uint16_t w[4];
-            w[0] = (uint16_t)i;
-            w[1] = (uint16_t)(int16_t)(1000 + (int32_t)((i * 7u) % 300u) - 150 * k);
-            w[2] = (uint16_t)(int16_t)(200 - (int32_t)(i % 50u) + 11 * k);
-            w[3] = (uint16_t)(int16_t)(9810 - (int32_t)(i % 13u) * (k + 1));
-            frame_le16(&f, rpdo_ids[k], w, k == 1 ? 4u : 3u);
+            frame_test_telemetry(&f, rpdo_ids[k], i, (unsigned)k);
             receive(now, &f);
         }
     }

@@ -54,3 +54,14 @@ void frame_le16(slipest_frame_t *f, uint32_t id, const uint16_t *v, unsigned n)
         f->data[2u * k + 1u] = (uint8_t)(v[k] >> 8);
     }
 }
+
+void frame_test_telemetry(slipest_frame_t *f, uint32_t id, uint32_t i, unsigned k)
+{
+    uint16_t w[4];
+    int32_t kk = (int32_t)k;
+    w[0] = (uint16_t)i;
+    w[1] = (uint16_t)(int16_t)(1000 + (int32_t)((i * 7u) % 300u) - 150 * kk);
+    w[2] = (uint16_t)(int16_t)(200 - (int32_t)(i % 50u) + 11 * kk);
+    w[3] = (uint16_t)(int16_t)(9810 - (int32_t)(i % 13u) * (kk + 1));
+    frame_le16(f, id, w, k == 1u ? 4u : 3u);
+}

@@ -71,7 +71,10 @@ def ctest(build: Path, *regex: str) -> str:
 
 def test_host_ctest_with_sanitizers(builds):
     out = ctest(builds["asan"])
-    for name in ("test_codecs", "test_features", "test_node", "vectors_host"):
+    # the golden frames of both profiles reproduced under ASan/UBSan (the files are decoded independently by
+    # tests/test_golden_frames.py and tests/test_golden_co_frames.py)
+    for name in ("test_codecs", "test_features", "test_node", "vectors_host", "node_frames_golden_host",
+                 "co_frames_golden_host"):
         assert re.search(rf"Test +#\d+: {name} \.+ +Passed", out), name
     assert re.search(r"vectors=(\d+) q_exact=\1 f32_within_1e-5=\1 .* PASS", out)
 

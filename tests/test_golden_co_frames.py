@@ -40,8 +40,8 @@ CHANNELS = (("Telemetry wheel", ("wheel_speed", "motor_current")), ("Telemetry I
 
 
 class Decoded:
-    """What a python-canopen master makes of the golden session: the node's PDOs by map, its heartbeats
-    (tick, NMT state) and its EMCY log, plus the tick of every frame."""
+    """What a python-canopen master makes of the golden session: the PDOs by mapped record (with the tick of
+    each), the node's heartbeats (tick, NMT state), its EMCY log, and which COB-IDs went which way."""
 
     def __init__(self, eds, path=GOLDEN):
         lines, self.count = golden_lines(path)
@@ -53,6 +53,7 @@ class Decoded:
         self.heartbeats: list[tuple[int, str]] = []
         self.short_pdos: list[tuple[int, str, int]] = []
         self.tick = 0
+        self.cob_ids: dict[str, set[int]] = {"rx": set(), "tx": set()}
         for maps in (self.node.rpdo, self.node.tpdo):
             maps.read(from_od=True)  # the maps as the EDS defines them
             for m in maps.map.values():
@@ -64,6 +65,7 @@ class Decoded:
             tick, direction = lead
             assert direction in ("rx", "tx") and int(tick) >= self.tick, lead
             self.tick = int(tick)
+            self.cob_ids[direction].add(can_id)
             net.notify(can_id, bytearray(data), self.tick / 1000)
 
     def _pdo(self, m) -> None:
@@ -110,6 +112,8 @@ def decoded(eds):
 
 def test_every_line_is_one_frame_and_every_frame_is_decoded(decoded):
     assert decoded.count == decoded.n_lines > 3000
+    # received: NMT and the three RPDOs; sent: TPDO1..4, EMCY and heartbeat (the predefined connection set)
+    assert decoded.cob_ids == {"rx": {0, 0x205, 0x305, 0x405}, "tx": {0x185, 0x285, 0x385, 0x485, 0x085, 0x705}}
     received = sum(len(decoded.pdos[r]) for r, _ in CHANNELS)
     sent = sum(len(v) for k, v in decoded.pdos.items() if not k.startswith("Telemetry"))
     # the lines besides the PDOs: boot-up + heartbeats, the EMCY, two NMT commands, the short RPDO

@@ -523,7 +523,9 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     k2_half = (int32_t)((1u << k2) >> 1);
     s = 0u;
     for (i = 0u; i < n; ++i) {
-        int32_t e = sat_var(rsr_h(nh * h[i] - sum, k2_half, k2), l->e_bits + 1u); /* |e| <= 2^e_bits */
+        /* |e| <= 2^e_bits <= 2^13: never acts; the constant bound (one SSAT on M3/M4/M7) is all that e * e
+         * and norm_z need, the sum s below is unsigned */
+        int32_t e = SAT(rsr_h(nh * h[i] - sum, k2_half, k2), 14);
         h[i] = e;
         s += (uint32_t)(e * e);                         /* <= H 4^e_bits <= 2^31 */
     }
@@ -532,10 +534,18 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     u_shift = (unsigned)l->fz + (unsigned)l->fg - (unsigned)l->fy;
     to_q15 = 15u - ((unsigned)l->fy - (unsigned)m->gelu_step_log2);
     u_half = (int32_t)(1u << u_shift) >> 1;
-    for (i = 0u; i < n; ++i) {
-        /* |z| < 2^15 (|e| <= sqrt(v), c <= SLIPEST_Q_C_MAX), |gamma z| < 2^30; the output is the next
-         * block's int16 input as it is: the requantisation is folded into its weights */
-        out[i] = (int16_t)hidden_out(l->gamma[i], l->beta[i], l->gelu, u_shift, u_half, to_q15, h[i], mult, &ns);
+    {
+        /* pointers walking the arrays: post-indexed loads, and fewer registers held than with an index */
+        const int16_t *gp = l->gamma;
+        const int32_t *bp = l->beta;
+        const int16_t *const table = l->gelu;
+        for (i = 0u; i < n; ++i) {
+            /* |z| < 2^15 (|e| <= sqrt(v), c <= SLIPEST_Q_C_MAX), |gamma z| < 2^30; the output is the next
+             * block's int16 input as it is: the requantisation is folded into its weights */
+            out[i] = (int16_t)hidden_out(*gp, *bp, table, u_shift, u_half, to_q15, h[i], mult, &ns);
+            ++gp;
+            ++bp;
+        }
     }
     *sat = (uint16_t)(*sat + ns);
 }

@@ -201,7 +201,7 @@ HOT unsigned block_shift(int32_t hmax, int32_t hmin, unsigned bits)
 }
 
 /* eps in the units of s = sum e^2: eps_m 2^(eps_e - 2(k1 + k2)), capped at 2^30 (a saturation, counted). */
-HOT uint32_t eps_scaled(int16_t eps_m, int8_t eps_e, int32_t eps_cap, unsigned k12, uint16_t *sat)
+HOT uint32_t eps_scaled(int16_t eps_m, int8_t eps_e, int32_t eps_cap, unsigned k12, uint32_t *sat)
 {
     int32_t t = eps_e - 2 * (int32_t)k12;
     uint32_t eps;
@@ -269,18 +269,15 @@ HOT int32_t norm_z(int32_t e, int32_t mult)
  * because |e| <= sqrt(v), so |z| < 2^15), u = rsr(gamma z, U_SHIFT) + beta saturated to int16
  * (counted), then GELU. Returns g in [-2^15, 2^15). Both kernels: gamma, beta, table of the block. */
 HOT int32_t hidden_out(int32_t gamma, int32_t beta, const int16_t *table, unsigned u_shift, int32_t u_half,
-                       unsigned to_q15, int32_t e, int32_t mult, uint16_t *sat)
+                       unsigned to_q15, int32_t e, int32_t mult, uint32_t *sat)
 {
     int32_t z = norm_z(e, mult);
     int32_t u = rsr_h(gamma * z, u_half, u_shift) + beta;
-    if (u > 32767) {
-        u = 32767;
-        ++*sat;
-    } else if (u < -32768) {
-        u = -32768;
+    const int32_t uc = SAT(u, 15); /* one SSAT where the core has it, then the count */
+    if (uc != u) {
         ++*sat;
     }
-    return gelu_q(table, to_q15, u);
+    return gelu_q(table, to_q15, uc);
 }
 
 /* The SN-S path (a model without a layer table: 12 -> 30 -> 3, the fields w1..fy), unrolled for its
@@ -293,7 +290,7 @@ static int infer_sn_s(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N
     const int16_t *w2;
     uint32_t s, v, usum = 0u;
     unsigned nb, k1, k2;
-    uint16_t sat = 0u;
+    uint32_t sat = 0u; /* counted in a register-wide unsigned, reported mod 2^16 */
     unsigned u_shift, to_q15;
     int32_t u_half;
     int32_t k2_half;
@@ -377,7 +374,7 @@ static int infer_sn_s(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N
         best = 2;
     }
     if (saturations != 0) {
-        *saturations = sat;
+        *saturations = (uint16_t)sat;
     }
     return best;
 }
@@ -467,11 +464,37 @@ static void dot16_rows4(const int16_t *w, unsigned n, const int16_t *x, const in
 }
 #endif
 
+/* Normalise, affine and GELU over the block's n units: out[i] from the centred e[i] and the multiplier. A
+ * call of its own, so that the loop has the registers to itself (block_q's values would spill). */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static void hidden_pass(const slipest_layer_q_t *l, const int32_t *e, int32_t mult, unsigned u_shift,
+                        int32_t u_half, unsigned to_q15, int16_t *out, uint32_t *sat)
+{
+    const int16_t *gp = l->gamma;
+    const int32_t *bp = l->beta;
+    const int16_t *const table = l->gelu;
+    const int32_t *const e_end = e + l->width;
+    uint32_t ns = *sat; /* a local held in a register */
+
+    while (e != e_end) {
+        /* |z| < 2^15 (|e| <= sqrt(v), c <= SLIPEST_Q_C_MAX), |gamma z| < 2^30; the output is the next
+         * block's int16 input as it is: the requantisation is folded into its weights */
+        *out = (int16_t)hidden_out(*gp, *bp, table, u_shift, u_half, to_q15, *e, mult, &ns);
+        ++out;
+        ++e;
+        ++gp;
+        ++bp;
+    }
+    *sat = ns;
+}
+
 /* One Linear -> LayerNorm -> GELU block (docs/fixed_point.md, "A general block"): the n_in int16 inputs
  * in io -> the block's width int16 outputs in Q(fy), written over io (the inputs are dead once the
  * accumulators are in h). Every bound quoted is the proof's, for this block's width H. */
 static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, const int16_t *x, unsigned n_in,
-                    int32_t *h, int16_t *out, uint16_t *sat)
+                    int32_t *h, int16_t *out, uint32_t *sat)
 {
     const unsigned n = l->width;
     const int32_t nh = (int32_t)n;
@@ -481,8 +504,6 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
 #if SLIPEST_DUAL_MAC
     unsigned r4;
 #endif
-    uint16_t ns = 0u; /* this block's saturations: a local the compiler keeps in a register (the stores
-                         to out could alias *sat, so counting through the pointer reloads it per unit) */
 
     i = 0u;
 #if SLIPEST_DUAL_MAC
@@ -529,25 +550,12 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
         h[i] = e;
         s += (uint32_t)(e * e);                         /* <= H 4^e_bits <= 2^31 */
     }
-    v = s + eps_scaled(l->eps_m, l->eps_e, m->eps_cap, k1 + k2, &ns); /* < 2^31 + 2^30 */
+    v = s + eps_scaled(l->eps_m, l->eps_e, m->eps_cap, k1 + k2, sat); /* < 2^31 + 2^30 */
     mult = rsqrt_mult(m->rsqrt_seed, (uint32_t)l->c, v);
     u_shift = (unsigned)l->fz + (unsigned)l->fg - (unsigned)l->fy;
     to_q15 = 15u - ((unsigned)l->fy - (unsigned)m->gelu_step_log2);
     u_half = (int32_t)(1u << u_shift) >> 1;
-    {
-        /* pointers walking the arrays: post-indexed loads, and fewer registers held than with an index */
-        const int16_t *gp = l->gamma;
-        const int32_t *bp = l->beta;
-        const int16_t *const table = l->gelu;
-        for (i = 0u; i < n; ++i) {
-            /* |z| < 2^15 (|e| <= sqrt(v), c <= SLIPEST_Q_C_MAX), |gamma z| < 2^30; the output is the next
-             * block's int16 input as it is: the requantisation is folded into its weights */
-            out[i] = (int16_t)hidden_out(*gp, *bp, table, u_shift, u_half, to_q15, h[i], mult, &ns);
-            ++gp;
-            ++bp;
-        }
-    }
-    *sat = (uint16_t)(*sat + ns);
+    hidden_pass(l, h, mult, u_shift, u_half, to_q15, out, sat);
 }
 
 /* The blocks of the table one after the other, then the head. Scratch: SLIPEST_MAX_WIDTH int32
@@ -563,7 +571,7 @@ static int infer_layers(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST
     int16_t act[SLIPEST_MAX_WIDTH];
     const int16_t *x = feat_q;
     unsigned k, c, n_in = SLIPEST_N_FEATURES;
-    uint16_t sat = 0u;
+    uint32_t sat = 0u;
     int best = 0;
 
     for (k = 0u; k < m->n_layers && k < (unsigned)SLIPEST_MAX_LAYERS; ++k) {
@@ -579,7 +587,7 @@ static int infer_layers(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST
         }
     }
     if (saturations != 0) {
-        *saturations = sat;
+        *saturations = (uint16_t)sat;
     }
     return best;
 }

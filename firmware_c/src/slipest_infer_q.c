@@ -474,16 +474,18 @@ static void hidden_pass(const slipest_layer_q_t *l, const int32_t *e, int32_t mu
 {
     const int16_t *gp = l->gamma;
     const int32_t *bp = l->beta;
+    const int32_t *ep = e;
+    int16_t *op = out;
     const int16_t *const table = l->gelu;
-    const int32_t *const e_end = e + l->width;
     uint32_t ns = *sat; /* a local held in a register */
+    unsigned i;
 
-    while (e != e_end) {
+    for (i = 0u; i < l->width; ++i) {
         /* |z| < 2^15 (|e| <= sqrt(v), c <= SLIPEST_Q_C_MAX), |gamma z| < 2^30; the output is the next
          * block's int16 input as it is: the requantisation is folded into its weights */
-        *out = (int16_t)hidden_out(*gp, *bp, table, u_shift, u_half, to_q15, *e, mult, &ns);
-        ++out;
-        ++e;
+        *op = (int16_t)hidden_out(*gp, *bp, table, u_shift, u_half, to_q15, *ep, mult, &ns);
+        ++op;
+        ++ep;
         ++gp;
         ++bp;
     }

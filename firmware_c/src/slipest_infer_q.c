@@ -475,12 +475,12 @@ static void hidden_pass(const slipest_layer_q_t *l, const int32_t *e, int32_t mu
     const int16_t *gp = l->gamma;
     const int32_t *bp = l->beta;
     const int32_t *ep = e;
+    const int32_t *const e_end = &e[l->width]; /* the loop counts by pointer: one register less */
     int16_t *op = out;
     const int16_t *const table = l->gelu;
     uint32_t ns = *sat; /* a local held in a register */
-    unsigned i;
 
-    for (i = 0u; i < l->width; ++i) {
+    while (ep != e_end) {
         /* |z| < 2^15 (|e| <= sqrt(v), c <= SLIPEST_Q_C_MAX), |gamma z| < 2^30; the output is the next
          * block's int16 input as it is: the requantisation is folded into its weights */
         *op = (int16_t)hidden_out(*gp, *bp, table, u_shift, u_half, to_q15, *ep, mult, &ns);

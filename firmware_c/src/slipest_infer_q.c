@@ -415,7 +415,8 @@ HOT int32_t dot16(const int16_t *w, const int16_t *x, unsigned n, int32_t acc)
 
 #if SLIPEST_DUAL_MAC
 /* h[r] = b[r] + sum_j w[r n + j] x[j] for the four rows r = 0..3 of a row-major block of n columns,
- * n a multiple of 4 and w word-aligned (so is every row): each pair of inputs is loaded once for four
+ * n a positive multiple of 4 (the loop ends when x reaches x + n: n / 4 passes) and w word-aligned (so
+ * is every row): each pair of inputs is loaded once for four
  * rows (several rows per pass, as CMSIS-NN does for its int16 matrix-vector products), and each row's
  * four weights of a pass in one LDRD (which needs the alignment; LDR of the inputs does not): 16
  * instructions per 16 multiply-accumulates on the M4. Written out because GCC neither keeps the 14

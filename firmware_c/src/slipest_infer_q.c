@@ -201,7 +201,7 @@ HOT unsigned block_shift(int32_t hmax, int32_t hmin, unsigned bits)
 }
 
 /* eps in the units of s = sum e^2: eps_m 2^(eps_e - 2(k1 + k2)), capped at 2^30 (a saturation, counted). */
-HOT uint32_t eps_scaled(int16_t eps_m, int8_t eps_e, int32_t eps_cap, unsigned k12, uint16_t *sat)
+HOT uint32_t eps_scaled(int16_t eps_m, int8_t eps_e, int32_t eps_cap, unsigned k12, uint32_t *sat)
 {
     int32_t t = eps_e - 2 * (int32_t)k12;
     uint32_t eps;
@@ -269,18 +269,15 @@ HOT int32_t norm_z(int32_t e, int32_t mult)
  * because |e| <= sqrt(v), so |z| < 2^15), u = rsr(gamma z, U_SHIFT) + beta saturated to int16
  * (counted), then GELU. Returns g in [-2^15, 2^15). Both kernels: gamma, beta, table of the block. */
 HOT int32_t hidden_out(int32_t gamma, int32_t beta, const int16_t *table, unsigned u_shift, int32_t u_half,
-                       unsigned to_q15, int32_t e, int32_t mult, uint16_t *sat)
+                       unsigned to_q15, int32_t e, int32_t mult, uint32_t *sat)
 {
     int32_t z = norm_z(e, mult);
     int32_t u = rsr_h(gamma * z, u_half, u_shift) + beta;
-    if (u > 32767) {
-        u = 32767;
-        ++*sat;
-    } else if (u < -32768) {
-        u = -32768;
+    const int32_t uc = SAT(u, 15); /* one SSAT where the core has it, then the count */
+    if (uc != u) {
         ++*sat;
     }
-    return gelu_q(table, to_q15, u);
+    return gelu_q(table, to_q15, uc);
 }
 
 /* The SN-S path (a model without a layer table: 12 -> 30 -> 3, the fields w1..fy), unrolled for its
@@ -293,7 +290,7 @@ static int infer_sn_s(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N
     const int16_t *w2;
     uint32_t s, v, usum = 0u;
     unsigned nb, k1, k2;
-    uint16_t sat = 0u;
+    uint32_t sat = 0u; /* counted in a register-wide unsigned, reported mod 2^16 */
     unsigned u_shift, to_q15;
     int32_t u_half;
     int32_t k2_half;
@@ -377,7 +374,7 @@ static int infer_sn_s(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N
         best = 2;
     }
     if (saturations != 0) {
-        *saturations = sat;
+        *saturations = (uint16_t)sat;
     }
     return best;
 }
@@ -417,73 +414,113 @@ HOT int32_t dot16(const int16_t *w, const int16_t *x, unsigned n, int32_t acc)
 }
 
 #if SLIPEST_DUAL_MAC
-/* acc[r] + sum_j w[r n + j] x[j] for the four rows r = 0..3 of a row-major block of n columns: each
- * pair of inputs is loaded once for four rows, so one 32-bit load of weights and one SMLAD per two
- * multiply-accumulates, plus a quarter of the input load (several rows per pass, as CMSIS-NN does for its
- * int16 matrix-vector products). A row of odd n starts at an odd element: the 32-bit loads are unaligned,
- * which ARMv7E-M allows for LDR (memcpy lets the compiler pick it). The sums are exact, so the order of the
- * products does not change them; every partial sum is inside the row's bound (any subset of its terms). */
-HOT void dot16_rows4(const int16_t *w, unsigned n, const int16_t *x, int32_t acc[4])
+/* h[r] = b[r] + sum_j w[r n + j] x[j] for the four rows r = 0..3 of a row-major block of n columns,
+ * n a positive multiple of 4 (the loop ends when x reaches x + n: n / 4 passes) and w word-aligned (so
+ * is every row): each pair of inputs is loaded once for four
+ * rows (several rows per pass, as CMSIS-NN does for its int16 matrix-vector products), and each row's
+ * four weights of a pass in one LDRD (which needs the alignment; LDR of the inputs does not): 16
+ * instructions per 16 multiply-accumulates on the M4. Written out because GCC neither keeps the 14
+ * registers the loop needs nor pairs the weight loads. The sums are exact, so the order of the products
+ * does not change them; every partial sum is inside the row's bound (any subset of its terms). */
+#if defined(__GNUC__)
+__attribute__((noinline)) /* a call of its own: the caller keeps its registers instead of spilling them
+                             around the 14 this loop needs */
+#endif
+static void dot16_rows4(const int16_t *w, unsigned n, const int16_t *x, const int32_t b[4], int32_t h[4])
 {
     const int16_t *w0 = w;
     const int16_t *w1 = w0 + n;
     const int16_t *w2 = w1 + n;
     const int16_t *w3 = w2 + n;
-    int32_t a0 = acc[0], a1 = acc[1], a2 = acc[2], a3 = acc[3];
-    unsigned j = 0u;
+    const int16_t *const xe = x + n;
+    int32_t a0 = b[0], a1 = b[1], a2 = b[2], a3 = b[3];
+    uint32_t xa, xb, t0, t1;
 
-    /* one input pair per pass, the pointers walking the rows: GCC then uses post-indexed loads (11
-     * instructions per 8 products on the M4; unrolled, it falls back to offsets plus four adds) */
-    for (; j + 1u < n; j += 2u) {
-        const uint32_t xa = pair16(x);
-        a0 = __smlad(pair16(w0), xa, a0);
-        a1 = __smlad(pair16(w1), xa, a1);
-        a2 = __smlad(pair16(w2), xa, a2);
-        a3 = __smlad(pair16(w3), xa, a3);
-        x += 2;
-        w0 += 2;
-        w1 += 2;
-        w2 += 2;
-        w3 += 2;
-    }
-    if (j < n) {
-        a0 += *w0 * *x;
-        a1 += *w1 * *x;
-        a2 += *w2 * *x;
-        a3 += *w3 * *x;
-    }
-    acc[0] = a0;
-    acc[1] = a1;
-    acc[2] = a2;
-    acc[3] = a3;
+    __asm__("1:\n\t"
+            "ldr %[xa], [%[x]], #4\n\t"
+            "ldr %[xb], [%[x]], #4\n\t"
+            "ldrd %[t0], %[t1], [%[w0]], #8\n\t"
+            "smlad %[a0], %[t0], %[xa], %[a0]\n\t"
+            "smlad %[a0], %[t1], %[xb], %[a0]\n\t"
+            "ldrd %[t0], %[t1], [%[w1]], #8\n\t"
+            "smlad %[a1], %[t0], %[xa], %[a1]\n\t"
+            "smlad %[a1], %[t1], %[xb], %[a1]\n\t"
+            "ldrd %[t0], %[t1], [%[w2]], #8\n\t"
+            "smlad %[a2], %[t0], %[xa], %[a2]\n\t"
+            "smlad %[a2], %[t1], %[xb], %[a2]\n\t"
+            "ldrd %[t0], %[t1], [%[w3]], #8\n\t"
+            "smlad %[a3], %[t0], %[xa], %[a3]\n\t"
+            "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
+            "cmp %[x], %[xe]\n\t"
+            "bne 1b"
+            : [a0] "+r"(a0), [a1] "+r"(a1), [a2] "+r"(a2), [a3] "+r"(a3), [w0] "+r"(w0), [w1] "+r"(w1),
+              [w2] "+r"(w2), [w3] "+r"(w3), [x] "+r"(x), [xa] "=&r"(xa), [xb] "=&r"(xb), [t0] "=&r"(t0),
+              [t1] "=&r"(t1)
+            : [xe] "r"(xe)
+            : "cc", "memory");
+    h[0] = a0;
+    h[1] = a1;
+    h[2] = a2;
+    h[3] = a3;
 }
 #endif
+
+/* Normalise, affine and GELU over the block's n units: out[i] from the centred e[i] and the multiplier. A
+ * call of its own, so that the loop has the registers to itself (block_q's values would spill). */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static void hidden_pass(const slipest_layer_q_t *l, const int32_t *e, int32_t mult, unsigned u_shift,
+                        int32_t u_half, unsigned to_q15, int16_t *out, uint32_t *sat)
+{
+    const int16_t *gp = l->gamma;
+    const int32_t *bp = l->beta;
+    const int32_t *ep = e;
+    const int32_t *const e_end = &e[l->width]; /* the loop counts by pointer: one register less */
+    int16_t *op = out;
+    const int16_t *const table = l->gelu;
+    uint32_t ns = *sat; /* a local held in a register */
+
+    while (ep != e_end) {
+        /* |z| < 2^15 (|e| <= sqrt(v), c <= SLIPEST_Q_C_MAX), |gamma z| < 2^30; the output is the next
+         * block's int16 input as it is: the requantisation is folded into its weights */
+        *op = (int16_t)hidden_out(*gp, *bp, table, u_shift, u_half, to_q15, *ep, mult, &ns);
+        ++op;
+        ++ep;
+        ++gp;
+        ++bp;
+    }
+    *sat = ns;
+}
 
 /* One Linear -> LayerNorm -> GELU block (docs/fixed_point.md, "A general block"): the n_in int16 inputs
  * in io -> the block's width int16 outputs in Q(fy), written over io (the inputs are dead once the
  * accumulators are in h). Every bound quoted is the proof's, for this block's width H. */
 static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, const int16_t *x, unsigned n_in,
-                    int32_t *h, int16_t *out, uint16_t *sat)
+                    int32_t *h, int16_t *out, uint32_t *sat)
 {
     const unsigned n = l->width;
     const int32_t nh = (int32_t)n;
     int32_t hmax = INT32_MIN, hmin = INT32_MAX, sum, dmax, t, mult, u_half, k2_half;
     uint32_t s = 0u, usum = 0u, v;
     unsigned i, nb, k1, k2, u_shift, to_q15;
+#if SLIPEST_DUAL_MAC
+    unsigned r4;
+#endif
 
     i = 0u;
 #if SLIPEST_DUAL_MAC
-    for (; i + 3u < n; i += 4u) { /* four rows per pass (dot16_rows4), the rest one by one below */
+    /* four rows per pass where the rows suit dot16_rows4 (n_in a positive multiple of 4, weights on a word
+     * boundary: true of every exported SN-D), the rest one by one below */
+    if ((n_in != 0u) && ((n_in & 3u) == 0u) && ((((uintptr_t)(const void *)l->w) & 3u) == 0u)) {
+        i = n & ~3u;
+    }
+    for (r4 = 0u; r4 < i; r4 += 4u) {
         unsigned r;
-        int32_t a4[4];
-        for (r = 0u; r < 4u; ++r) {
-            a4[r] = l->b[i + r];
-        }
-        dot16_rows4(&l->w[i * n_in], n_in, x, a4);
-        for (r = 0u; r < 4u; ++r) {
-            h[i + r] = a4[r];
-            hmax = a4[r] > hmax ? a4[r] : hmax;
-            hmin = a4[r] < hmin ? a4[r] : hmin;
+        dot16_rows4(&l->w[r4 * n_in], n_in, x, &l->b[r4], &h[r4]);
+        for (r = r4; r < r4 + 4u; ++r) {
+            hmax = h[r] > hmax ? h[r] : hmax;
+            hmin = h[r] < hmin ? h[r] : hmin;
         }
     }
 #endif
@@ -510,7 +547,9 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     k2_half = (int32_t)((1u << k2) >> 1);
     s = 0u;
     for (i = 0u; i < n; ++i) {
-        int32_t e = sat_var(rsr_h(nh * h[i] - sum, k2_half, k2), l->e_bits + 1u); /* |e| <= 2^e_bits */
+        /* |e| <= 2^e_bits <= 2^13: never acts; the constant bound (one SSAT on M3/M4/M7) is all that e * e
+         * and norm_z need, the sum s below is unsigned */
+        int32_t e = SAT(rsr_h(nh * h[i] - sum, k2_half, k2), 14);
         h[i] = e;
         s += (uint32_t)(e * e);                         /* <= H 4^e_bits <= 2^31 */
     }
@@ -519,11 +558,7 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     u_shift = (unsigned)l->fz + (unsigned)l->fg - (unsigned)l->fy;
     to_q15 = 15u - ((unsigned)l->fy - (unsigned)m->gelu_step_log2);
     u_half = (int32_t)(1u << u_shift) >> 1;
-    for (i = 0u; i < n; ++i) {
-        /* |z| < 2^15 (|e| <= sqrt(v), c <= SLIPEST_Q_C_MAX), |gamma z| < 2^30; the output is the next
-         * block's int16 input as it is: the requantisation is folded into its weights */
-        out[i] = (int16_t)hidden_out(l->gamma[i], l->beta[i], l->gelu, u_shift, u_half, to_q15, h[i], mult, sat);
-    }
+    hidden_pass(l, h, mult, u_shift, u_half, to_q15, out, sat);
 }
 
 /* The blocks of the table one after the other, then the head. Scratch: SLIPEST_MAX_WIDTH int32
@@ -539,7 +574,7 @@ static int infer_layers(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST
     int16_t act[SLIPEST_MAX_WIDTH];
     const int16_t *x = feat_q;
     unsigned k, c, n_in = SLIPEST_N_FEATURES;
-    uint16_t sat = 0u;
+    uint32_t sat = 0u;
     int best = 0;
 
     for (k = 0u; k < m->n_layers && k < (unsigned)SLIPEST_MAX_LAYERS; ++k) {
@@ -555,7 +590,7 @@ static int infer_layers(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST
         }
     }
     if (saturations != 0) {
-        *saturations = sat;
+        *saturations = (uint16_t)sat;
     }
     return best;
 }

@@ -165,12 +165,15 @@ def format_result(result: dict, key: str) -> str:
 def format_compare_table(arch_a: str, rows_a: dict[str, dict], arch_b: str, rows_b: dict[str, dict]) -> str:
     """Two architectures side by side per target (docs/integrating_slipest.md, "Choosing an architecture")."""
     head = (f"| target | instr./q inference {arch_a} | {arch_b} | instr./float inference {arch_a} | {arch_b} "
-            f"| flash kernel+model {arch_a} (B) | {arch_b} (B) | peak stack q {arch_a} (B) | {arch_b} (B) |")
-    lines = [head, "|" + "---|" * 9]
+            f"| instr./sample (node) {arch_a} | {arch_b} "
+            f"| flash kernel+model {arch_a} (B) | {arch_b} (B) | peak stack q {arch_a} (B) | {arch_b} (B) "
+            f"| RAM {arch_a} (B) | {arch_b} (B) |")
+    lines = [head, "|" + "---|" * 13]
     for name, a in rows_a.items():
         b = rows_b[name]
         cells = [(a[k], b[k]) for k in ("instructions_per_inference_q", "instructions_per_inference_f32",
-                                          "flash_bytes_kernel_and_model", "stack_bytes_q")]
+                                          "instructions_per_sample_node_slcan", "flash_bytes_kernel_and_model",
+                                          "stack_bytes_q", "ram_bytes")]
         lines.append(f"| {name} | " + " | ".join(f"{_cell(x)} | {_cell(y)}" for x, y in cells) + " |")
     return "\n".join(lines)
 

@@ -35,11 +35,11 @@ COUNTED_BY = {"systick": "SysTick under qemu -icount shift=0",
               "instret": "minstret under qemu -icount shift=0",
               "trace": "qemu exec trace, one instruction per block"}
 _ROW_COUNTS = ("instructions_per_inference_q", "instructions_per_inference_f32", "instructions_per_sample_node_slcan",
-               "stack_bytes_q", "stack_bytes_f32", "stack_bytes_node_window")
+               "stack_bytes_q", "stack_bytes_f32", "stack_bytes_node_window", "ram_bytes")
 
 
 def target_figures(t: Target, build_dir: Path, cost: dict | None = None) -> dict:
-    """One row of the targets table: instruction counts (where counted), flash and peak stack.
+    """One row of the targets table: instruction counts (where counted), flash, peak stack and RAM.
 
     Flash: kernel + model in the fixed-point cost image; the CAN node (node, generated CAN codec,
     extractor, kernel + model, status) in the node-frames image, without the serial-link codecs
@@ -68,6 +68,10 @@ def target_figures(t: Target, build_dir: Path, cost: dict | None = None) -> dict
         "instructions_per_sample_node_slcan": round(cost["node_instructions_per_sample"], 1),
         "stack_bytes_q": cost["stack_q"], "stack_bytes_f32": cost["stack_f32"],
         "stack_bytes_node_window": cost["stack_node_window"],
+        # as the reference target's <key>_ram_bytes: the library's static data + node context + the peak
+        # stack of the frame that closes a window (the layer-table kernel's scratch is on that stack)
+        "ram_bytes": sum(o["ram"] for o in lib.values()) + cost["node_bytes"]
+        + max(cost["stack_q"], cost["stack_node_window"]),
         "counted_by": COUNTED_BY[t.counter],
     })
     return row

@@ -37,6 +37,15 @@ extern "C" {
 #define SLIPEST_IMAGE_TABLE_MAX_SIZE \
     SLIPEST_IMAGE_V2_SIZE(SLIPEST_IMAGE_MAX_WEIGHTS, SLIPEST_IMAGE_MAX_UNITS + 3u, SLIPEST_MAX_LAYERS)
 
+/** Largest image this build reads in any format: the format-1 maximum, or the format-2 one when the layer-table
+ *  reader is built and its caps admit a larger image. The model store's default slot size
+ *  (SLIPEST_STORE_IMAGE_MAX, slipest_store.h) and the streaming validator's bound. */
+#if SLIPEST_LAYER_TABLE && (SLIPEST_IMAGE_TABLE_MAX_SIZE > SLIPEST_IMAGE_MAX_SIZE)
+#define SLIPEST_IMAGE_READ_MAX_SIZE SLIPEST_IMAGE_TABLE_MAX_SIZE
+#else
+#define SLIPEST_IMAGE_READ_MAX_SIZE SLIPEST_IMAGE_MAX_SIZE
+#endif
+
 /** Storage of a fixed-point layer-table model read from an image (the model struct points into it). */
 typedef struct {
     slipest_layer_q_t layers[SLIPEST_MAX_LAYERS];             /**< the blocks */

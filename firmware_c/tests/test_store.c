@@ -191,7 +191,7 @@ static void test_version_rule_and_refusals(void)
 
     n = make_image(img, 11u, NULL);
     CHECK(upload(img, n - 1u) == SLIPEST_E_LENGTH && c->refused_length == 1u); /* truncated image */
-    CHECK(slipest_store_begin(&st, SLIPEST_IMAGE_MAX_SIZE + 1u, 0u) == SLIPEST_E_LENGTH && c->refused_length == 2u);
+    CHECK(slipest_store_begin(&st, SLIPEST_STORE_IMAGE_MAX + 1u, 0u) == SLIPEST_E_LENGTH && c->refused_length == 2u);
     CHECK(slipest_store_begin(&st, (uint32_t)n, 1u) == SLIPEST_E_RANGE);
     /* announced more than sent: finish refuses */
     CHECK(slipest_store_begin(&st, (uint32_t)n, 0u) == SLIPEST_OK);
@@ -346,7 +346,7 @@ static void test_parameter_refusals(void)
     image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_NONFINITE && c->refused_range == 6u);
     n = make_image(img, 1u, NULL);
-    img[SLIPEST_IMAGE_OFF_FORMAT] = 2u;
+    img[SLIPEST_IMAGE_OFF_FORMAT] = 3u; /* a format no build reads (2 is the layer table's: test_store_table) */
     image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_VERSION && c->refused_format == 1u);
     CHECK(slipest_store_model_q(&st) == NULL && c->images_accepted == 0u);

@@ -166,6 +166,15 @@ def test_power_loss_during_an_sn_d_upload_and_activation(table_emu, snd_models, 
     check_switch(outcomes, "old", "new", f"SN-D upload+activate, sector {sector}")
 
 
+def test_c_store_takes_a_format_2_image(snd_models) -> None:
+    """firmware_c/tests/test_store_table.c, built by CMake with the SN-D bundle (so with the layer-table reader):
+    the store's streaming validator loads the very model slipest_image_read_table() reads, boots it again, and
+    refuses edited images (CRC, row bound, LayerNorm bias, NaN, shift, table size, stale version)."""
+    exe = find_artifact(build(snd_models["dir"], targets=("test_store_table",)), "test_store_table")
+    res = subprocess.run([str(exe), str(snd_models["new"][0])], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0 and "all checks passed" in res.stdout, res.stdout + res.stderr
+
+
 def test_power_loss_during_rollback(emu, models, tmp_path) -> None:
     sector = 256
     base, work = tmp_path / "base.nvm", tmp_path / "work.nvm"

@@ -52,8 +52,8 @@ extern "C" {
 /** Bytes of a commit record at the start of a record sector. */
 #define SLIPEST_STORE_RECORD_SIZE 52u
 /** Largest image the store takes, and with it the slot size: by default the largest image this build reads
- *  (SLIPEST_IMAGE_READ_MAX_SIZE: 3,874 B for SN-S only, the format-2 caps' 77,238 B with the layer-table
- *  reader). An integrator lowers it (CMake -DSLIPEST_STORE_IMAGE_MAX=...) to the largest model it will upload;
+ *  (SLIPEST_IMAGE_READ_MAX_SIZE: 3,874 B for SN-S only, 80,696 B with the layer-table reader at its default
+ *  caps). An integrator lowers it (CMake -DSLIPEST_STORE_IMAGE_MAX=...) to the largest model it will upload;
  *  a larger announced image is refused with SLIPEST_E_LENGTH (CANopen abort 0x06070012). */
 #ifndef SLIPEST_STORE_IMAGE_MAX
 #define SLIPEST_STORE_IMAGE_MAX SLIPEST_IMAGE_READ_MAX_SIZE

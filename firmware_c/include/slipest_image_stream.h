@@ -26,8 +26,9 @@ extern "C" {
 /** Bytes of the longest header the stream reads (format 2's, with the layer table). */
 #define SLIPEST_IMAGE_STREAM_HDR SLIPEST_IMAGE_V2_HEADER_SIZE
 /** Row sums the stream keeps: the rows of the widest block, or SN-S's hidden and head rows. */
-#define SLIPEST_IMAGE_STREAM_ROWS \
-    ((SLIPEST_MAX_WIDTH > SLIPEST_N_HIDDEN + SLIPEST_N_CLASSES) ? SLIPEST_MAX_WIDTH : SLIPEST_N_HIDDEN + SLIPEST_N_CLASSES)
+#define SLIPEST_IMAGE_STREAM_ROWS                                                                   \
+    ((SLIPEST_MAX_WIDTH > (SLIPEST_N_HIDDEN + SLIPEST_N_CLASSES)) ? SLIPEST_MAX_WIDTH                 \
+                                                                   : (SLIPEST_N_HIDDEN + SLIPEST_N_CLASSES))
 #else
 #define SLIPEST_IMAGE_STREAM_HDR SLIPEST_IMAGE_HEADER_SIZE
 #define SLIPEST_IMAGE_STREAM_ROWS (SLIPEST_N_HIDDEN + SLIPEST_N_CLASSES)

@@ -172,7 +172,10 @@ static unsigned seg_bytes(const slipest_image_stream_t *w)
 /* on to the segment after the current one */
 static void next_seg(slipest_image_stream_t *w)
 {
-    unsigned last = (w->f32part != 0u) ? K2_BETA : K2_GELU; /* a block's last segment */
+    unsigned last = K2_GELU; /* a block's last segment: the GELU table, or beta in the float section */
+    if (w->f32part != 0u) {
+        last = K2_BETA;
+    }
     w->idx = 0u;
     if (w->seg == K2_FEPS) {
         w->seg = K2_W; /* the float blocks, from the first one */
@@ -230,7 +233,9 @@ static void visit_q(slipest_image_stream_t *w, uint32_t raw, unsigned size)
     switch (w->seg) {
     case K2_W:
         w->row_abs[i / seg_n_in(w)] += (v < 0) ? (uint32_t)(-v) : (uint32_t)v; /* |v| <= 2^15 */
-        if (t != NULL) t->w[w->w_at + i] = (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): int16 */
+        if (t != NULL) {
+            t->w[w->w_at + i] = (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): an int16 element */
+        }
         break;
     case K2_B:
         /* the row's bound now that its weights are summed; the sum restarts for the next layer's row i */
@@ -239,21 +244,35 @@ static void visit_q(slipest_image_stream_t *w, uint32_t raw, unsigned size)
             defer(w, SLIPEST_E_RANGE);
         }
         w->row_abs[i] = 0u;
-        if (t != NULL) t->b[w->u_at + i] = v;
+        if (t != NULL) {
+            t->b[w->u_at + i] = v;
+        }
         break;
     case K2_GAMMA:
-        if (t != NULL) t->gamma[w->u_at + i] = (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): int16 */
+        if (t != NULL) {
+            t->gamma[w->u_at + i] = (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): an int16 element */
+        }
         break;
     case K2_BETA:
-        if ((v < -32768) || (v > 32767)) defer(w, SLIPEST_E_RANGE); /* the LayerNorm bias must fit int16 */
-        if (t != NULL) t->beta[w->u_at + i] = v;
+        if ((v < -32768) || (v > 32767)) {
+            defer(w, SLIPEST_E_RANGE); /* the LayerNorm bias must fit int16 */
+        }
+        if (t != NULL) {
+            t->beta[w->u_at + i] = v;
+        }
         break;
     case K2_GELU:
-        if (t != NULL) t->gelu[(uint32_t)w->layer * SLIPEST_Q_GELU_N + i] = (int16_t)v; /* NOLINT: int16 */
+        if (t != NULL) {
+            t->gelu[((uint32_t)w->layer * SLIPEST_Q_GELU_N) + i] = (int16_t)v; /* NOLINT: an int16 element */
+        }
         break;
     default: /* K2_RSQRT */
-        if (slipest_model_seed_ok(raw, (int)i) == 0) defer(w, SLIPEST_E_RANGE);
-        if (t != NULL) t->rsqrt_seed[i] = raw;
+        if (slipest_model_seed_ok(raw, (int)i) == 0) {
+            defer(w, SLIPEST_E_RANGE);
+        }
+        if (t != NULL) {
+            t->rsqrt_seed[i] = raw;
+        }
         break;
     }
 }

@@ -9,6 +9,7 @@
 #include "slipest_sha256.h"
 #include "image_edit.h"
 #include "ram_nvm.h"
+#include "store_upload.h"
 #include "slipest_store.h"
 
 #define SECTOR 128u
@@ -47,25 +48,9 @@ static size_t make_image(uint8_t *out, uint32_t v, const uint8_t *k)
 }
 
 static unsigned rng = 7u;
-static unsigned next_rand(void)
-{
-    rng = rng * 1103515245u + 12345u;
-    return (rng >> 16) & 0x7FFFu;
-}
 
 /* upload in random-sized chunks and finish; returns the finish (or first failing) status */
-static int upload(const uint8_t *img, size_t len)
-{
-    size_t off = 0;
-    int s = slipest_store_begin(&st, (uint32_t)len, 0u);
-    while (s == SLIPEST_OK && off < len) {
-        size_t n = 1u + next_rand() % 300u;
-        if (n > len - off) n = len - off;
-        s = slipest_store_write(&st, (uint32_t)off, img + off, n);
-        off += n;
-    }
-    return s == SLIPEST_OK ? slipest_store_finish(&st) : s;
-}
+static int upload(const uint8_t *img, size_t len) { return store_upload(&st, img, len, &rng); }
 
 /* open the store, authenticating with the 32-byte key k (NULL: no authentication) */
 static int reboot(const uint8_t *k)

@@ -9,6 +9,7 @@
 #include "check.h"
 #include "image_edit.h"
 #include "ram_nvm.h"
+#include "store_upload.h"
 #include "slipest_image_table.h"
 #include "slipest_store.h"
 
@@ -27,25 +28,9 @@ static slipest_model_q_t ref_q;
 static slipest_model_f32_t ref_f;
 
 static unsigned rng = 11u;
-static unsigned next_rand(void)
-{
-    rng = rng * 1103515245u + 12345u;
-    return (rng >> 16) & 0x7FFFu;
-}
 
-/* upload in random-sized chunks (1..300 bytes, across sector bounds) and finish */
-static int upload(const uint8_t *p, size_t n)
-{
-    size_t off = 0;
-    int s = slipest_store_begin(&st, (uint32_t)n, 0u);
-    while (s == SLIPEST_OK && off < n) {
-        size_t k = 1u + next_rand() % 300u;
-        if (k > n - off) k = n - off;
-        s = slipest_store_write(&st, (uint32_t)off, p + off, k);
-        off += k;
-    }
-    return s == SLIPEST_OK ? slipest_store_finish(&st) : s;
-}
+/* upload in random-sized chunks and finish; returns the finish (or first failing) status */
+static int upload(const uint8_t *img, size_t len) { return store_upload(&st, img, len, &rng); }
 
 /* the store's model equals the reference read from the whole buffer, array by array */
 static int same_model(const slipest_model_q_t *q, const slipest_model_f32_t *f)

@@ -46,8 +46,10 @@ static int16_t s16(uint16_t u)
     return (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): v fits int16_t (see above) */
 }
 
+#if SLIPEST_LAYER_TABLE /* the format-2 part of the stream, slipest_image_table.c */
 int16_t slipest_image_s16(uint16_t u) { return s16(u); }
 int32_t slipest_image_s32(uint32_t u) { return s32(u); }
+#endif
 
 /* data is never NULL: slipest_crc32() checks its argument, the stream passes its own bytes */
 static uint32_t crc32_update(uint32_t crc_in, const uint8_t *data, size_t len)

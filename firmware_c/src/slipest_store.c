@@ -72,20 +72,20 @@ typedef struct {
  * (slipest_image_internal.h) plus the HMAC; with load, also decode it into the store's model
  * storage. Returns the first failure in the order header, CRC, hash, HMAC, parameters; on
  * success *id describes the image. */
-static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t len, int load, image_id_t *id)
+static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t rec_len, int load, image_id_t *id)
 {
     slipest_image_stream_t *w = &s->walk;
     slipest_hmac_sha256_t mac;
     uint32_t pos = 0u, base = slot_addr(s, slot), S = s->nvm.sector_size, n;
+    uint32_t len = (rec_len > SLIPEST_STORE_IMAGE_MAX) ? 0u : rec_len;
     uint8_t tag[SLIPEST_SHA256_SIZE];
     slipest_model_q_t q;
     slipest_model_f32_t *mf = NULL;
     slipest_status_t st;
 
-    /* the store checks the float model whatever the build: a Q-only node keeps it valid for others */
-    if (len > SLIPEST_STORE_IMAGE_MAX) {
-        return SLIPEST_E_LENGTH; /* a record's length beyond the slot (the stream's own bound may be larger) */
-    }
+    /* len: a record's length beyond the slot is refused as a length of 0 (the stream's own bound, the largest
+     * image the build reads, may be larger than the slot). The store checks the float model whatever the
+     * build: a Q-only node keeps it valid for others */
 #ifdef SLIPEST_Q_ONLY
     st = slipest_image_stream_init(w, len, (load != 0) ? &s->qs : NULL, NULL, 1);
 #else

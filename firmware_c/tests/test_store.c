@@ -177,6 +177,9 @@ static void test_version_rule_and_refusals(void)
     n = make_image(img, 11u, NULL);
     CHECK(upload(img, n - 1u) == SLIPEST_E_LENGTH && c->refused_length == 1u); /* truncated image */
     CHECK(slipest_store_begin(&st, SLIPEST_STORE_IMAGE_MAX + 1u, 0u) == SLIPEST_E_LENGTH && c->refused_length == 2u);
+    /* the build's maximum and NVM size, as tools read them through the library */
+    CHECK(slipest_store_image_max() == SLIPEST_STORE_IMAGE_MAX && SLIPEST_STORE_IMAGE_MAX >= SLIPEST_IMAGE_MAX_SIZE);
+    CHECK(slipest_store_nvm_sectors(SECTOR) == N_SECT && slipest_store_nvm_sectors(SLIPEST_STORE_SECTOR_MIN - 1u) == 0u);
     CHECK(slipest_store_begin(&st, (uint32_t)n, 1u) == SLIPEST_E_RANGE);
     /* announced more than sent: finish refuses */
     CHECK(slipest_store_begin(&st, (uint32_t)n, 0u) == SLIPEST_OK);

@@ -1,6 +1,7 @@
 /* The model-image reader's streaming interface, shared with the model store (slipest_store.c), so
- * that there is one validator: slipest_image_read() feeds it a whole buffer, the store feeds it a
- * slot's bytes as it reads them back from NVM. Not a public API. */
+ * that there is one validator for both formats: slipest_image_read() (format 1) and
+ * slipest_image_read_table() (format 2) feed it a whole buffer, the store feeds it a slot's bytes as it
+ * reads them back from NVM. Not a public API. */
 #ifndef SLIPEST_IMAGE_INTERNAL_H
 #define SLIPEST_IMAGE_INTERNAL_H
 

@@ -65,12 +65,14 @@ typedef struct {
     uint32_t acc;                    /**< the element being assembled: its little-endian bytes */
     uint32_t idx;                    /**< the element's index in its array, */
     uint16_t flags;                  /**< header flags (once the header is complete) */
+#if SLIPEST_LAYER_TABLE
     uint16_t hdr_size;               /**< bytes of this image's header (64 until the format says 2) */
+    uint8_t formats;                 /**< formats accepted: bit 0 format 1, bit 1 format 2 */
+    uint8_t format;                  /**< the image's format (once the header is complete) */
+#endif
     uint8_t seg;                     /**< ... its array */
     uint8_t nb;                      /**< ... and its bytes so far */
     uint8_t check_f32;               /**< 1: the float parameters must be finite */
-    uint8_t formats;                 /**< formats accepted: bit 0 format 1, bit 1 format 2 */
-    uint8_t format;                  /**< the image's format (once the header is complete) */
     slipest_status_t deferred;       /**< first parameter check that failed (reported after CRC/HMAC) */
 } slipest_image_stream_t;
 

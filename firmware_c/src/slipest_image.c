@@ -162,11 +162,6 @@ static void header_scalars(const uint8_t *img, slipest_model_q_t *q)
 
 static uint32_t abs16(int16_t v) { return v < 0 ? (uint32_t)(-(int32_t)v) : (uint32_t)v; }
 
-int slipest_image_f32_ok(uint32_t bits, int is_eps)
-{
-    /* finite; the LayerNorm eps also positive (its bits nonzero and not those of a negative float) */
-    return ((bits & 0x7F800000u) != 0x7F800000u) && ((is_eps == 0) || ((bits != 0u) && (bits <= 0x7F7FFFFFu)));
-}
 
 #ifndef SLIPEST_Q_ONLY
 /* where a float element of segment seg goes (ln_eps is kept as bits in the stream) */
@@ -299,8 +294,10 @@ slipest_status_t slipest_image_stream_init(slipest_image_stream_t *w, size_t len
 #endif
     w->check_f32 = (check_f32 != 0) ? 1u : 0u;
     w->crc = 0xFFFFFFFFu;
+#if SLIPEST_LAYER_TABLE
     w->hdr_size = SLIPEST_IMAGE_HEADER_SIZE;
     w->formats = 1u;
+#endif
     return SLIPEST_OK;
 }
 
@@ -318,7 +315,14 @@ void slipest_image_stream_table(slipest_image_stream_t *w, slipest_image_table_q
 }
 #endif
 
-/* The first w->hdr_size bytes are in: check the header of the format they give. A format-2 image (when
+/* bytes of the header being read: format 1's, unless a layer-table build found format 2 */
+#if SLIPEST_LAYER_TABLE
+#define HDR_SIZE(w) ((size_t)(w)->hdr_size)
+#else
+#define HDR_SIZE(w) ((size_t)SLIPEST_IMAGE_HEADER_SIZE)
+#endif
+
+/* The first HDR_SIZE(w) bytes are in: check the header of the format they give. A format-2 image (when
  * accepted) is known at byte 64, the end of a format-1 header, and read on to the end of its layer table. */
 static slipest_status_t header_done(slipest_image_stream_t *w)
 {
@@ -336,8 +340,8 @@ static slipest_status_t header_done(slipest_image_stream_t *w)
         }
         if ((w->formats & 1u) == 0u) return SLIPEST_E_VERSION;
     }
-#endif
     w->format = 1u;
+#endif
     return check_header(w->hdr, w->len, &w->flags, &w->body);
 }
 
@@ -350,9 +354,9 @@ slipest_status_t slipest_image_stream_feed(slipest_image_stream_t *w, const uint
             return SLIPEST_E_LENGTH; /* more bytes than the image was said to have */
         }
         w->pos = pos + 1u;
-        if (pos < w->hdr_size) {
-            w->hdr[pos] = p[i]; /* hdr_size <= SLIPEST_IMAGE_STREAM_HDR */
-            if (pos + 1u == w->hdr_size) {
+        if (pos < HDR_SIZE(w)) {
+            w->hdr[pos] = p[i]; /* HDR_SIZE(w) <= SLIPEST_IMAGE_STREAM_HDR */
+            if (pos + 1u == HDR_SIZE(w)) {
                 slipest_status_t st = header_done(w);
                 if (st != SLIPEST_OK) {
                     return st;

@@ -51,7 +51,12 @@ uint32_t slipest_image_le32(const uint8_t *p);
  * eps also positive). */
 int16_t slipest_image_s16(uint16_t u);
 int32_t slipest_image_s32(uint32_t u);
-int slipest_image_f32_ok(uint32_t bits, int is_eps);
+/* (inline: the SN-S node's flash budget has no room for a call per float element) */
+static inline int slipest_image_f32_ok(uint32_t bits, int is_eps)
+{
+    /* finite; the LayerNorm eps also positive (its bits nonzero and not those of a negative float) */
+    return ((bits & 0x7F800000u) != 0x7F800000u) && ((is_eps == 0) || ((bits != 0u) && (bits <= 0x7F7FFFFFu)));
+}
 
 #if SLIPEST_LAYER_TABLE /* slipest_image_table.c, compiled with the layer-table kernels */
 /* The format-2 parts of the stream: the header once its 112 bytes are in (every check but CRC and hash, as

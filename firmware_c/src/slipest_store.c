@@ -77,15 +77,19 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t re
     slipest_image_stream_t *w = &s->walk;
     slipest_hmac_sha256_t mac;
     uint32_t pos = 0u, base = slot_addr(s, slot), S = s->nvm.sector_size, n;
+#if SLIPEST_STORE_IMAGE_MAX < SLIPEST_IMAGE_READ_MAX_SIZE
     uint32_t len = (rec_len > SLIPEST_STORE_IMAGE_MAX) ? 0u : rec_len;
+#else
+    uint32_t len = rec_len; /* the stream's own bound is the slot's */
+#endif
     uint8_t tag[SLIPEST_SHA256_SIZE];
     slipest_model_q_t q;
     slipest_model_f32_t *mf = NULL;
     slipest_status_t st;
 
-    /* len: a record's length beyond the slot is refused as a length of 0 (the stream's own bound, the largest
-     * image the build reads, may be larger than the slot). The store checks the float model whatever the
-     * build: a Q-only node keeps it valid for others */
+    /* len: a record's length beyond a slot lowered below the largest image the build reads (the stream's own
+     * bound) is refused as a length of 0. The store checks the float model whatever the build: a Q-only node
+     * keeps it valid for others */
 #ifdef SLIPEST_Q_ONLY
     st = slipest_image_stream_init(w, len, (load != 0) ? &s->qs : NULL, NULL, 1);
 #else

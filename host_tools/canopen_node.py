@@ -43,6 +43,14 @@ def nvm_sectors(lib_path: Path | str, sector_size: int = 256) -> int:
     return n
 
 
+def store_image_max(lib_path: Path | str) -> int:
+    """The largest model image the library's store (and so its CANopen DOMAIN and serial upload) accepts:
+    SLIPEST_STORE_IMAGE_MAX of that build, read through slipest_store_image_max()."""
+    f = ctypes.CDLL(str(lib_path)).slipest_store_image_max
+    f.restype, f.argtypes = ctypes.c_uint32, []
+    return int(f())
+
+
 class RamNvm:
     """An NVM area in RAM (erased to 0xFF), with counts of the store's writes and erases. Strict as flash
     and as the C ram_nvm (firmware_c/common/ram_nvm.c): a write must be one whole, aligned, in-range

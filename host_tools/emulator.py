@@ -37,14 +37,15 @@ def _is_table_image(data: bytes) -> bool:
     return len(data) >= at + 2 and int.from_bytes(data[at:at + 2], "little") == image_layout.V2.version
 
 
-def build_dir_for(bundle: Path, dbc: Path | None = None) -> Path:
+def build_dir_for(bundle: Path, dbc: Path | None = None, options: dict[str, str] | None = None) -> Path:
     bundle, dbc = bundle.resolve(), (dbc or dbc_path()).resolve()
     default_dbc = dbc == DBC_PATH.resolve()
     # our own build dirs (not build/host, which people configure by hand, e.g. with sanitizers
     # that a ctypes load cannot take)
-    if bundle == default_bundle().resolve() and default_dbc:
+    if bundle == default_bundle().resolve() and default_dbc and not options:
         return build_root() / "emulate"
     key = str(bundle) if default_dbc else f"{bundle}|{dbc}"
+    key += "".join(f"|{k}={v}" for k, v in sorted((options or {}).items()))
     tag = hashlib.sha256(key.encode()).hexdigest()[:10]
     return build_root() / f"emulate-{tag}"
 
@@ -62,21 +63,22 @@ _BUILT: set[tuple[Path, tuple[str, ...], str]] = set()  # up to date in this pro
 
 
 def build(bundle: Path | str | None = None, targets: tuple[str, ...] = (EMULATOR_TARGET, HOST_LIBRARY_TARGET),
-          quiet: bool = True) -> Path:
+          quiet: bool = True, options: dict[str, str] | None = None) -> Path:
     """Configure (if needed) and build the host targets for `bundle` and the DBC in use
     (`dbc.dbc_path()`); returns the build dir.
 
     CMake's own up-to-date check takes about a second, so a process asks it once per
-    bundle and target set.
+    bundle and target set. `options`: more CMake cache settings (their own build dir), e.g.
+    SLIPEST_LAYER_TABLE=ON for a node that takes format-2 images of any architecture.
     """
     bundle = Path(bundle) if bundle else default_bundle()
     if not (bundle / "slipest_model_q.h").is_file():
         raise OSError(f"{bundle}: not an export bundle (no slipest_model_q.h)")
     need("cmake", "building the host emulator (fleetlab emulate, stream, upload --emulate)")
     dbc = dbc_path()
-    bdir = build_dir_for(bundle, dbc)
+    bdir = build_dir_for(bundle, dbc, options)
     bdir.mkdir(parents=True, exist_ok=True)
-    stamp = _bundle_stamp(bundle, dbc)
+    stamp = _bundle_stamp(bundle, dbc) + "".join(f"|{k}={v}" for k, v in sorted((options or {}).items()))
     key = (bdir, tuple(targets), stamp)
     if key in _BUILT:
         return bdir
@@ -86,7 +88,7 @@ def build(bundle: Path | str | None = None, targets: tuple[str, ...] = (EMULATOR
         stamp_file = bdir / ".fleetlab-bundle-stamp"
         if not (bdir / "CMakeCache.txt").is_file() or not stamp_file.is_file() or stamp_file.read_text() != stamp:
             cmd = configure_command(bdir, bundle, options={"SLIPEST_DBC": str(dbc), "SLIPEST_SANITIZE": "OFF",
-                                                           "SLIPEST_FUZZ": "OFF"})
+                                                           "SLIPEST_FUZZ": "OFF", **(options or {})})
             r = subprocess.run(cmd, stdout=out, stderr=subprocess.PIPE, text=True)
             if r.returncode:
                 raise OSError(f"cmake configure failed for bundle {bundle}:\n{r.stderr[-2000:]}")

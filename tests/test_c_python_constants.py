@@ -14,7 +14,7 @@ from fleetlab.assurance.sources import generate_dbc, include_dirs
 from fleetlab.canopen_od import objects as od
 from fleetlab.export import image_layout
 from fleetlab.host_tools.binding import CCounters
-from fleetlab.host_tools.canopen_node import nvm_sectors
+from fleetlab.host_tools.canopen_node import nvm_sectors, store_image_max
 from fleetlab.host_tools.emulator import HOST_LIBRARY_TARGET, build, find_artifact
 from fleetlab.host_tools.status_codes import status
 
@@ -35,12 +35,14 @@ def c_side(tmp_path_factory) -> dict[str, int]:
     lines += [f'P("CNT_{n}", offsetof(slipest_counters_t, {n}));' for n in od.ESTIMATOR_COUNTERS]
     lines += ['P("N_COUNTERS", sizeof(slipest_counters_t) / sizeof(uint32_t));',
               'P("N_STORE_COUNTERS", sizeof(slipest_store_counters_t) / sizeof(uint32_t));',
-              'P("IMAGE_MAX", SLIPEST_IMAGE_MAX_SIZE);', 'P("NVM_SECTORS_256", SLIPEST_STORE_NVM_SECTORS(256u));',
+              'P("IMAGE_MAX", SLIPEST_IMAGE_MAX_SIZE);', 'P("STORE_IMAGE_MAX", SLIPEST_STORE_IMAGE_MAX);', 'P("NVM_SECTORS_256", SLIPEST_STORE_NVM_SECTORS(256u));',
               'P("NVM_SECTORS_64", SLIPEST_STORE_NVM_SECTORS(64u));', "return 0; }"]
     src = tmp / "constants.c"
     src.write_text("\n".join(lines) + "\n")
     exe = tmp / "constants"
-    subprocess.run([cc, "-std=c99", *[f"-I{d}" for d in include_dirs(None, gen)], str(src), "-o", str(exe)],
+    # as CMake builds the example (SN-S) bundle's library: without the layer-table reader
+    subprocess.run([cc, "-std=c99", "-DSLIPEST_LAYER_TABLE=0", *[f"-I{d}" for d in include_dirs(None, gen)], str(src),
+                    "-o", str(exe)],
                    check=True, capture_output=True, text=True)
     out = subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout
     return {k: int(v) for k, v in (line.split() for line in out.splitlines())}
@@ -82,3 +84,17 @@ def test_nvm_sectors_are_read_from_the_library(c_side) -> None:
     assert c_side["NVM_SECTORS_256"] == nvm_sectors(lib, 256) and c_side["NVM_SECTORS_64"] == nvm_sectors(lib, 64)
     with pytest.raises(ValueError, match="does not accept"):
         nvm_sectors(lib, 32)
+
+
+def test_store_image_max_follows_the_build(c_side) -> None:
+    """The store's largest image (SLIPEST_STORE_IMAGE_MAX), read through the library: an SN-S-only build keeps
+    the format-1 maximum; a build with the layer-table reader takes an SN-D image with its float model and tag,
+    and its NVM size follows (two record sectors, two slots of that many bytes)."""
+    lib = find_artifact(build(None, targets=(HOST_LIBRARY_TARGET,)), "libslipest_host.so")
+    assert store_image_max(lib) == c_side["STORE_IMAGE_MAX"] == image_layout.CURRENT.max_size
+    table_lib = find_artifact(build(None, targets=(HOST_LIBRARY_TARGET,), options={"SLIPEST_LAYER_TABLE": "ON"}),
+                              "libslipest_host.so")
+    big = store_image_max(table_lib)
+    assert big >= image_layout.V2.image_size((128, 64, 32)) > image_layout.CURRENT.max_size
+    for sector in (64, 256):
+        assert nvm_sectors(table_lib, sector) == 2 + 2 * (-(-big // sector))

@@ -5,8 +5,9 @@ the same file; it must serve the old model or the new one, never neither, with e
 serves bit-exact.
 
 CI runs every write/erase of an upload + activation with 256-byte sectors in the three modes (>= 50 cut
-points), a second-generation upload that overwrites the rollback target, and a rollback. FLEETLAB_LONG=1
-adds 64- and 128-byte sectors (about 4x the cut points).
+points), a second-generation upload that overwrites the rollback target, and a rollback; and every write/erase
+of an SN-D (77 KB, format-2) upload + activation with 256- and 4,096-byte sectors. FLEETLAB_LONG=1 adds 64- and
+128-byte sectors to the SN-S sweep (about 4x the cut points).
 """
 
 from __future__ import annotations
@@ -125,6 +126,53 @@ def test_power_loss_during_upload_and_activation(emu, models, tmp_path, sector) 
           f"{outcomes.count('old')} old, {outcomes.count('new')} new")
     assert len(outcomes) >= 50
     check_switch(outcomes, "old", "new", f"upload+activate, sector {sector}")
+
+
+@pytest.fixture(scope="module")
+def table_emu() -> Path:
+    """The emulator of a node that takes format-2 (layer-table) images: built with the layer-table reader, and
+    with 4,096-byte NVM sectors (SLIPEST_STORE_SECTOR_MAX) for the SN-D sweep below."""
+    opts = {"SLIPEST_LAYER_TABLE": "ON", "SLIPEST_STORE_SECTOR_MAX": "4096"}
+    return find_artifact(build(None, targets=(EMULATOR_TARGET,), options=opts), EMULATOR_TARGET)
+
+
+@pytest.fixture(scope="module")
+def snd_models(tmp_path_factory) -> dict:
+    """old: the example SN-S (version 1); new: an SN-D exported as version 2 (a 77 KB format-2 image)."""
+    from test_export_arch import quick_model
+
+    out = tmp_path_factory.mktemp("slots-snd") / "new"
+    export_bundle(quick_model("sn-d"), out, inputs=draw_inputs(1000, None, seed=3), model_version=2)
+    old, new = load_bundle(EXAMPLE), load_bundle(out)
+    assert (out / "model.img").read_bytes()[4] == 2 and (out / "model.img").stat().st_size > 70000
+    return {"old": (EXAMPLE / "model.img", EXAMPLE / "vectors.bin", old.content_hash[:8]),
+            "new": (out / "model.img", out / "vectors.bin", new.content_hash[:8]), "dir": out}
+
+
+# Every write and erase at the store's default 256-byte sectors: an SN-D slot is 302 sectors, the upload +
+# activation about 620 NVM operations, 1,860 cut points (about 15 s on one core: no sampling, no larger
+# sector needed), and once more with 4,096-byte sectors (19 a slot), a build that raised SLIPEST_STORE_SECTOR_MAX.
+@pytest.mark.parametrize("sector", [256, 4096])
+def test_power_loss_during_an_sn_d_upload_and_activation(table_emu, snd_models, tmp_path, sector) -> None:
+    """The sweep above over an SN-D (format-2) upload that replaces an active SN-S: every write and erase, in
+    the three cut modes, leaves the SN-S or the SN-D serving, each bit-exact on its own vectors."""
+    base, work = tmp_path / "base.bin", tmp_path / "work.bin"
+    make_base(table_emu, base, sector, snd_models)
+    t0 = time.monotonic()
+    outcomes = cut_sweep(table_emu, base, work, sector, snd_models,
+                         ["--upload", str(snd_models["new"][0]), "--activate"])
+    print(f"SN-D, sector {sector}: {len(outcomes)} cut points in {time.monotonic() - t0:.1f} s")
+    assert len(outcomes) >= 3 * 2 * ((snd_models["new"][0].stat().st_size + sector - 1) // sector)
+    check_switch(outcomes, "old", "new", f"SN-D upload+activate, sector {sector}")
+
+
+def test_c_store_takes_a_format_2_image(snd_models) -> None:
+    """firmware_c/tests/test_store_table.c, built by CMake with the SN-D bundle (so with the layer-table reader):
+    the store's streaming validator loads the very model slipest_image_read_table() reads, boots it again, and
+    refuses edited images (CRC, row bound, LayerNorm bias, NaN, shift, table size, stale version)."""
+    exe = find_artifact(build(snd_models["dir"], targets=("test_store_table",)), "test_store_table")
+    res = subprocess.run([str(exe), str(snd_models["new"][0])], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0 and "all checks passed" in res.stdout, res.stdout + res.stderr
 
 
 def test_power_loss_during_rollback(emu, models, tmp_path) -> None:

@@ -59,3 +59,53 @@ def test_rehearsal_streams_through_the_upload_and_switches_bit_exact(bdir, new_b
     assert r["windows_answered_during_upload_phase"] == r["windows_streamed_during_upload_phase"] == 6
     assert r["before"]["version"] == 1 and r["after"]["version"] == 2 and r["windows_after_activation"] == 6
     assert "bit-exact with the new model: True" in capsys.readouterr().out
+
+
+@pytest.fixture(scope="module")
+def snd_bundle(tmp_path_factory):
+    """An SN-D (12 -> 128 -> 64 -> 32 -> 3) exported as model version 2: a 77 KB format-2 image."""
+    from fleetlab.export.bundle import export_bundle
+    from fleetlab.export.vectors import draw_inputs
+    from test_export_arch import quick_model
+
+    out = tmp_path_factory.mktemp("upload-snd") / "snd"
+    export_bundle(quick_model("sn-d"), out, inputs=draw_inputs(200, None, seed=3), model_version=2)
+    return out
+
+
+@pytest.mark.parametrize("link", ["canopen", "serial"])
+def test_sn_d_image_uploads_activates_and_serves_bit_exact(snd_bundle, tmp_path, capsys, link):
+    """An SN-D image through the emulated node's CANopen DOMAIN (slcan, or the serial link's COBS packets):
+    uploaded into the store, validated, activated; windows streamed before the upload are answered bit-exact by
+    the boot SN-S and those after the activation bit-exact by the SN-D (its torch integer reference). The
+    report gives the SDO frames and the bus time at 500 kbit/s, computed from them."""
+    report = tmp_path / "landing.json"
+    assert main(["upload", "--bundle", str(snd_bundle), "--link", link, "--emulate", "--boot-bundle", str(EXAMPLE),
+                 "--rehearse", "4", "--scale", "0.1", "--report", str(report)]) == 0
+    r = json.loads(report.read_text())
+    assert r["boot_model_bit_exact"] and r["new_model_bit_exact"], r
+    assert r["before"]["version"] == 1 and r["after"]["version"] == 2
+    assert r["after"]["hash32"] == load_bundle(snd_bundle).content_hash[:8]
+    up = r["upload"]
+    assert up["image_bytes"] == (snd_bundle / "model.img").stat().st_size > 70000
+    n_seg = -(-up["image_bytes"] // 7)
+    assert up["sdo_frames"] >= 2 + n_seg + -(-n_seg // 127)  # block download: every segment on the bus
+    assert 2.0 < up["bus_time_s_at_500k"] < 3.5  # about 1.3 Mbit: SN-S's 0.15 s times the image's 20x
+    out = capsys.readouterr().out
+    assert "ms at 500 kbit/s" in out and "bit-exact with the new model: True" in out
+
+
+def test_sn_d_image_is_refused_by_an_sn_s_only_node(snd_bundle, tmp_path):
+    """A node built without the layer-table reader (the SN-S library) keeps its slot at the format-1 size and
+    refuses the SN-D image by its announced length (SDO abort 0x06070012), with one clear line."""
+    from fleetlab.host_tools.canopen_session import CanopenSession, eds_for
+    from fleetlab.host_tools.emulator import EMULATOR_TARGET, build, find_artifact
+    from fleetlab.host_tools.upload import explain, open_tapped, upload_image
+
+    bdir = build(None, targets=(EMULATOR_TARGET,))
+    session, tap = open_tapped("slcan", eds_for(bdir), 5, emulator=find_artifact(bdir, EMULATOR_TARGET),
+                               nvm_file=tmp_path / "nvm.bin")
+    assert isinstance(session, CanopenSession)
+    with session, pytest.raises(Exception) as e:
+        upload_image(session, tap, (snd_bundle / "model.img").read_bytes(), activate=True)
+    assert "0x06070012" in explain(e.value)

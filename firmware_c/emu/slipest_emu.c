@@ -168,7 +168,7 @@ static int open_store(const char *path, uint32_t sector)
  * then validate it; activate when asked. Returns 0, or 3 with a message when refused. */
 static int upload_image(const char *path, int activate)
 {
-    static uint8_t buf[SLIPEST_IMAGE_MAX_SIZE + 1u];
+    static uint8_t buf[SLIPEST_STORE_IMAGE_MAX + 1u]; /* a longer file is refused by its length */
     size_t n = 0, off;
     int st;
     if (read_image_file(path, buf, sizeof buf, &n) != 0) {

@@ -66,7 +66,8 @@ static void boot(void)
  * store's finish */
 static void download(int block, uint32_t at, uint8_t x, unsigned crc_mode)
 {
-    uint8_t img[SLIPEST_IMAGE_MAX_SIZE], d[8];
+    static uint8_t img[SLIPEST_STORE_IMAGE_MAX]; /* the seed, up to the store's largest image */
+    uint8_t d[8];
     uint32_t off = 0, len = (uint32_t)seed_len;
     unsigned seq = 0, t = 0;
     uint16_t crc;
@@ -78,6 +79,7 @@ static void download(int block, uint32_t at, uint8_t x, unsigned crc_mode)
     d[2] = 0x20u;
     d[4] = (uint8_t)len;
     d[5] = (uint8_t)(len >> 8);
+    d[6] = (uint8_t)(len >> 16); /* a format-2 seed is over 64 KiB */
     frame(0x600u + ID, 8u, d);
     while (off < len) {
         uint32_t k = len - off < 7u ? len - off : 7u;

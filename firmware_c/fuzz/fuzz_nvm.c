@@ -54,7 +54,7 @@ void fuzz_nvm_fail_next(void)
 
 const uint8_t *fuzz_seed_image(size_t *len)
 {
-    static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
+    static uint8_t img[SLIPEST_STORE_IMAGE_MAX];
     static size_t img_len;
     if (img_len == 0u) {
         FILE *fp = fopen(SLIPEST_FUZZ_IMAGE, "rb");

@@ -18,7 +18,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     static slipest_store_t st;
-    static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
+    static uint8_t img[SLIPEST_STORE_IMAGE_MAX];
     static const uint8_t key[16] = {1, 2, 3};
     static const slipest_store_auth_t auth = SLIPEST_STORE_AUTH_HMAC_SHA256(key, sizeof key);
     slipest_nvm_t nvm;

@@ -33,9 +33,20 @@ extern "C" {
 /** Build cap on the hidden units of all blocks of a format-2 image together (see SLIPEST_IMAGE_MAX_WEIGHTS). */
 #define SLIPEST_IMAGE_MAX_UNITS 256u
 #endif
-/** Largest format-2 image the caps admit (with the float model and an HMAC tag). */
+/** Largest format-2 image the caps admit (with the float model and an HMAC tag), with a GELU table for each
+ *  of the format's SLIPEST_IMAGE_V2_RECORDS blocks (an unsigned constant, where SLIPEST_MAX_LAYERS is a plain
+ *  int: a build that lowers SLIPEST_MAX_LAYERS keeps up to 774 bytes of slack). */
 #define SLIPEST_IMAGE_TABLE_MAX_SIZE \
-    SLIPEST_IMAGE_V2_SIZE(SLIPEST_IMAGE_MAX_WEIGHTS, SLIPEST_IMAGE_MAX_UNITS + 3u, SLIPEST_MAX_LAYERS)
+    SLIPEST_IMAGE_V2_SIZE(SLIPEST_IMAGE_MAX_WEIGHTS, SLIPEST_IMAGE_MAX_UNITS + 3u, SLIPEST_IMAGE_V2_RECORDS)
+
+/** Largest image this build reads in any format: the format-1 maximum, or the format-2 one when the layer-table
+ *  reader is built and its caps admit a larger image. The model store's default slot size
+ *  (SLIPEST_STORE_IMAGE_MAX, slipest_store.h) and the streaming validator's bound. */
+#if SLIPEST_LAYER_TABLE && (SLIPEST_IMAGE_TABLE_MAX_SIZE > SLIPEST_IMAGE_MAX_SIZE)
+#define SLIPEST_IMAGE_READ_MAX_SIZE SLIPEST_IMAGE_TABLE_MAX_SIZE
+#else
+#define SLIPEST_IMAGE_READ_MAX_SIZE SLIPEST_IMAGE_MAX_SIZE
+#endif
 
 /** Storage of a fixed-point layer-table model read from an image (the model struct points into it). */
 typedef struct {

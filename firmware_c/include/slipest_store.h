@@ -31,6 +31,8 @@
 #include <stdint.h>
 
 #include "slipest_image.h"
+#include "slipest_image_stream.h"
+#include "slipest_image_table.h"
 #include "slipest_model.h"
 #include "slipest_sha256.h"
 #include "slipest_status.h"
@@ -49,8 +51,19 @@ extern "C" {
 #define SLIPEST_STORE_SECTOR_MIN 64u
 /** Bytes of a commit record at the start of a record sector. */
 #define SLIPEST_STORE_RECORD_SIZE 52u
+/** Largest image the store takes, and with it the slot size: by default the largest image this build reads
+ *  (SLIPEST_IMAGE_READ_MAX_SIZE: 3,874 B for SN-S only, 80,696 B with the layer-table reader at its default
+ *  caps). An integrator lowers it (CMake -DSLIPEST_STORE_IMAGE_MAX=...) to the largest model it will upload;
+ *  a larger announced image is refused with SLIPEST_E_LENGTH (CANopen abort 0x06070012). */
+#ifndef SLIPEST_STORE_IMAGE_MAX
+#define SLIPEST_STORE_IMAGE_MAX SLIPEST_IMAGE_READ_MAX_SIZE
+#endif
+#if (SLIPEST_STORE_IMAGE_MAX) > (SLIPEST_IMAGE_READ_MAX_SIZE) || \
+    (SLIPEST_STORE_IMAGE_MAX) < (SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE)
+#error "SLIPEST_STORE_IMAGE_MAX must lie between a minimal image and SLIPEST_IMAGE_READ_MAX_SIZE"
+#endif
 /** Sectors of one slot for sector size s. */
-#define SLIPEST_STORE_SLOT_SECTORS(s) ((SLIPEST_IMAGE_MAX_SIZE + (s) - 1u) / (s))
+#define SLIPEST_STORE_SLOT_SECTORS(s) (((SLIPEST_STORE_IMAGE_MAX) + (s) - 1u) / (s))
 /** Sectors the NVM must have for sector size s: two record sectors and two slots. */
 #define SLIPEST_STORE_NVM_SECTORS(s) (2u + 2u * SLIPEST_STORE_SLOT_SECTORS(s))
 /** Number of model slots. */
@@ -173,13 +186,21 @@ typedef struct {
     uint8_t buf[SLIPEST_STORE_SECTOR_MAX]; /**< one sector: write buffer and read-back buffer */
     uint8_t sha256[32];                   /**< trailer sha256 of the active image */
     uint8_t have_model;                   /**< mq (and mf) hold the active slot's model */
-    slipest_model_q_t mq;                 /**< active fixed-point model (arrays in qs) */
-    slipest_image_q_storage_t qs;         /**< its arrays */
+    slipest_model_q_t mq;                 /**< active fixed-point model (arrays in qs or tqs) */
+    slipest_image_q_storage_t qs;         /**< its arrays, from a format-1 image */
 #ifndef SLIPEST_Q_ONLY
     uint8_t have_f32;                     /**< mf holds a float model (the image had one) */
-    slipest_model_f32_t mf;               /**< active float model (arrays in fs) */
-    slipest_image_f32_storage_t fs;       /**< its arrays */
+    slipest_model_f32_t mf;               /**< active float model (arrays in fs or tfs) */
+    slipest_image_f32_storage_t fs;       /**< its arrays, from a format-1 image */
 #endif
+#if SLIPEST_LAYER_TABLE
+    slipest_image_table_q_t tqs;          /**< the arrays of a format-2 (layer-table) image */
+#ifndef SLIPEST_Q_ONLY
+    slipest_image_table_f32_t tfs;        /**< its float arrays */
+#endif
+#endif
+    slipest_image_stream_t walk;          /**< the validator's state while a slot is streamed (not on the stack:
+                                               it holds a row sum per unit of the widest block) */
     slipest_store_counters_t c;           /**< counters */
 } slipest_store_t;
 
@@ -350,6 +371,13 @@ const slipest_store_counters_t *slipest_store_counters(const slipest_store_t *st
  *         (outside SLIPEST_STORE_SECTOR_MIN..SLIPEST_STORE_SECTOR_MAX)
  */
 uint32_t slipest_store_nvm_sectors(uint32_t sector_size);
+
+/**
+ * @brief SLIPEST_STORE_IMAGE_MAX of this build: the largest image the store (and so the CANopen DOMAIN and the
+ *        serial upload) accepts, for tools that read it through the library instead of retyping it.
+ * @return the bytes
+ */
+uint32_t slipest_store_image_max(void);
 
 #ifdef __cplusplus
 }

@@ -108,7 +108,7 @@ static uint32_t domain_begin(slipest_co_t *co, uint32_t size, slipest_frame_t *o
 {
     slipest_status_t st;
     if (co->store == NULL) return SLIPEST_CO_ABORT_STATE;
-    if (size > SLIPEST_IMAGE_MAX_SIZE) return SLIPEST_CO_ABORT_TOO_HIGH;
+    if (size > SLIPEST_STORE_IMAGE_MAX) return SLIPEST_CO_ABORT_TOO_HIGH; /* the slot size of this build */
     if (size < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE) return SLIPEST_CO_ABORT_TOO_LOW;
     if (slipest_store_upload_state(co->store) == SLIPEST_UPLOAD_RECEIVING) {
         (void)slipest_store_abort(co->store); /* a new transfer replaces a stalled one */

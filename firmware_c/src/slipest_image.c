@@ -5,6 +5,7 @@
  * allows, never used to size a read. */
 #include "slipest_image.h"
 #include "slipest_image_internal.h"
+#include "slipest_image_table.h"
 #include "slipest_model_internal.h"
 
 #include <string.h>
@@ -29,11 +30,11 @@ uint32_t slipest_image_le32(const uint8_t *p)
     return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
 }
 
-static slipest_status_t check_hash32(const uint8_t *hdr, const uint8_t *trailer)
+static slipest_status_t check_hash32(const uint8_t *hdr, size_t at, const uint8_t *trailer)
 {
     uint32_t sha_head = ((uint32_t)trailer[SHA] << 24) | ((uint32_t)trailer[SHA + 1u] << 16) |
                         ((uint32_t)trailer[SHA + 2u] << 8) | (uint32_t)trailer[SHA + 3u]; /* sha256 bytes, big-endian */
-    return (slipest_image_le32(&hdr[SLIPEST_IMAGE_OFF_HASH32]) == sha_head) ? SLIPEST_OK : SLIPEST_E_HASH;
+    return (slipest_image_le32(&hdr[at]) == sha_head) ? SLIPEST_OK : SLIPEST_E_HASH;
 }
 
 /* two's complement from the unsigned bit pattern without implementation-defined conversions */
@@ -44,6 +45,11 @@ static int16_t s16(uint16_t u)
     int32_t v = u > 0x7FFFu ? -(int32_t)(uint16_t)~u - 1 : (int32_t)u;
     return (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): v fits int16_t (see above) */
 }
+
+#if SLIPEST_LAYER_TABLE /* the format-2 part of the stream, slipest_image_table.c */
+int16_t slipest_image_s16(uint16_t u) { return s16(u); }
+int32_t slipest_image_s32(uint32_t u) { return s32(u); }
+#endif
 
 /* data is never NULL: slipest_crc32() checks its argument, the stream passes its own bytes */
 static uint32_t crc32_update(uint32_t crc_in, const uint8_t *data, size_t len)
@@ -76,6 +82,9 @@ static float f32_of(uint32_t bits)
     memcpy(&f, &bits, sizeof f);
     return f;
 }
+#if SLIPEST_LAYER_TABLE
+float slipest_image_f32_of(uint32_t bits) { return f32_of(bits); }
+#endif
 
 #endif
 
@@ -153,7 +162,6 @@ static void header_scalars(const uint8_t *img, slipest_model_q_t *q)
 
 static uint32_t abs16(int16_t v) { return v < 0 ? (uint32_t)(-(int32_t)v) : (uint32_t)v; }
 
-static int f32_bits_finite(uint32_t b) { return (b & 0x7F800000u) != 0x7F800000u; }
 
 #ifndef SLIPEST_Q_ONLY
 /* where a float element of segment seg goes (ln_eps is kept as bits in the stream) */
@@ -198,8 +206,7 @@ static void visit(slipest_image_stream_t *w, unsigned seg, unsigned i, uint32_t 
     if (seg >= K_FEPS) {
         /* the float model: finite parameters, a positive finite LayerNorm eps */
         bad = SLIPEST_E_NONFINITE;
-        if ((w->check_f32 != 0u) &&
-            ((f32_bits_finite(raw) == 0) || ((seg == K_FEPS) && ((raw == 0u) || (raw > 0x7F7FFFFFu))))) {
+        if ((w->check_f32 != 0u) && (slipest_image_f32_ok(raw, seg == K_FEPS) == 0)) {
             ok = 0;
         }
 #ifndef SLIPEST_Q_ONLY
@@ -263,7 +270,7 @@ static void payload_byte(slipest_image_stream_t *w, uint8_t b)
     visit(w, w->seg, w->idx, w->acc, seg_size[w->seg]);
     w->acc = 0u;
     w->nb = 0u;
-    w->idx = (uint16_t)(w->idx + 1u); /* < seg_n[seg] <= SLIPEST_IMAGE_F32_W1_N */
+    w->idx = w->idx + 1u; /* < seg_n[seg] <= SLIPEST_IMAGE_F32_W1_N */
     if (w->idx == seg_n[w->seg]) {
         w->idx = 0u;
         w->seg = (uint8_t)(w->seg + 1u); /* <= K_END */
@@ -273,7 +280,7 @@ static void payload_byte(slipest_image_stream_t *w, uint8_t b)
 slipest_status_t slipest_image_stream_init(slipest_image_stream_t *w, size_t len, slipest_image_q_storage_t *qs,
                                            slipest_image_f32_storage_t *fs, int check_f32)
 {
-    if (len < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE || len > SLIPEST_IMAGE_MAX_SIZE) {
+    if (len < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE || len > SLIPEST_IMAGE_READ_MAX_SIZE) {
         return SLIPEST_E_LENGTH;
     }
     memset(w, 0, sizeof *w);
@@ -287,7 +294,55 @@ slipest_status_t slipest_image_stream_init(slipest_image_stream_t *w, size_t len
 #endif
     w->check_f32 = (check_f32 != 0) ? 1u : 0u;
     w->crc = 0xFFFFFFFFu;
+#if SLIPEST_LAYER_TABLE
+    w->hdr_size = SLIPEST_IMAGE_HEADER_SIZE;
+    w->formats = 1u;
+#endif
     return SLIPEST_OK;
+}
+
+#if SLIPEST_LAYER_TABLE
+void slipest_image_stream_table(slipest_image_stream_t *w, slipest_image_table_q_t *tqs,
+                                slipest_image_table_f32_t *tfs, int only)
+{
+    w->tqs = tqs;
+#ifndef SLIPEST_Q_ONLY
+    w->tfs = tfs;
+#else
+    (void)tfs; /* no float model in this build */
+#endif
+    w->formats = (only != 0) ? 2u : 3u;
+}
+#endif
+
+/* bytes of the header being read: format 1's, unless a layer-table build found format 2 */
+#if SLIPEST_LAYER_TABLE
+#define HDR_SIZE(w) ((size_t)(w)->hdr_size)
+#else
+#define HDR_SIZE(w) ((size_t)SLIPEST_IMAGE_HEADER_SIZE)
+#endif
+
+/* The first HDR_SIZE(w) bytes are in: check the header of the format they give. A format-2 image (when
+ * accepted) is known at byte 64, the end of a format-1 header, and read on to the end of its layer table. */
+static slipest_status_t header_done(slipest_image_stream_t *w)
+{
+#if SLIPEST_LAYER_TABLE
+    if (w->hdr_size == SLIPEST_IMAGE_V2_HEADER_SIZE) {
+        w->format = 2u;
+        return slipest_image_v2_header(w);
+    }
+    if ((w->formats & 2u) != 0u) {
+        if (memcmp(w->hdr + SLIPEST_IMAGE_OFF_MAGIC, SLIPEST_IMAGE_MAGIC, 4) != 0) return SLIPEST_E_FORMAT;
+        if (le16(w->hdr + SLIPEST_IMAGE_OFF_FORMAT) == SLIPEST_IMAGE_V2_FORMAT) {
+            if (w->len < SLIPEST_IMAGE_V2_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE) return SLIPEST_E_LENGTH;
+            w->hdr_size = SLIPEST_IMAGE_V2_HEADER_SIZE;
+            return SLIPEST_OK;
+        }
+        if ((w->formats & 1u) == 0u) return SLIPEST_E_VERSION;
+    }
+    w->format = 1u;
+#endif
+    return check_header(w->hdr, w->len, &w->flags, &w->body);
 }
 
 slipest_status_t slipest_image_stream_feed(slipest_image_stream_t *w, const uint8_t *p, size_t n)
@@ -299,10 +354,10 @@ slipest_status_t slipest_image_stream_feed(slipest_image_stream_t *w, const uint
             return SLIPEST_E_LENGTH; /* more bytes than the image was said to have */
         }
         w->pos = pos + 1u;
-        if (pos < SLIPEST_IMAGE_HEADER_SIZE) {
-            w->hdr[pos] = p[i];
-            if (pos + 1u == SLIPEST_IMAGE_HEADER_SIZE) {
-                slipest_status_t st = check_header(w->hdr, w->len, &w->flags, &w->body);
+        if (pos < HDR_SIZE(w)) {
+            w->hdr[pos] = p[i]; /* HDR_SIZE(w) <= SLIPEST_IMAGE_STREAM_HDR */
+            if (pos + 1u == HDR_SIZE(w)) {
+                slipest_status_t st = header_done(w);
                 if (st != SLIPEST_OK) {
                     return st;
                 }
@@ -310,6 +365,10 @@ slipest_status_t slipest_image_stream_feed(slipest_image_stream_t *w, const uint
         } else if (pos >= w->body) {
             w->tail[pos - w->body] = p[i]; /* pos < len == body + trailer (+ tag): checked with the header */
             continue;
+#if SLIPEST_LAYER_TABLE
+        } else if (w->format == 2u) {
+            slipest_image_v2_byte(w, p[i]);
+#endif
         } else {
             payload_byte(w, p[i]);
         }
@@ -323,13 +382,23 @@ slipest_status_t slipest_image_stream_seal(const slipest_image_stream_t *w)
     if (slipest_image_le32(&w->tail[SLIPEST_IMAGE_TRAILER_OFF_CRC32]) != (w->crc ^ 0xFFFFFFFFu)) {
         return SLIPEST_E_CRC;
     }
-    return check_hash32(w->hdr, w->tail);
+#if SLIPEST_LAYER_TABLE
+    if (w->format == 2u) {
+        return check_hash32(w->hdr, SLIPEST_IMAGE_V2_OFF_HASH32, w->tail);
+    }
+#endif
+    return check_hash32(w->hdr, SLIPEST_IMAGE_OFF_HASH32, w->tail);
 }
 
 slipest_status_t slipest_image_stream_model(const slipest_image_stream_t *w, slipest_model_q_t *q,
                                             slipest_model_f32_t *mf)
 {
     slipest_status_t st;
+#if SLIPEST_LAYER_TABLE
+    if (w->format == 2u) {
+        return slipest_image_v2_model(w, q, mf);
+    }
+#endif
     header_scalars(w->hdr, q);
     st = slipest_model_q_check_scalars(q);
     if (st != SLIPEST_OK) {
@@ -408,34 +477,3 @@ slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t exp
     *mq = q;
     return SLIPEST_OK;
 }
-
-#if SLIPEST_LAYER_TABLE
-/* The element readers of the format-2 reader (slipest_image_table.c), on this file's byte decoders (le16,
- * slipest_image_le32, s16, s32, f32_of): one copy of each for both formats. */
-void slipest_image_get_i16(const uint8_t *img, size_t *off, int16_t *dst, size_t n)
-{
-    size_t i;
-    for (i = 0u; i < n; ++i) {
-        dst[i] = s16(le16(&img[*off]));
-        *off += 2u;
-    }
-}
-void slipest_image_get_i32(const uint8_t *img, size_t *off, int32_t *dst, size_t n)
-{
-    size_t i;
-    for (i = 0u; i < n; ++i) {
-        dst[i] = s32(slipest_image_le32(&img[*off]));
-        *off += 4u;
-    }
-}
-#ifndef SLIPEST_Q_ONLY
-void slipest_image_get_f32(const uint8_t *img, size_t *off, float *dst, size_t n)
-{
-    size_t i;
-    for (i = 0u; i < n; ++i) {
-        dst[i] = f32_of(slipest_image_le32(&img[*off]));
-        *off += 4u;
-    }
-}
-#endif
-#endif /* SLIPEST_LAYER_TABLE */

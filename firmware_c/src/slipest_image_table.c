@@ -1,11 +1,14 @@
-/* Validating reader of a format-2 model image (the layer table; writer: export/model_image.py, every
- * offset and size from slipest_image_layout.h, generated from export/image_layout.py). Kept apart from
- * the format-1 reader (slipest_image.c) so that a build without layer tables does not link it. Every
- * integer is assembled from little-endian bytes; the table's sizes are checked against the build's caps
- * and the payload size is checked against the size the table gives before any array is read. */
+/* The format-2 (layer-table) parts of the one model-image validator (slipest_image.c's stream; writer:
+ * export/model_image.py, every offset and size from slipest_image_layout.h, generated from
+ * export/image_layout.py). Kept apart from the format-1 reader so that a build without layer tables does not
+ * link it. The header's table is checked against the build's caps, and the payload size against the size the
+ * table gives, before any payload byte is taken; the payload is then a list of segments derived from the
+ * table (per block w, b, gamma, beta, GELU; the head's w, b; the seeds; then the float arrays), each element
+ * checked as it arrives and stored when the caller gave storage. */
 #include "slipest_image_table.h"
 #include "slipest_image.h"
 #include "slipest_image_internal.h"
+#include "slipest_model_internal.h"
 
 #include <string.h>
 
@@ -15,22 +18,8 @@ static size_t rec_at(unsigned k) { return SLIPEST_IMAGE_V2_TABLE_AT + ((size_t)k
 /* an unsigned 16-bit field from its little-endian bytes */
 static uint16_t u16_at(const uint8_t *p) { return (uint16_t)((unsigned)p[0] | ((unsigned)p[1] << 8)); }
 
-/* a signed field of 1 (int16) or 4 (int32) elements through the shared element readers */
-static int16_t i16_at(const uint8_t *img, size_t at)
-{
-    int16_t v = 0;
-    size_t off = at;
-    slipest_image_get_i16(img, &off, &v, 1u);
-    return v;
-}
-
-static int32_t i32_at(const uint8_t *img, size_t at)
-{
-    int32_t v = 0;
-    size_t off = at;
-    slipest_image_get_i32(img, &off, &v, 1u);
-    return v;
-}
+static int16_t i16_at(const uint8_t *p) { return slipest_image_s16(u16_at(p)); }
+static int32_t i32_at(const uint8_t *p) { return slipest_image_s32(slipest_image_le32(p)); }
 
 uint16_t slipest_image_format_of(const uint8_t *img, size_t len)
 {
@@ -65,18 +54,52 @@ static slipest_status_t table_sizes(const uint8_t *img, unsigned n_layers, uint1
     return SLIPEST_OK;
 }
 
-/* magic, version, architecture, sizes, reserved bytes, lengths, CRC and hash32 of a format-2 image */
-static slipest_status_t check_frame(const uint8_t *img, size_t len, uint32_t expect32, uint16_t *width,
-                                    uint16_t *flags, size_t *body)
+
+/* the scalars of record k of the header (its arrays are set by the caller) */
+static void record_scalars(const uint8_t *hdr, unsigned k, uint16_t width, slipest_layer_q_t *l)
 {
+    size_t r = rec_at(k);
+    uint8_t eps_e = hdr[r + SLIPEST_IMAGE_V2_REC_EPS_E];
+    memset(l, 0, sizeof *l);
+    l->width = width;
+    l->h_bits = hdr[r + SLIPEST_IMAGE_V2_REC_H_BITS];
+    l->e_bits = hdr[r + SLIPEST_IMAGE_V2_REC_E_BITS];
+    l->fz = hdr[r + SLIPEST_IMAGE_V2_REC_FZ];
+    l->fg = hdr[r + SLIPEST_IMAGE_V2_REC_FG];
+    l->fy = hdr[r + SLIPEST_IMAGE_V2_REC_FY];
+    l->eps_e = (int8_t)((eps_e > 127u) ? ((int)eps_e - 256) : (int)eps_e);
+    l->eps_m = i16_at(hdr + r + SLIPEST_IMAGE_V2_REC_EPS_M);
+    l->c = i32_at(hdr + r + SLIPEST_IMAGE_V2_REC_C);
+}
+
+/* the payload's segments, in order: per block W B GAMMA BETA GELU, the head's W B, the seeds; with the float
+ * model its eps, per block W B GAMMA BETA, the head's W B */
+#define K2_W 0u
+#define K2_B 1u
+#define K2_GAMMA 2u
+#define K2_BETA 3u
+#define K2_GELU 4u
+#define K2_RSQRT 5u
+#define K2_FEPS 6u
+#define K2_END 7u
+
+/* the first record that fails a shift check makes the image's parameter status (reported after CRC/HMAC) */
+static void defer(slipest_image_stream_t *w, slipest_status_t st)
+{
+    if ((st != SLIPEST_OK) && (w->deferred == SLIPEST_OK)) {
+        w->deferred = st;
+    }
+}
+
+slipest_status_t slipest_image_v2_header(slipest_image_stream_t *w)
+{
+    const uint8_t *img = w->hdr;
     size_t q_bytes = 0u, f_bytes = 0u, tail, i;
-    uint32_t payload, sha_head;
-    unsigned n_layers;
+    uint32_t payload;
+    unsigned n_layers, k;
     slipest_status_t st;
     uint16_t f;
-    if (len < SLIPEST_IMAGE_V2_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE) return SLIPEST_E_LENGTH;
-    if (memcmp(img + SLIPEST_IMAGE_V2_OFF_MAGIC, SLIPEST_IMAGE_MAGIC, 4) != 0) return SLIPEST_E_FORMAT;
-    if (u16_at(img + SLIPEST_IMAGE_V2_OFF_FORMAT) != SLIPEST_IMAGE_V2_FORMAT) return SLIPEST_E_VERSION;
+    /* the magic was checked, and len >= header + trailer, when the format field said 2 */
     n_layers = img[SLIPEST_IMAGE_V2_OFF_N_LAYERS];
     if (u16_at(img + SLIPEST_IMAGE_V2_OFF_ARCH) != SLIPEST_IMAGE_ARCH_TABLE || u16_at(img + SLIPEST_IMAGE_V2_OFF_HEADER_SIZE) != SLIPEST_IMAGE_V2_HEADER_SIZE ||
         img[SLIPEST_IMAGE_V2_OFF_N_IN] != SLIPEST_N_FEATURES || img[SLIPEST_IMAGE_V2_OFF_N_OUT] != SLIPEST_N_CLASSES || img[SLIPEST_IMAGE_V2_OFF_GELU_N] != SLIPEST_Q_GELU_N ||
@@ -92,18 +115,269 @@ static slipest_status_t check_frame(const uint8_t *img, size_t len, uint32_t exp
          i < SLIPEST_IMAGE_V2_HEADER_SIZE; ++i) {
         if (img[i] != 0u) return SLIPEST_E_FORMAT;
     }
-    st = table_sizes(img, n_layers, width, &q_bytes, &f_bytes);
+    st = table_sizes(img, n_layers, w->width, &q_bytes, &f_bytes);
     if (st != SLIPEST_OK) return st;
     payload = slipest_image_le32(img + SLIPEST_IMAGE_V2_OFF_PAYLOAD_SIZE);
     if ((size_t)payload != q_bytes + (((f & SLIPEST_IMAGE_FLAG_F32) != 0u) ? f_bytes : 0u)) return SLIPEST_E_LENGTH;
     tail = SLIPEST_IMAGE_TRAILER_SIZE + (((f & SLIPEST_IMAGE_FLAG_HMAC) != 0u) ? SLIPEST_IMAGE_HMAC_SIZE : 0u);
-    if (len != SLIPEST_IMAGE_V2_HEADER_SIZE + (size_t)payload + tail) return SLIPEST_E_LENGTH;
-    *body = SLIPEST_IMAGE_V2_HEADER_SIZE + (size_t)payload;
-    if (slipest_image_le32(img + *body + SLIPEST_IMAGE_TRAILER_OFF_CRC32) != slipest_crc32(img, *body)) return SLIPEST_E_CRC;
-    i = *body + SLIPEST_IMAGE_TRAILER_OFF_SHA256;
-    sha_head = ((uint32_t)img[i] << 24) | ((uint32_t)img[i + 1u] << 16) | ((uint32_t)img[i + 2u] << 8) | img[i + 3u];
-    if (slipest_image_le32(img + SLIPEST_IMAGE_V2_OFF_HASH32) != sha_head || (expect32 != 0u && sha_head != expect32)) return SLIPEST_E_HASH;
-    *flags = f;
+    if (w->len != SLIPEST_IMAGE_V2_HEADER_SIZE + (size_t)payload + tail) return SLIPEST_E_LENGTH;
+    w->body = SLIPEST_IMAGE_V2_HEADER_SIZE + (size_t)payload;
+    w->flags = f;
+    w->n_layers = (uint8_t)n_layers;
+    w->width[n_layers] = SLIPEST_N_CLASSES; /* the head */
+    /* the model checks of the scalars: every block's shifts (each one's row bound with them), the eps cap */
+    if (i32_at(img + SLIPEST_IMAGE_V2_OFF_EPS_CAP) != 1073741824) {
+        defer(w, SLIPEST_E_RANGE);
+    }
+    for (k = 0u; k < n_layers; ++k) {
+        slipest_layer_q_t l;
+        record_scalars(img, k, w->width[k], &l);
+        w->limit[k] = 0; /* a block whose shifts failed: no row passes (its status is already deferred) */
+        defer(w, slipest_model_layer_scalars(&l, img[SLIPEST_IMAGE_V2_OFF_GELU_STEP_LOG2], &w->limit[k]));
+    }
+    w->seg = K2_W;
+    w->layer = 0u;
+    w->idx = 0u;
+    w->w_at = 0u;
+    w->u_at = 0u;
+    w->f32part = 0u;
+    return SLIPEST_OK;
+}
+
+/* inputs of the current block (or the head) */
+static uint32_t seg_n_in(const slipest_image_stream_t *w)
+{
+    return (w->layer == 0u) ? (uint32_t)SLIPEST_N_FEATURES : (uint32_t)w->width[w->layer - 1u];
+}
+
+/* elements of the current segment (never 0: widths >= 2) */
+static uint32_t seg_count(const slipest_image_stream_t *w)
+{
+    uint32_t width = w->width[w->layer];
+    switch (w->seg) {
+    case K2_W: return width * seg_n_in(w);
+    case K2_GELU: return SLIPEST_Q_GELU_N;
+    case K2_RSQRT: return SLIPEST_Q_RSQRT_SEED_N;
+    case K2_FEPS: return 1u;
+    default: return width; /* K2_B, K2_GAMMA, K2_BETA */
+    }
+}
+
+/* bytes of each element of the current segment */
+static unsigned seg_bytes(const slipest_image_stream_t *w)
+{
+    return ((w->f32part == 0u) && ((w->seg == K2_W) || (w->seg == K2_GAMMA) || (w->seg == K2_GELU))) ? 2u : 4u;
+}
+
+/* on to the segment after the current one */
+static void next_seg(slipest_image_stream_t *w)
+{
+    unsigned last = K2_GELU; /* a block's last segment: the GELU table, or beta in the float section */
+    if (w->f32part != 0u) {
+        last = K2_BETA;
+    }
+    w->idx = 0u;
+    if (w->seg == K2_FEPS) {
+        w->seg = K2_W; /* the float blocks, from the first one */
+        w->layer = 0u;
+        w->w_at = 0u;
+        w->u_at = 0u;
+    } else if (w->seg == K2_RSQRT) {
+        w->f32part = 1u;
+        w->seg = ((w->flags & SLIPEST_IMAGE_FLAG_F32) != 0u) ? K2_FEPS : K2_END;
+    } else if (w->layer == w->n_layers) {
+        /* the head: W then B, then the seeds (fixed point) or the end (float) */
+        w->seg = (w->seg == K2_W) ? K2_B : ((w->f32part != 0u) ? K2_END : K2_RSQRT);
+    } else if (w->seg == last) {
+        w->w_at += w->width[w->layer] * seg_n_in(w);
+        w->u_at += w->width[w->layer];
+        w->layer = (uint8_t)(w->layer + 1u);
+        w->seg = K2_W;
+    } else {
+        w->seg = (uint8_t)(w->seg + 1u);
+    }
+}
+
+/* one float element: checked (finite; eps positive), stored when the caller gave storage */
+static void visit_f32(slipest_image_stream_t *w, uint32_t raw)
+{
+    if ((w->check_f32 != 0u) && (slipest_image_f32_ok(raw, w->seg == K2_FEPS) == 0)) {
+        defer(w, SLIPEST_E_NONFINITE);
+    }
+#ifndef SLIPEST_Q_ONLY
+    if (w->seg == K2_FEPS) {
+        w->ln_eps_bits = raw;
+    } else if (w->tfs != NULL) {
+        uint32_t i = w->idx;
+        float v = slipest_image_f32_of(raw);
+        switch (w->seg) {
+        case K2_W: w->tfs->w[w->w_at + i] = v; break;
+        case K2_B: w->tfs->b[w->u_at + i] = v; break;
+        case K2_GAMMA: w->tfs->gamma[w->u_at + i] = v; break;
+        default: w->tfs->beta[w->u_at + i] = v; break; /* K2_BETA */
+        }
+    } else {
+        /* checked only */
+    }
+#endif
+}
+
+/* one fixed-point element: the row sums and bounds, LayerNorm bias and seed checks of
+ * slipest_model_q_check(), as the elements arrive; stored when the caller gave storage. table_sizes() kept
+ * every index inside the caps that size the storage. */
+static void visit_q(slipest_image_stream_t *w, uint32_t raw, unsigned size)
+{
+    int32_t v = (size == 2u) ? (int32_t)slipest_image_s16((uint16_t)raw) : slipest_image_s32(raw);
+    uint32_t i = w->idx;
+    slipest_image_table_q_t *t = w->tqs;
+    switch (w->seg) {
+    case K2_W:
+        w->row_abs[i / seg_n_in(w)] += (v < 0) ? (uint32_t)(-v) : (uint32_t)v; /* |v| <= 2^15 */
+        if (t != NULL) {
+            t->w[w->w_at + i] = (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): an int16 element */
+        }
+        break;
+    case K2_B:
+        /* the row's bound now that its weights are summed; the sum restarts for the next layer's row i */
+        if (slipest_model_row_ok((int64_t)w->row_abs[i], v,
+                                 (w->layer < w->n_layers) ? w->limit[w->layer] : SLIPEST_Q_ACC2_LIMIT) == 0) {
+            defer(w, SLIPEST_E_RANGE);
+        }
+        w->row_abs[i] = 0u;
+        if (t != NULL) {
+            t->b[w->u_at + i] = v;
+        }
+        break;
+    case K2_GAMMA:
+        if (t != NULL) {
+            t->gamma[w->u_at + i] = (int16_t)v; /* NOLINT(bugprone-narrowing-conversions): an int16 element */
+        }
+        break;
+    case K2_BETA:
+        if ((v < -32768) || (v > 32767)) {
+            defer(w, SLIPEST_E_RANGE); /* the LayerNorm bias must fit int16 */
+        }
+        if (t != NULL) {
+            t->beta[w->u_at + i] = v;
+        }
+        break;
+    case K2_GELU:
+        if (t != NULL) {
+            t->gelu[((uint32_t)w->layer * SLIPEST_Q_GELU_N) + i] = (int16_t)v; /* NOLINT: an int16 element */
+        }
+        break;
+    default: /* K2_RSQRT */
+        if (slipest_model_seed_ok(raw, (int)i) == 0) {
+            defer(w, SLIPEST_E_RANGE);
+        }
+        if (t != NULL) {
+            t->rsqrt_seed[i] = raw;
+        }
+        break;
+    }
+}
+
+void slipest_image_v2_byte(slipest_image_stream_t *w, uint8_t b)
+{
+    unsigned size;
+    /* the payload size, checked with the header, ends the bytes where the segments end */
+    if (w->seg >= K2_END) return;
+    size = seg_bytes(w);
+    w->acc |= (uint32_t)b << (8u * w->nb);
+    w->nb = (uint8_t)(w->nb + 1u);
+    if (w->nb < size) {
+        return;
+    }
+    if (w->f32part != 0u) {
+        visit_f32(w, w->acc);
+    } else {
+        visit_q(w, w->acc, size);
+    }
+    w->acc = 0u;
+    w->nb = 0u;
+    w->idx = w->idx + 1u;
+    if (w->idx == seg_count(w)) {
+        next_seg(w);
+    }
+}
+
+slipest_status_t slipest_image_v2_model(const slipest_image_stream_t *w, slipest_model_q_t *q, slipest_model_f32_t *mf)
+{
+    const uint8_t *img = w->hdr;
+    uint32_t w_at = 0u, u_at = 0u, n_in = SLIPEST_N_FEATURES;
+    unsigned k;
+    memset(q, 0, sizeof *q);
+    q->n_layers = w->n_layers;
+    q->n_in = img[SLIPEST_IMAGE_V2_OFF_N_IN];
+    q->n_out = img[SLIPEST_IMAGE_V2_OFF_N_OUT];
+    q->gelu_n = img[SLIPEST_IMAGE_V2_OFF_GELU_N];
+    q->rsqrt_seed_n = img[SLIPEST_IMAGE_V2_OFF_RSQRT_SEED_N];
+    q->gelu_step_log2 = img[SLIPEST_IMAGE_V2_OFF_GELU_STEP_LOG2];
+    q->eps_cap = i32_at(img + SLIPEST_IMAGE_V2_OFF_EPS_CAP);
+    q->version = slipest_image_le32(img + SLIPEST_IMAGE_V2_OFF_MODEL_VERSION);
+    q->hash32 = slipest_image_le32(img + SLIPEST_IMAGE_V2_OFF_HASH32);
+    if (w->deferred != SLIPEST_OK) {
+        return w->deferred;
+    }
+    /* No second slipest_model_q_check() on the storage: every value stored is the very value the stream
+     * checked (every check of slipest_model_q_check(), block by block) */
+    if (w->tqs != NULL) {
+        slipest_image_table_q_t *t = w->tqs;
+        memset(t->layers, 0, sizeof t->layers);
+        for (k = 0u; k < w->n_layers; ++k) {
+            slipest_layer_q_t *l = &t->layers[k];
+            record_scalars(img, k, w->width[k], l);
+            l->w = &t->w[w_at];
+            l->b = &t->b[u_at];
+            l->gamma = &t->gamma[u_at];
+            l->beta = &t->beta[u_at];
+            l->gelu = &t->gelu[k * SLIPEST_Q_GELU_N];
+            w_at += w->width[k] * n_in;
+            u_at += w->width[k];
+            n_in = w->width[k];
+        }
+        q->w2 = &t->w[w_at];
+        q->b2 = &t->b[u_at];
+        q->rsqrt_seed = t->rsqrt_seed;
+        q->layers = t->layers;
+    }
+#ifndef SLIPEST_Q_ONLY
+    if ((mf != NULL) && (w->tfs != NULL)) {
+        slipest_image_table_f32_t *t = w->tfs;
+        slipest_model_f32_t f;
+        slipest_status_t st;
+        memset(&f, 0, sizeof f);
+        memset(t->layers, 0, sizeof t->layers);
+        w_at = 0u;
+        u_at = 0u;
+        n_in = SLIPEST_N_FEATURES;
+        for (k = 0u; k < w->n_layers; ++k) {
+            slipest_layer_f32_t *l = &t->layers[k];
+            l->width = w->width[k];
+            l->w = &t->w[w_at];
+            l->b = &t->b[u_at];
+            l->gamma = &t->gamma[u_at];
+            l->beta = &t->beta[u_at];
+            w_at += w->width[k] * n_in;
+            u_at += w->width[k];
+            n_in = w->width[k];
+        }
+        f.ln_eps = slipest_image_f32_of(w->ln_eps_bits);
+        f.w2 = &t->w[w_at];
+        f.b2 = &t->b[u_at];
+        f.layers = t->layers;
+        f.n_layers = q->n_layers;
+        f.n_in = q->n_in;
+        f.n_out = q->n_out;
+        f.version = q->version;
+        f.hash32 = q->hash32;
+        st = slipest_model_f32_check(&f);
+        if (st != SLIPEST_OK) return st;
+        *mf = f;
+    }
+#else
+    (void)mf;
+#endif
     return SLIPEST_OK;
 }
 
@@ -111,18 +385,22 @@ slipest_status_t slipest_image_read_table(const uint8_t *img, size_t len, uint32
                                           slipest_image_table_q_t *qs, slipest_model_f32_t *mf,
                                           slipest_image_table_f32_t *fs)
 {
-    uint16_t width[SLIPEST_MAX_LAYERS];
-    uint16_t flags = 0u;
-    size_t body = 0u, off = SLIPEST_IMAGE_V2_HEADER_SIZE, w_at = 0u, u_at = 0u, n_in = SLIPEST_N_FEATURES;
+    slipest_image_stream_t w;
     slipest_model_q_t q;
+    slipest_model_f32_t f;
     slipest_status_t st;
-    unsigned k;
 
     if (img == NULL || mq == NULL || qs == NULL || (mf != NULL && fs == NULL)) return SLIPEST_E_NULL;
-    memset(width, 0, sizeof width);
-    st = check_frame(img, len, expect32, width, &flags, &body);
+    /* the one validator, fed the whole buffer, format 2 only: floats are checked when the float model is asked for */
+    st = slipest_image_stream_init(&w, len, NULL, NULL, (mf != NULL) ? 1 : 0);
     if (st != SLIPEST_OK) return st;
-    if (mf != NULL && (flags & SLIPEST_IMAGE_FLAG_F32) == 0u) {
+    slipest_image_stream_table(&w, qs, (mf != NULL) ? fs : NULL, 1);
+    st = slipest_image_stream_feed(&w, img, len);
+    if (st != SLIPEST_OK) return st;
+    st = slipest_image_stream_seal(&w);
+    if (st != SLIPEST_OK) return st;
+    if (expect32 != 0u && slipest_image_le32(&w.hdr[SLIPEST_IMAGE_V2_OFF_HASH32]) != expect32) return SLIPEST_E_HASH;
+    if (mf != NULL && (w.flags & SLIPEST_IMAGE_FLAG_F32) == 0u) {
         return SLIPEST_E_STATE;
     }
 #ifdef SLIPEST_Q_ONLY
@@ -130,94 +408,12 @@ slipest_status_t slipest_image_read_table(const uint8_t *img, size_t len, uint32
         return SLIPEST_E_STATE;
     }
 #endif
-    memset(&q, 0, sizeof q);
-    memset(qs->layers, 0, sizeof qs->layers);
-    q.n_layers = img[SLIPEST_IMAGE_V2_OFF_N_LAYERS];
-    q.n_in = img[SLIPEST_IMAGE_V2_OFF_N_IN];
-    q.n_out = img[SLIPEST_IMAGE_V2_OFF_N_OUT];
-    q.gelu_n = img[SLIPEST_IMAGE_V2_OFF_GELU_N];
-    q.rsqrt_seed_n = img[SLIPEST_IMAGE_V2_OFF_RSQRT_SEED_N];
-    q.gelu_step_log2 = img[SLIPEST_IMAGE_V2_OFF_GELU_STEP_LOG2];
-    q.eps_cap = i32_at(img, SLIPEST_IMAGE_V2_OFF_EPS_CAP);
-    q.version = slipest_image_le32(img + SLIPEST_IMAGE_V2_OFF_MODEL_VERSION);
-    q.hash32 = slipest_image_le32(img + SLIPEST_IMAGE_V2_OFF_HASH32);
-    for (k = 0u; k < q.n_layers; ++k) { /* table_sizes() kept every array inside the caps */
-        slipest_layer_q_t *l = &qs->layers[k];
-        size_t r = rec_at(k);
-        uint8_t eps_e = img[r + SLIPEST_IMAGE_V2_REC_EPS_E];
-        l->width = width[k];
-        l->h_bits = img[r + SLIPEST_IMAGE_V2_REC_H_BITS];
-        l->e_bits = img[r + SLIPEST_IMAGE_V2_REC_E_BITS];
-        l->fz = img[r + SLIPEST_IMAGE_V2_REC_FZ];
-        l->fg = img[r + SLIPEST_IMAGE_V2_REC_FG];
-        l->fy = img[r + SLIPEST_IMAGE_V2_REC_FY];
-        l->eps_e = (int8_t)((eps_e > 127u) ? ((int)eps_e - 256) : (int)eps_e);
-        l->eps_m = i16_at(img, r + SLIPEST_IMAGE_V2_REC_EPS_M);
-        l->c = i32_at(img, r + SLIPEST_IMAGE_V2_REC_C);
-        slipest_image_get_i16(img, &off, &qs->w[w_at], (size_t)width[k] * n_in);
-        slipest_image_get_i32(img, &off, &qs->b[u_at], width[k]);
-        slipest_image_get_i16(img, &off, &qs->gamma[u_at], width[k]);
-        slipest_image_get_i32(img, &off, &qs->beta[u_at], width[k]);
-        slipest_image_get_i16(img, &off, &qs->gelu[k * SLIPEST_Q_GELU_N], SLIPEST_Q_GELU_N);
-        l->w = &qs->w[w_at];
-        l->b = &qs->b[u_at];
-        l->gamma = &qs->gamma[u_at];
-        l->beta = &qs->beta[u_at];
-        l->gelu = &qs->gelu[k * SLIPEST_Q_GELU_N];
-        w_at += (size_t)width[k] * n_in;
-        u_at += width[k];
-        n_in = width[k];
-    }
-    slipest_image_get_i16(img, &off, &qs->w[w_at], (size_t)SLIPEST_N_CLASSES * n_in);
-    slipest_image_get_i32(img, &off, &qs->b[u_at], SLIPEST_N_CLASSES);
-    for (k = 0u; k < SLIPEST_Q_RSQRT_SEED_N; ++k, off += 4u) {
-        qs->rsqrt_seed[k] = slipest_image_le32(img + off);
-    }
-    q.w2 = &qs->w[w_at];
-    q.b2 = &qs->b[u_at];
-    q.rsqrt_seed = qs->rsqrt_seed;
-    q.layers = qs->layers;
-    st = slipest_model_q_check(&q); /* every block's shifts and row bounds, the head, the seeds */
+    memset(&f, 0, sizeof f);
+    st = slipest_image_stream_model(&w, &q, (mf != NULL) ? &f : NULL);
     if (st != SLIPEST_OK) return st;
-#ifndef SLIPEST_Q_ONLY
     if (mf != NULL) {
-        slipest_model_f32_t f;
-        memset(&f, 0, sizeof f);
-        memset(fs->layers, 0, sizeof fs->layers);
-        slipest_image_get_f32(img, &off, &f.ln_eps, 1u);
-        w_at = 0u;
-        u_at = 0u;
-        n_in = SLIPEST_N_FEATURES;
-        for (k = 0u; k < q.n_layers; ++k) {
-            slipest_layer_f32_t *l = &fs->layers[k];
-            l->width = width[k];
-            slipest_image_get_f32(img, &off, &fs->w[w_at], (size_t)width[k] * n_in);
-            slipest_image_get_f32(img, &off, &fs->b[u_at], width[k]);
-            slipest_image_get_f32(img, &off, &fs->gamma[u_at], width[k]);
-            slipest_image_get_f32(img, &off, &fs->beta[u_at], width[k]);
-            l->w = &fs->w[w_at];
-            l->b = &fs->b[u_at];
-            l->gamma = &fs->gamma[u_at];
-            l->beta = &fs->beta[u_at];
-            w_at += (size_t)width[k] * n_in;
-            u_at += width[k];
-            n_in = width[k];
-        }
-        slipest_image_get_f32(img, &off, &fs->w[w_at], (size_t)SLIPEST_N_CLASSES * n_in);
-        slipest_image_get_f32(img, &off, &fs->b[u_at], SLIPEST_N_CLASSES);
-        f.w2 = &fs->w[w_at];
-        f.b2 = &fs->b[u_at];
-        f.layers = fs->layers;
-        f.n_layers = q.n_layers;
-        f.n_in = q.n_in;
-        f.n_out = q.n_out;
-        f.version = q.version;
-        f.hash32 = q.hash32;
-        st = slipest_model_f32_check(&f);
-        if (st != SLIPEST_OK) return st;
         *mf = f;
     }
-#endif
     *mq = q;
     return SLIPEST_OK;
 }

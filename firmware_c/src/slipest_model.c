@@ -69,18 +69,13 @@ slipest_status_t slipest_model_q_check_scalars(const slipest_model_q_t *m)
 }
 
 #if SLIPEST_LAYER_TABLE
-/* One block of the table after n_in inputs: pointers, the width-dependent shifts of the overflow proof
- * (docs/fixed_point.md, "A general block"), every row bound and LayerNorm bias. */
-static slipest_status_t layer_q_check(const slipest_layer_q_t *l, unsigned n_in, unsigned gelu_step_log2)
+/* the width-dependent shifts of the overflow proof (docs/fixed_point.md, "A general block"); shared with
+ * the image stream, which checks the rows as they arrive */
+slipest_status_t slipest_model_layer_scalars(const slipest_layer_q_t *l, unsigned gelu_step_log2, int64_t *limit)
 {
     int32_t u_shift, gelu_shift;
-    int64_t limit;
-    unsigned i, width;
+    unsigned width = l->width;
 
-    if (l->w == NULL || l->b == NULL || l->gamma == NULL || l->beta == NULL || l->gelu == NULL) {
-        return SLIPEST_E_NULL;
-    }
-    width = l->width;
     if (width < 2u || width > (unsigned)SLIPEST_MAX_WIDTH) {
         return SLIPEST_E_ARCH;
     }
@@ -96,8 +91,26 @@ static slipest_status_t layer_q_check(const slipest_layer_q_t *l, unsigned n_in,
         return SLIPEST_E_RANGE;
     }
     /* accumulator: room for the rounding term 2^(k1 - 1) of rsr(h, k1), k1 <= 31 - h_bits */
-    limit = (int64_t)INT32_MAX - ((int64_t)1 << (32u - l->h_bits));
-    for (i = 0u; i < width; ++i) {
+    *limit = (int64_t)INT32_MAX - ((int64_t)1 << (32u - l->h_bits));
+    return SLIPEST_OK;
+}
+
+/* One block of the table after n_in inputs: pointers, the width-dependent shifts of the overflow proof
+ * (docs/fixed_point.md, "A general block"), every row bound and LayerNorm bias. */
+static slipest_status_t layer_q_check(const slipest_layer_q_t *l, unsigned n_in, unsigned gelu_step_log2)
+{
+    int64_t limit = 0;
+    unsigned i;
+    slipest_status_t st;
+
+    if (l->w == NULL || l->b == NULL || l->gamma == NULL || l->beta == NULL || l->gelu == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    st = slipest_model_layer_scalars(l, gelu_step_log2, &limit);
+    if (st != SLIPEST_OK) {
+        return st;
+    }
+    for (i = 0u; i < l->width; ++i) {
         if (!slipest_model_row_ok(row_abs_sum(&l->w[i * n_in], (int)n_in), l->b[i], limit) || l->beta[i] < -32768 ||
             l->beta[i] > 32767) {
             return SLIPEST_E_RANGE;

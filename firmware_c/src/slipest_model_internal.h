@@ -30,4 +30,10 @@ slipest_status_t slipest_model_q_check_scalars(const slipest_model_q_t *m);
 /* 1 when a row with sum_j |w_j| = abs_w_sum and bias b keeps its accumulator within limit. */
 int slipest_model_row_ok(int64_t abs_w_sum, int32_t b, int64_t limit);
 
+#if SLIPEST_LAYER_TABLE
+/* The checks of one block of a layer table on its scalar fields only (width, every shift, c, eps); on success
+ * *limit is the bound each of its rows' accumulators must keep (slipest_model_row_ok()). */
+slipest_status_t slipest_model_layer_scalars(const slipest_layer_q_t *l, unsigned gelu_step_log2, int64_t *limit);
+#endif
+
 #endif /* SLIPEST_MODEL_INTERNAL_H */

@@ -72,74 +72,88 @@ typedef struct {
  * (slipest_image_internal.h) plus the HMAC; with load, also decode it into the store's model
  * storage. Returns the first failure in the order header, CRC, hash, HMAC, parameters; on
  * success *id describes the image. */
-static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t len, int load, image_id_t *id)
+static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t rec_len, int load, image_id_t *id)
 {
-    slipest_image_stream_t w;
+    slipest_image_stream_t *w = &s->walk;
     slipest_hmac_sha256_t mac;
     uint32_t pos = 0u, base = slot_addr(s, slot), S = s->nvm.sector_size, n;
+#if SLIPEST_STORE_IMAGE_MAX < SLIPEST_IMAGE_READ_MAX_SIZE
+    uint32_t len = (rec_len > SLIPEST_STORE_IMAGE_MAX) ? 0u : rec_len;
+#else
+    uint32_t len = rec_len; /* the stream's own bound is the slot's */
+#endif
     uint8_t tag[SLIPEST_SHA256_SIZE];
     slipest_model_q_t q;
     slipest_model_f32_t *mf = NULL;
     slipest_status_t st;
 
-    /* the store checks the float model whatever the build: a Q-only node keeps it valid for others */
+    /* len: a record's length beyond a slot lowered below the largest image the build reads (the stream's own
+     * bound) is refused as a length of 0. The store checks the float model whatever the build: a Q-only node
+     * keeps it valid for others */
 #ifdef SLIPEST_Q_ONLY
-    st = slipest_image_stream_init(&w, len, (load != 0) ? &s->qs : NULL, NULL, 1);
+    st = slipest_image_stream_init(w, len, (load != 0) ? &s->qs : NULL, NULL, 1);
 #else
-    st = slipest_image_stream_init(&w, len, (load != 0) ? &s->qs : NULL, (load != 0) ? &s->fs : NULL, 1);
+    st = slipest_image_stream_init(w, len, (load != 0) ? &s->qs : NULL, (load != 0) ? &s->fs : NULL, 1);
 #endif
     if (st != SLIPEST_OK) {
         return st;
     }
+#if SLIPEST_LAYER_TABLE /* format 2 too, into its own storage */
+#ifdef SLIPEST_Q_ONLY
+    slipest_image_stream_table(w, (load != 0) ? &s->tqs : NULL, NULL, 0);
+#else
+    slipest_image_stream_table(w, (load != 0) ? &s->tqs : NULL, (load != 0) ? &s->tfs : NULL, 0);
+#endif
+#endif
     if (s->auth != NULL) {
         s->auth->init(&mac, s->auth->key, s->auth->key_len);
     }
-    /* len <= SLIPEST_IMAGE_MAX_SIZE (init), so at most SLIPEST_STORE_SLOT_SECTORS(S) iterations */
+    /* len <= SLIPEST_STORE_IMAGE_MAX (above), so at most SLIPEST_STORE_SLOT_SECTORS(S) iterations */
     while (pos < len) {
         n = (len - pos < S) ? len - pos : S;
         st = nvm_read(s, base + pos, s->buf, n);
         if (st == SLIPEST_OK) {
-            st = slipest_image_stream_feed(&w, s->buf, n);
+            st = slipest_image_stream_feed(w, s->buf, n);
         }
         if (st != SLIPEST_OK) {
             return st; /* the NVM's failure or the image's first refusal */
         }
-        /* the tag covers header and payload: w.body bytes (len until the header is complete) */
-        if ((s->auth != NULL) && (pos < w.body)) {
-            s->auth->update(&mac, s->buf, (w.body - pos < n) ? w.body - pos : n);
+        /* the tag covers header and payload: w->body bytes (len until the header is complete) */
+        if ((s->auth != NULL) && (pos < w->body)) {
+            s->auth->update(&mac, s->buf, (w->body - pos < n) ? w->body - pos : n);
         }
         pos += n;
     }
-    st = slipest_image_stream_seal(&w);
+    st = slipest_image_stream_seal(w);
     if (st != SLIPEST_OK) {
         return st;
     }
     if (s->auth != NULL) {
-        if ((w.flags & SLIPEST_IMAGE_FLAG_HMAC) == 0u) {
+        if ((w->flags & SLIPEST_IMAGE_FLAG_HMAC) == 0u) {
             return SLIPEST_E_AUTH;
         }
         s->auth->final(&mac, tag);
-        if (0 == slipest_ct_equal(tag, &w.tail[SLIPEST_IMAGE_TRAILER_SIZE], SLIPEST_SHA256_SIZE)) {
+        if (0 == slipest_ct_equal(tag, &w->tail[SLIPEST_IMAGE_TRAILER_SIZE], SLIPEST_SHA256_SIZE)) {
             return SLIPEST_E_AUTH;
         }
     }
 #ifndef SLIPEST_Q_ONLY
-    if ((load != 0) && ((w.flags & SLIPEST_IMAGE_FLAG_F32) != 0u)) {
+    if ((load != 0) && ((w->flags & SLIPEST_IMAGE_FLAG_F32) != 0u)) {
         mf = &s->mf;
     }
 #endif
-    st = slipest_image_stream_model(&w, &q, mf);
+    st = slipest_image_stream_model(w, &q, mf);
     if (st != SLIPEST_OK) {
         return st;
     }
-    id->crc = slipest_image_le32(&w.tail[SLIPEST_IMAGE_TRAILER_OFF_CRC32]);
+    id->crc = slipest_image_le32(&w->tail[SLIPEST_IMAGE_TRAILER_OFF_CRC32]);
     id->version = q.version;
     id->hash32 = q.hash32;
     if (load == 0) {
         return SLIPEST_OK;
     }
     s->mq = q; /* its arrays point into s->qs (and s->mf's into s->fs) */
-    memcpy(s->sha256, &w.tail[SLIPEST_IMAGE_TRAILER_OFF_SHA256], sizeof s->sha256);
+    memcpy(s->sha256, &w->tail[SLIPEST_IMAGE_TRAILER_OFF_SHA256], sizeof s->sha256);
 #ifndef SLIPEST_Q_ONLY
     s->have_f32 = (mf != NULL) ? 1u : 0u;
 #endif
@@ -337,7 +351,7 @@ slipest_status_t slipest_store_begin(slipest_store_t *store, uint32_t total_len,
     if (flags != 0u) {
         return SLIPEST_E_RANGE;
     }
-    if (total_len < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE || total_len > SLIPEST_IMAGE_MAX_SIZE) {
+    if (total_len < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE || total_len > SLIPEST_STORE_IMAGE_MAX) {
         store->c.refused_length++;
         return SLIPEST_E_LENGTH;
     }
@@ -391,7 +405,7 @@ slipest_status_t slipest_store_write(slipest_store_t *store, uint32_t offset, co
         return SLIPEST_E_LENGTH;
     }
     S = store->nvm.sector_size;
-    for (i = 0; i < len; ++i) { /* len <= total_len <= SLIPEST_IMAGE_MAX_SIZE */
+    for (i = 0; i < len; ++i) { /* len <= total_len <= SLIPEST_STORE_IMAGE_MAX */
         store->buf[store->buf_fill] = data[i];
         store->buf_fill += 1u;
         store->received += 1u;
@@ -640,4 +654,9 @@ uint32_t slipest_store_nvm_sectors(uint32_t sector_size)
         return 0u;
     }
     return SLIPEST_STORE_NVM_SECTORS(sector_size);
+}
+
+uint32_t slipest_store_image_max(void)
+{
+    return (uint32_t)SLIPEST_STORE_IMAGE_MAX;
 }

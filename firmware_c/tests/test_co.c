@@ -381,7 +381,7 @@ int main(void)
     CHECK(aborted() == SLIPEST_CO_ABORT_COMMAND);
 
     /* model image: sizes, block download with a lost segment (repeated), CRC, activation */
-    CHECK(block(img, img_len, SLIPEST_IMAGE_MAX_SIZE + 1u, 0u, 0) == SLIPEST_CO_ABORT_TOO_HIGH);
+    CHECK(block(img, img_len, SLIPEST_STORE_IMAGE_MAX + 1u, 0u, 0) == SLIPEST_CO_ABORT_TOO_HIGH);
     CHECK(block(img, img_len, 10u, 0u, 0) == SLIPEST_CO_ABORT_TOO_LOW);
     sdo8(0xC4u, 0x2000u, 0u, 0u); /* size not indicated */
     CHECK(aborted() == SLIPEST_CO_ABORT_LENGTH);

@@ -9,6 +9,7 @@
 #include "slipest_sha256.h"
 #include "image_edit.h"
 #include "ram_nvm.h"
+#include "store_upload.h"
 #include "slipest_store.h"
 
 #define SECTOR 128u
@@ -47,25 +48,9 @@ static size_t make_image(uint8_t *out, uint32_t v, const uint8_t *k)
 }
 
 static unsigned rng = 7u;
-static unsigned next_rand(void)
-{
-    rng = rng * 1103515245u + 12345u;
-    return (rng >> 16) & 0x7FFFu;
-}
 
 /* upload in random-sized chunks and finish; returns the finish (or first failing) status */
-static int upload(const uint8_t *img, size_t len)
-{
-    size_t off = 0;
-    int s = slipest_store_begin(&st, (uint32_t)len, 0u);
-    while (s == SLIPEST_OK && off < len) {
-        size_t n = 1u + next_rand() % 300u;
-        if (n > len - off) n = len - off;
-        s = slipest_store_write(&st, (uint32_t)off, img + off, n);
-        off += n;
-    }
-    return s == SLIPEST_OK ? slipest_store_finish(&st) : s;
-}
+static int upload(const uint8_t *img, size_t len) { return store_upload(&st, img, len, &rng); }
 
 /* open the store, authenticating with the 32-byte key k (NULL: no authentication) */
 static int reboot(const uint8_t *k)
@@ -191,7 +176,10 @@ static void test_version_rule_and_refusals(void)
 
     n = make_image(img, 11u, NULL);
     CHECK(upload(img, n - 1u) == SLIPEST_E_LENGTH && c->refused_length == 1u); /* truncated image */
-    CHECK(slipest_store_begin(&st, SLIPEST_IMAGE_MAX_SIZE + 1u, 0u) == SLIPEST_E_LENGTH && c->refused_length == 2u);
+    CHECK(slipest_store_begin(&st, SLIPEST_STORE_IMAGE_MAX + 1u, 0u) == SLIPEST_E_LENGTH && c->refused_length == 2u);
+    /* the build's maximum and NVM size, as tools read them through the library */
+    CHECK(slipest_store_image_max() == SLIPEST_STORE_IMAGE_MAX && SLIPEST_STORE_IMAGE_MAX >= SLIPEST_IMAGE_MAX_SIZE);
+    CHECK(slipest_store_nvm_sectors(SECTOR) == N_SECT && slipest_store_nvm_sectors(SLIPEST_STORE_SECTOR_MIN - 1u) == 0u);
     CHECK(slipest_store_begin(&st, (uint32_t)n, 1u) == SLIPEST_E_RANGE);
     /* announced more than sent: finish refuses */
     CHECK(slipest_store_begin(&st, (uint32_t)n, 0u) == SLIPEST_OK);
@@ -346,7 +334,7 @@ static void test_parameter_refusals(void)
     image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_NONFINITE && c->refused_range == 6u);
     n = make_image(img, 1u, NULL);
-    img[SLIPEST_IMAGE_OFF_FORMAT] = 2u;
+    img[SLIPEST_IMAGE_OFF_FORMAT] = 3u; /* a format no build reads (2 is the layer table's: test_store_table) */
     image_edit_reseal(img, body);
     CHECK(upload(img, n) == SLIPEST_E_VERSION && c->refused_format == 1u);
     CHECK(slipest_store_model_q(&st) == NULL && c->images_accepted == 0u);

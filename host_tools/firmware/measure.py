@@ -29,7 +29,9 @@ from .targets import Target
 MARK = "] slipest_count_mark"
 _MAP_ENTRY = re.compile(r"^ (\.[\w.]+|COMMON)\s*\n?\s+0x([0-9a-f]+)\s+0x([0-9a-f]+)\s+(\S+)", re.M)
 # the model store's objects (docs/model_slots.md): store, SHA-256, image reader, model check
-STORE_OBJECTS = ("slipest_store.c.obj", "slipest_sha256.c.obj", "slipest_image.c.obj", "slipest_model.c.obj")
+# the format-2 part of the image validator is linked only in a build with the layer-table reader
+STORE_OBJECTS = ("slipest_store.c.obj", "slipest_sha256.c.obj", "slipest_image.c.obj", "slipest_image_table.c.obj",
+                 "slipest_model.c.obj")
 
 
 def parse_kv(text: str) -> dict[str, int]:

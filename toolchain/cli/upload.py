@@ -13,6 +13,7 @@ from pathlib import Path
 from fleetlab.canopen_od import eds_text
 from fleetlab.host_tools.canopen_session import CobsCanBus, eds_for
 from fleetlab.host_tools.links import open_can_bus
+from fleetlab.export.image_layout import V2, layout_of
 from fleetlab.host_tools.upload import open_tapped, read_image, rehearse, upload_image
 
 
@@ -44,6 +45,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the report as one JSON object")
 
 
+def _is_table_image(image: bytes) -> bool:
+    """A format-2 (layer-table) image; an unreadable format is left for the node to refuse."""
+    try:
+        return layout_of(image) is V2
+    except ValueError:
+        return False
+
+
 def run(args: argparse.Namespace) -> int:
     from tqdm.auto import tqdm
 
@@ -54,7 +63,10 @@ def run(args: argparse.Namespace) -> int:
         if args.emulate:
             from fleetlab.host_tools.emulator import EMULATOR_TARGET, build, find_artifact
 
-            bdir = build(None, targets=(EMULATOR_TARGET,))
+            # a layer-table (format-2) image needs a node built with the layer-table kernels and reader; the
+            # emulated node still boots on the example SN-S model
+            table = _is_table_image(image)
+            bdir = build(None, targets=(EMULATOR_TARGET,), options={"SLIPEST_LAYER_TABLE": "ON"} if table else None)
             nvm = args.nvm or Path(tmp) / "nvm.bin"
             boot = None
             if args.boot_bundle is not None:

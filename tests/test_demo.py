@@ -30,6 +30,12 @@ def test_demo_quick_end_to_end(tmp_path):
     assert landing["boot_model_bit_exact"] and landing["new_model_bit_exact"] and landing["after"]["version"] == 2
     assert landing["windows_answered_during_upload_phase"] == landing["windows_streamed_during_upload_phase"]
     assert "## After landing: model update over CANopen" in report
+    # SN-D beside SN-S: uploaded to the same node after the SN-S bundle, served bit-exact, its cost counted
+    deep = json.loads((out / "sn_d_upload.json").read_text())
+    assert deep["new_model_bit_exact"] and deep["after"]["version"] == 3
+    assert deep["upload"]["image_bytes"] > landing["upload"]["image_bytes"]
+    assert "## SN-S against SN-D" in report
+    assert "| sn-d | " in report and f"{deep['upload']['image_bytes']:,}" in report
     rows = sum(len(f.table) for f in load_dataset(out / "data").files)
     assert f"{rows} windows" in report
     assert "100% tests passed" in report

@@ -118,10 +118,23 @@ def plan(out: Path, seed: int, prof: Profile, cortex_m: bool) -> list[Stage]:
                                    "--model-version", 1),
                          _fleetlab("upload", "--bundle", bundle, "--emulate", "--boot-bundle", earth, "--rehearse", 10,
                                    "--seed", seed, "--scale", prof.emulate_scale, "--report", out / "after_landing.json")]))
-    if cortex_m:  # the cost figures are counted on the reference target's image under QEMU
+    if cortex_m:
+        # the paper's deep network on the same data and the same node: what it costs a user to pick SN-D
+        # (accuracy from one calibration draw, instructions and flash on the reference target, upload time)
+        fuse_d, bundle_d = out / "fuse_sn_d", out / "bundle_sn_d"
+        stages.append(Stage("sn_d", "SN-D beside SN-S: fuse, export and upload the deep network",
+                            [_fleetlab("fuse", "--arch", "sn-d", "--data", data, "--out", fuse_d, "--seed", seed,
+                                       "--epochs", prof.epochs, "--generations", prof.generations,
+                                       "--ants", prof.ants, "--no-progress"),
+                             _fleetlab("export", fuse_d / "fused.pt", "--out", bundle_d, "--data", data, "--check",
+                                       "--model-version", 3),
+                             _fleetlab("upload", "--bundle", bundle_d, "--emulate", "--boot-bundle", bundle,
+                                       "--rehearse", 10, "--seed", seed, "--scale", prof.emulate_scale,
+                                       "--report", out / "sn_d_upload.json")]))
+        # the cost figures are counted on the reference target's image under QEMU, SN-D beside SN-S
         stages.append(Stage("bench_c", f"C estimator cost: host timing, {cpu.description} instructions and size",
                             [_fleetlab("bench", "c", "--bundle", bundle, "--build-dir", out / "build",
-                                       "--iterations", prof.bench_iterations, "--json")]))
+                                       "--iterations", prof.bench_iterations, "--compare", bundle_d, "--json")]))
     # flight-software evidence for the exported bundle (cross builds are the stages above)
     stages.append(Stage("assure", "Assurance evidence: MISRA, analysers, stack bounds, coverage",
                         [_fleetlab("assure", "--bundle", bundle, "--out", out / "assurance", "--no-target")]))

@@ -129,6 +129,52 @@ def test_construct_follows_the_pseudo_random_proportional_rule():
     torch.testing.assert_close(freq, expected, atol=0.008, rtol=0)
 
 
+def _departures_row_by_row(tau, eta, q0, n_ants, gen, alpha, beta):
+    """construct_ants' paths computed the plain way: every row's departures found with torch's
+    nonzero and located by a search of that row alone (rows shifted by 2t, as the one flat search
+    sees them), the same uniforms and float64 arithmetic."""
+    n_idx, m = tau.shape
+    rows = torch.arange(n_idx)
+    greedy = tau.argmax(dim=1)
+    weight = tau if alpha == 1.0 else tau.pow(alpha)
+    weight = (weight if eta is None else weight * (eta if beta == 1.0 else eta.pow(beta))).to(torch.float64)
+    w_greedy = weight[rows, greedy]
+    w_others = weight.sum(dim=1) - w_greedy
+    leave = ((1.0 - q0) * w_others / (w_others + w_greedy)).to(torch.float32)
+    others = weight.clone()
+    others[rows, greedy] = 0.0
+    cdf = others.cumsum(dim=1) / w_others.unsqueeze(1)
+    cdf[:, -1] = 1.0
+    u = torch.rand(n_idx, n_ants, generator=gen)
+    paths = greedy.to(torch.int32).expand(n_ants, n_idx).clone()
+    for t in range(n_idx):
+        ants = (u[t] < leave[t]).nonzero().squeeze(1)
+        v = u[t, ants].to(torch.float64) / leave[t]
+        paths[ants, t] = torch.searchsorted(cdf[t] + 2.0 * t, 2.0 * t + v, right=True).clamp(max=m - 1).to(torch.int32)
+    return paths
+
+
+@pytest.mark.parametrize("case", ["spread", "heuristic", "alpha", "concentrated", "concentrated-heuristic"])
+def test_construct_matches_the_row_by_row_rule(case):
+    """Issue 30: the departures are found with numpy and indexed flat (faster); the paths are those
+    of the plain row-by-row computation, bit for bit, early (spread pheromone) and late in a run
+    (one candidate per index at τ_max, the rest at τ_min, few departures)."""
+    gen = torch.Generator().manual_seed(11)
+    n_idx, m = 543, 48
+    tau = torch.rand(n_idx, m, generator=gen) + 0.5
+    if case.startswith("concentrated"):
+        tau = torch.full((n_idx, m), 1.2e-4)
+        tau[torch.arange(n_idx), torch.randint(0, m, (n_idx,), generator=gen)] = 1.0
+    eta = torch.rand(n_idx, m, generator=gen) + 0.1 if case.endswith("heuristic") else None
+    alpha = 2.0 if case == "alpha" else 1.0
+    for q0 in (0.0, 0.5, 0.95):
+        paths, explorer = construct_ants(tau, eta, q0, 300, torch.Generator().manual_seed(5), alpha, 1.5)
+        expected = _departures_row_by_row(tau, eta, q0, 300, torch.Generator().manual_seed(5), alpha, 1.5)
+        assert torch.equal(paths, expected)
+        assert torch.equal(explorer, (expected != tau.argmax(dim=1)).any(dim=1))
+        assert explorer.any()
+
+
 def test_greedy_ants_share_one_evaluation():
     """Ants that never left the greedy path get the greedy model's J; every other ant its own."""
     gen = torch.Generator().manual_seed(3)

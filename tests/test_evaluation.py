@@ -111,6 +111,19 @@ def test_batched_runs_beside_cpu_jobs_give_the_same_numbers(dataset, small_setti
     assert comparable(beside) == comparable(loky_result)
 
 
+def test_timing_says_where_the_cpu_time_went(loky_result, small_settings):
+    """Issue 30: the evaluation reports the CPU seconds of the source models' training and of every
+    method's jobs (what `bench fusion --table-runs` reads); they add up to the total."""
+    t = loky_result["timing"]
+    assert set(t["sources_cpu_s"]) == {"experts"}  # no method of these needs the joint model
+    assert t["sources_cpu_s"]["experts"] > 0
+    assert set(t["method_cpu_s"]) == set(small_settings.methods) and all(v > 0 for v in t["method_cpu_s"].values())
+    for m, total in t["method_cpu_s"].items():  # two runs per method: the mean is half the sum
+        assert t["method_mean_cpu_s"][m] == pytest.approx(total / small_settings.runs)
+    assert t["cpu_s"] == pytest.approx(sum(t["sources_cpu_s"].values()) + sum(t["method_cpu_s"].values()))
+    assert t["jobs_without_cpu_time"] == 0
+
+
 def test_another_seed_changes_the_search(dataset, small_settings, loky_result):
     other = run_mccv(dataset, EvalSettings(**{**small_settings.__dict__, "seed": 4}), n_jobs=2, progress=False)
     a = loky_result["results"]["acomerge"]["150"]["macro_f1"]["runs"]

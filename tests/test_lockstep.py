@@ -139,6 +139,14 @@ def test_bench_reports_idle_and_loaded_runs(capsys):
                              "met": busy["run_s_idle"] <= 0.35 and busy["run_s_loaded"] <= 0.6}
 
 
+def test_bench_table_needs_the_real_data(capsys):
+    """`--table-runs` times the paper table on the target rover's rows: without --data, one line."""
+    rc = main(["bench", "fusion", "--json", "--table-runs", "1", "--load", "0"])
+    assert rc == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--table-runs needs --data" in err[0]
+
+
 # --- the whole generation as one CUDA graph, and --rng host (issue 30 follow-up) ----------
 
 def _state(experts, cals, cfg, seeds):

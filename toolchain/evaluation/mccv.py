@@ -126,18 +126,18 @@ def single_threaded_torch():
         torch.set_num_threads(before)
 
 
-def _train_experts_job(dataset: Dataset, settings: EvalSettings, progress: bool) -> tuple[list[str], np.ndarray, float]:
+def _train_experts_job(dataset: Dataset, settings: EvalSettings, progress: bool) -> tuple[list[str], np.ndarray, dict]:
     with single_threaded_torch():
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         roles, experts = train_expert_flats(dataset, settings.arch, settings.seed, settings.epochs, progress)
-        return roles, experts, time.perf_counter() - t0
+        return roles, experts, {"experts": time.perf_counter() - t0, "experts_cpu": time.process_time() - c0}
 
 
-def _train_joint_job(dataset: Dataset, settings: EvalSettings, progress: bool) -> tuple[np.ndarray, float]:
+def _train_joint_job(dataset: Dataset, settings: EvalSettings, progress: bool) -> tuple[np.ndarray, dict]:
     with single_threaded_torch():
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         joint = train_joint_flat(dataset, settings.arch, settings.seed, settings.epochs, progress)
-        return joint, time.perf_counter() - t0
+        return joint, {"joint": time.perf_counter() - t0, "joint_cpu": time.process_time() - c0}
 
 
 def prepare_sources(
@@ -150,11 +150,11 @@ def prepare_sources(
     if needs_joint(settings.all_methods):
         tasks.append(joblib.delayed(_train_joint_job)(dataset, settings, progress))
     done = execute(tasks, n_jobs, backend, scheduler, progress=False, ordered=True)
-    roles, experts, t_experts = done[0]
-    seconds = {"experts": t_experts}
+    roles, experts, seconds = done[0]
     joint = None
     if len(done) > 1:
-        joint, seconds["joint"] = done[1]
+        joint, joint_seconds = done[1]
+        seconds = {**seconds, **joint_seconds}
     with single_threaded_torch():
         return align_sources(settings.arch, roles, experts, joint, seconds)
 
@@ -174,7 +174,10 @@ def run_job(cal_size: int, run: int, method: str, src: Sources, target: Target, 
 def run_jobs(cal_size: int, runs: list[int], method: str, src: Sources, target: Target,
              settings: EvalSettings) -> list[dict]:
     """Fit one method on several calibration draws (batched where the method batches, i.e.
-    AcoMerge on a GPU) and score each on its own test rows. `seconds` is the wall time per run."""
+    AcoMerge on a GPU) and score each on its own test rows. `seconds` is the wall time per run and
+    `cpu_seconds` this process's CPU time per run, fit and scoring (the job runs on one thread, so
+    it is the job's own work, whatever else the machine runs)."""
+    c0 = time.process_time()
     with single_threaded_torch():
         splits = [make_split(settings.protocol, target.y, target.groups, cal_size, seed=r) for r in runs]
         draws = [(target.x[sp.cal], target.y[sp.cal], derive_seed(settings.seed, cal_size, r, method_code(method)),
@@ -198,6 +201,9 @@ def run_jobs(cal_size: int, runs: list[int], method: str, src: Sources, target: 
                 # the same scores on D_Cal itself: the fit the method reached, beside what it generalises to
                 "calibration_fit": {k: fit[k] for k in SCALAR_METRICS},
             })
+    cpu_seconds = (time.process_time() - c0) / len(runs)
+    for job in out:
+        job["cpu_seconds"] = cpu_seconds
     return out
 
 
@@ -408,8 +414,26 @@ def run_mccv(
         "sources_s": src.seconds, "mccv_wall_s": time.perf_counter() - t1, "total_wall_s": time.perf_counter() - t0,
         "backend": backend, "jobs": n_jobs, "device": device, "resumed_jobs": len(jobs) - len(todo),
         "method_mean_s": {m: float(np.mean([j["seconds"] for j in jobs if j["method"] == m])) for m in settings.all_methods},
+        **cpu_breakdown(jobs, src.seconds, settings.all_methods),
     }
     return out
+
+
+def cpu_breakdown(jobs: list[dict], source_seconds: dict[str, float], methods: tuple[str, ...]) -> dict:
+    """Where the evaluation's CPU time went: the source models' training (CPU seconds of their jobs)
+    and every method's jobs (sum over its runs, and the mean per run). CPU time, not wall time: on a
+    shared machine it is what the work itself cost. Jobs read back by --resume from an older
+    fleetlab may lack it (counted as missing)."""
+    timed = [j for j in jobs if "cpu_seconds" in j]
+    per_method = {m: float(sum(j["cpu_seconds"] for j in timed if j["method"] == m)) for m in methods}
+    sources = {k[: -len("_cpu")]: v for k, v in source_seconds.items() if k.endswith("_cpu")}
+    return {
+        "sources_cpu_s": sources,
+        "method_cpu_s": per_method,
+        "method_mean_cpu_s": {m: per_method[m] / max(1, sum(1 for j in timed if j["method"] == m)) for m in methods},
+        "cpu_s": float(sum(sources.values()) + sum(per_method.values())),
+        "jobs_without_cpu_time": len(jobs) - len(timed),
+    }
 
 
 def _device_name(device: str) -> str:

@@ -213,15 +213,19 @@ def construct_ants(
     cdf = others.cumsum_(dim=1).div_(w_others.unsqueeze(1))
     cdf[:, -1] = 1.0
     u = torch.rand(n_idx, n_ants, generator=gen)
-    t, ant = (u < leave).nonzero(as_tuple=True)  # the departures
+    # The departures' flat positions in (index, ant) order: numpy's flatnonzero finds them in a
+    # third of the time of torch's nonzero (an early generation has ~80,000 of 163,000 decisions),
+    # and one flat position serves as the index into u and into paths without 2-D gathers.
+    where = torch.from_numpy(np.flatnonzero((u < leave).numpy()))
     paths = greedy.to(torch.int32).expand(n_ants, n_idx).clone()  # int32: half the memory traffic of int64
     explorer = torch.zeros(n_ants, dtype=torch.bool)
-    if t.numel():
+    if where.numel():
+        t, ant = where.div(n_ants, rounding_mode="floor"), where.remainder(n_ants)
         # one sorted sequence for all rows (row t spans [2t, 2t + 1]): one search serves every departure
         flat = cdf.add_(2.0 * rows.unsqueeze(1)).reshape(-1)
-        v = u[t, ant].to(torch.float64) / leave[t, 0]
+        v = u.view(-1)[where].to(torch.float64) / leave.view(-1)[t]
         pick = (torch.searchsorted(flat, 2.0 * t + v, right=True) - t * m).clamp_(max=m - 1)
-        paths[ant, t] = pick.to(torch.int32)
+        paths.view(-1)[ant * n_idx + t] = pick.to(torch.int32)
         explorer[ant] = True
     return paths, explorer
 

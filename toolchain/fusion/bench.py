@@ -26,6 +26,10 @@ Figures (one JSON object with --json):
   extra processes spinning on a core each; beside them the same loaded runs with a fixed
   thread count of every core (the old default, the peer that collapses), against the goals
   (SN-S: ≤ 0.35 s idle, ≤ 0.6 s with one core busy, on 2 cores).
+- table (`--table-runs R` with `--data`): the paper table (R runs × the two calibration sizes, every
+  registered method) run by `fleetlab evaluate --jobs --table-jobs` in a child process, as a user runs it:
+  wall_s against the goal (SN-S, 30 runs, 2 jobs: ≤ 60 s), and where its CPU time went (the source
+  models' training and every method's jobs, CPU seconds, from evaluate's own timing).
 
 With `--device cuda` it measures the accelerator path instead (fusion/lockstep.py):
 generation_ms (one run's generation: construction, fitness of every ant, updates, IWOA
@@ -49,8 +53,10 @@ import contextlib
 import json
 import math
 import os
+import resource
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -82,6 +88,8 @@ TARGET_FULL_RUN_S = 2.0
 # issue 30: SN-S on 2 cores, idle and with one core busy; on one H100-class GPU
 GOAL_IDLE_RUN_S = 0.35
 GOAL_LOADED_RUN_S = 0.6
+GOAL_TABLE_S = 60.0  # SN-S paper table: 30 runs x 2 calibration sizes, every registered method, --jobs 2
+GOAL_TABLE_RUNS, GOAL_TABLE_JOBS = 30, 2
 GOAL_GPU_GENERATION_MS = {"sn-s": 0.15}
 GOAL_GPU_RUN_S = {"sn-d": 0.5}
 REFERENCE_BATCH = 200  # the reference's D_Cal loader batch size (BATCH_SIZE_ADAPT)
@@ -115,6 +123,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--load", type=int, default=1, metavar="N",
                    help="busy processes (one spinning core each) started beside a second set of full runs, to "
                         "measure the run time on a busy machine; 0 skips it (default: 1)")
+    p.add_argument("--table-runs", type=int, default=0, metavar="R",
+                   help=f"also time the paper table (`fleetlab evaluate`, R runs x 2 calibration sizes, every method; "
+                        f"needs --data; the goal is for R = {GOAL_TABLE_RUNS}); 0 skips it (default: 0)")
+    p.add_argument("--table-jobs", type=int, default=GOAL_TABLE_JOBS, metavar="J",
+                   help=f"--jobs of that evaluation (default: {GOAL_TABLE_JOBS})")
     p.add_argument("--device", default="cpu", metavar="cpu|cuda|auto",
                    help="cpu (default): the reference path; cuda: the GPU path (lockstep engine)")
     p.add_argument("--batch-runs", type=int, default=30, metavar="R",
@@ -235,7 +248,44 @@ def measure(args) -> dict:
         "max_abs_fitness_diff": float(np.max(np.abs(np.array(seq_j) - batched_j.numpy()))),
         "targets": {"speedup": TARGET_SPEEDUP, "full_run_s": TARGET_FULL_RUN_S},
         **({"busy": busy_machine(experts, x, y, args)} if args.load else {}),
+        **({"table": table_time(args)} if args.table_runs else {}),
     }
+
+
+def table_time(args) -> dict:
+    """The paper table as a user runs it: `fleetlab evaluate` in a child process (its start-up, data
+    loading, expert training, every method's jobs and the summary included), wall time against the
+    goal, and the CPU seconds per stage and method that evaluate reports."""
+    with tempfile.TemporaryDirectory(prefix="fleetlab-table-") as tmp:
+        out = Path(tmp) / "table.json"
+        cmd = [sys.executable, "-m", "fleetlab.cli", "evaluate", "--data", str(args.data), "--arch", args.arch,
+               "--runs", str(args.table_runs), "--jobs", str(args.table_jobs), "--seed", str(args.seed),
+               "--no-progress", "--json", str(out)]
+        t0, c0 = time.perf_counter(), _children_cpu_s()
+        done = subprocess.run(cmd, capture_output=True, text=True)
+        wall_s, process_cpu_s = time.perf_counter() - t0, _children_cpu_s() - c0
+        if done.returncode != 0:
+            last = (done.stderr.strip().splitlines() or ["no output"])[-1]
+            raise RuntimeError(f"the table's evaluation failed (exit {done.returncode}): {last}")
+        timing = json.loads(out.read_text())["timing"]
+    table = {"runs": args.table_runs, "jobs": args.table_jobs, "wall_s": round(wall_s, 2),
+             "cpu_s": round(timing["cpu_s"], 2),
+             # the command's processes in all (evaluate and its workers): start-up, imports, data loading,
+             # pickling and the summary are the difference to the jobs' cpu_s
+             "process_cpu_s": round(process_cpu_s, 2),
+             "sources_cpu_s": {k: round(v, 2) for k, v in timing["sources_cpu_s"].items()},
+             "method_cpu_s": {k: round(v, 2) for k, v in timing["method_cpu_s"].items()},
+             "method_mean_cpu_s": {k: round(v, 4) for k, v in timing["method_mean_cpu_s"].items()},
+             "load_average_1min": round(os.getloadavg()[0], 2), "command": " ".join(cmd[2:])}
+    if args.arch == "sn-s" and args.table_runs == GOAL_TABLE_RUNS and args.table_jobs == GOAL_TABLE_JOBS:
+        table["goal"] = {"wall_s": GOAL_TABLE_S, "met": wall_s <= GOAL_TABLE_S}
+    return table
+
+
+def _children_cpu_s() -> float:
+    """User + system CPU seconds of this process's finished children (and theirs, once reaped)."""
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
 
 
 @contextlib.contextmanager
@@ -361,8 +411,10 @@ def run(args: argparse.Namespace) -> int:
     for name in ("ants", "generations", "cal_size", "repeats", "full_runs", "batch_runs"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')} must be at least 1")
-    if args.threads < 0 or args.load < 0:
-        raise ValueError("--threads and --load must not be negative")
+    if args.threads < 0 or args.load < 0 or args.table_runs < 0 or args.table_jobs < 1:
+        raise ValueError("--threads, --load and --table-runs must not be negative, --table-jobs at least 1")
+    if args.table_runs and args.data is None:
+        raise ValueError("--table-runs needs --data DIR (the table is evaluated on the real target rover's rows)")
     device = resolve_device(args.device)  # one line, before any work, where the GPU is missing
     previous_threads = torch.get_num_threads()
     try:
@@ -402,4 +454,12 @@ def run(args: argparse.Namespace) -> int:
         if "goals" in b:
             print(f"  goals: <= {GOAL_IDLE_RUN_S} s idle, <= {GOAL_LOADED_RUN_S} s loaded: "
                   f"{'met' if b['goals']['met'] else 'not met'}")
+    if "table" in result:
+        t = result["table"]
+        goal = f"   (goal <= {GOAL_TABLE_S:g} s: {'met' if t['goal']['met'] else 'not met'})" if "goal" in t else ""
+        print(f"  paper table, {t['runs']} runs, --jobs {t['jobs']}:    {t['wall_s']:10.1f} s{goal}")
+        print(f"    CPU seconds: {t['process_cpu_s']:.1f} for the command's processes, {t['cpu_s']:.1f} of them in "
+              f"the jobs; sources {t['sources_cpu_s']}")
+        for m, c in sorted(t["method_cpu_s"].items(), key=lambda kv: -kv[1]):
+            print(f"    {m:24s} {c:8.1f} s CPU   ({t['method_mean_cpu_s'][m]:.3f} s per run)")
     return 0

@@ -79,9 +79,11 @@ slipest_status_t slipest_model_layer_scalars(const slipest_layer_q_t *l, unsigne
     if (width < 2u || width > (unsigned)SLIPEST_MAX_WIDTH) {
         return SLIPEST_E_ARCH;
     }
-    /* |d| = |H h'_i - sum h'| <= 2 H 2^h_bits <= 2^30; S = sum e^2 <= H 4^e_bits <= 2^31 */
-    if (l->h_bits < 1u || l->h_bits > 24u || (2u * width) << l->h_bits > (UINT32_C(1) << 30) || l->e_bits < 1u ||
-        l->e_bits > 13u || (uint64_t)width << (2u * l->e_bits) > (UINT64_C(1) << 31)) {
+    /* |d| = |H h'_i - sum h'| <= 2 H 2^h_bits <= 2^30; S = sum e^2 <= H 4^e_bits <= 2^31. Written as
+     * 2H <= 2^(30 - h_bits) and H <= 2^(31 - 2 e_bits) (exact: powers of two): shifting H up could wrap a
+     * uint32_t, and a 64-bit shift by a variable needs libgcc's __ashldi3, which bare-metal SPARC lacks */
+    if ((l->h_bits < 1u) || (l->h_bits > 24u) || (l->e_bits < 1u) || (l->e_bits > 13u) ||
+        ((2u * width) > ((UINT32_C(1) << 30) >> l->h_bits)) || (width > ((UINT32_C(1) << 31) >> (2u * l->e_bits)))) {
         return SLIPEST_E_RANGE;
     }
     gelu_shift = (int32_t)l->fy - (int32_t)gelu_step_log2;
@@ -91,7 +93,7 @@ slipest_status_t slipest_model_layer_scalars(const slipest_layer_q_t *l, unsigne
         return SLIPEST_E_RANGE;
     }
     /* accumulator: room for the rounding term 2^(k1 - 1) of rsr(h, k1), k1 <= 31 - h_bits */
-    *limit = (int64_t)INT32_MAX - ((int64_t)1 << (32u - l->h_bits));
+    *limit = (int64_t)INT32_MAX - (int64_t)(UINT32_C(1) << (32u - l->h_bits)); /* h_bits >= 1: shift <= 31 */
     return SLIPEST_OK;
 }
 

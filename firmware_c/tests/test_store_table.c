@@ -122,6 +122,12 @@ int main(int argc, char **argv)
     image_edit_reseal(edit, body);
     CHECK(upload(edit, n) == SLIPEST_E_RANGE && c->refused_range == 4u);
     n = edited(v + 1u, 0u, 0u);
+    /* h_bits 24 in range alone, but 2 H 2^24 > 2^30 for H >= 64 (2^32 for H = 128: a uint32_t shift wraps to 0) */
+    CHECK(ref_q.layers[0].width >= 64u);
+    edit[SLIPEST_IMAGE_V2_TABLE_AT + SLIPEST_IMAGE_V2_REC_H_BITS] = 24u;
+    image_edit_reseal(edit, body);
+    CHECK(upload(edit, n) == SLIPEST_E_RANGE && c->refused_range == 5u);
+    n = edited(v + 1u, 0u, 0u);
     edit[SLIPEST_IMAGE_V2_TABLE_AT + SLIPEST_IMAGE_V2_REC_WIDTH] ^= 1u; /* the table disagrees with the payload */
     image_edit_reseal(edit, body);
     CHECK(upload(edit, n) == SLIPEST_E_LENGTH && c->refused_length == 1u);

@@ -4,6 +4,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from fleetlab.data.dataset import load_dataset
 
 
@@ -36,6 +38,7 @@ def test_demo_quick_end_to_end(tmp_path):
     assert deep["upload"]["image_bytes"] > landing["upload"]["image_bytes"]
     assert "## SN-S against SN-D" in report
     assert "| sn-d | " in report and f"{deep['upload']['image_bytes']:,}" in report
+    _check_sn_d_cost(out)
     rows = sum(len(f.table) for f in load_dataset(out / "data").files)
     assert f"{rows} windows" in report
     assert "100% tests passed" in report
@@ -43,3 +46,25 @@ def test_demo_quick_end_to_end(tmp_path):
     assert "<table>" in html and "convergence.png" in html
     for png in ("features.png", "fuse/convergence.png", "fixed_vs_float.png"):
         assert (out / png).stat().st_size > 5000, png
+
+
+def _check_sn_d_cost(out):
+    """The demo's `fleetlab bench c --compare SN-D --json` (issue 28 item 6): for SN-D as for SN-S, instructions
+    per fixed-point and float inference and per node sample, kernel + model flash, stack and RAM on the M4, and
+    host C against onnxruntime; the row's RAM is the reference figure's formula."""
+    line = next(x for x in (out / "logs" / "bench_c.log").read_text().splitlines() if x.startswith("{"))
+    bench = json.loads(line)
+    sns, snd = bench["cpu_targets"]["cortex-m4"], bench["compare"]["cpu_targets"]["cortex-m4"]
+    assert bench["arch"] == "sn-s" and bench["compare"]["arch"] == "sn-d"
+    keys = ("instructions_per_inference_q", "instructions_per_inference_f32", "instructions_per_sample_node_slcan",
+            "flash_bytes_kernel_and_model", "stack_bytes_q", "stack_bytes_f32", "ram_bytes")
+    for key in keys:
+        assert sns[key] > 0 and snd[key] > 0, key
+    assert sns["ram_bytes"] == bench["m4_ram_bytes"]
+    # SN-D: 22x the multiply-accumulates, its weights in flash, its scratch on the stack
+    assert snd["instructions_per_inference_q"] > 5 * sns["instructions_per_inference_q"]
+    assert snd["flash_bytes_kernel_and_model"] > 20_000 > sns["flash_bytes_kernel_and_model"]
+    assert snd["ram_bytes"] > sns["ram_bytes"]
+    c = bench["compare"]
+    assert c["host_ns_per_inference_q"] > 0 and c["onnxruntime_ns_per_inference"] > 0
+    assert c["speedup_vs_onnxruntime"] == pytest.approx(c["onnxruntime_ns_per_inference"] / c["host_ns_per_inference_q"])

@@ -232,35 +232,3 @@ def test_bit_exact_under_qemu(snd_bundle, irregular_bundle, tmp_path, arch, name
         assert f"{what}: 0 soft-float helper symbols (expected absent)" in out
 
 
-def test_bench_c_reports_sn_d_beside_sn_s_on_the_m4(snd_bundle, tmp_path, capsys):
-    """`fleetlab bench c --target cortex-m4 --compare SN-D --json` (issue 28 item 6): for SN-D as for SN-S,
-    instructions per fixed-point and float inference and per node sample, kernel + model flash, stack and
-    RAM on the target, and host C against onnxruntime; the row's RAM is the reference figure's formula."""
-    import argparse
-
-    from fleetlab.host_tools.firmware import bench as bench_c
-    from fleetlab.host_tools.firmware import targets
-
-    t = targets.get("cortex-m4")
-    if not t.runs:
-        pytest.skip("qemu-system-arm not installed: run scripts/setup.sh (scripts/apt-packages.txt)")
-    parser = argparse.ArgumentParser()
-    bench_c.add_arguments(parser)
-    args = parser.parse_args(["--target", "cortex-m4", "--compare", str(snd_bundle), "--build-dir",
-                              str(tmp_path), "--iterations", "50", "--json"])
-    assert bench_c.run(args) == 0
-    out = json.loads(capsys.readouterr().out)
-    sns, snd = out["cpu_targets"]["cortex-m4"], out["compare"]["cpu_targets"]["cortex-m4"]
-    assert out["arch"] == "sn-s" and out["compare"]["arch"] == "sn-d"
-    keys = ("instructions_per_inference_q", "instructions_per_inference_f32", "instructions_per_sample_node_slcan",
-            "flash_bytes_kernel_and_model", "stack_bytes_q", "stack_bytes_f32", "ram_bytes")
-    for key in keys:
-        assert sns[key] > 0 and snd[key] > 0, key
-    assert sns["ram_bytes"] == out["m4_ram_bytes"]
-    # SN-D: 22x the multiply-accumulates, its weights in flash, its scratch on the stack
-    assert snd["instructions_per_inference_q"] > 5 * sns["instructions_per_inference_q"]
-    assert snd["flash_bytes_kernel_and_model"] > 20_000 > sns["flash_bytes_kernel_and_model"]
-    assert snd["ram_bytes"] > sns["ram_bytes"]
-    c = out["compare"]
-    assert c["host_ns_per_inference_q"] > 0 and c["onnxruntime_ns_per_inference"] > 0
-    assert c["speedup_vs_onnxruntime"] == pytest.approx(c["onnxruntime_ns_per_inference"] / c["host_ns_per_inference_q"])

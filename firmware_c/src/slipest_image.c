@@ -377,17 +377,25 @@ slipest_status_t slipest_image_stream_feed(slipest_image_stream_t *w, const uint
     return SLIPEST_OK;
 }
 
+/* where the header's hash32 sits in the image's format */
+static size_t hash32_at(const slipest_image_stream_t *w)
+{
+#if SLIPEST_LAYER_TABLE
+    if (w->format == 2u) {
+        return SLIPEST_IMAGE_V2_OFF_HASH32;
+    }
+#else
+    (void)w;
+#endif
+    return SLIPEST_IMAGE_OFF_HASH32;
+}
+
 slipest_status_t slipest_image_stream_seal(const slipest_image_stream_t *w)
 {
     if (slipest_image_le32(&w->tail[SLIPEST_IMAGE_TRAILER_OFF_CRC32]) != (w->crc ^ 0xFFFFFFFFu)) {
         return SLIPEST_E_CRC;
     }
-#if SLIPEST_LAYER_TABLE
-    if (w->format == 2u) {
-        return check_hash32(w->hdr, SLIPEST_IMAGE_V2_OFF_HASH32, w->tail);
-    }
-#endif
-    return check_hash32(w->hdr, SLIPEST_IMAGE_OFF_HASH32, w->tail);
+    return check_hash32(w->hdr, hash32_at(w), w->tail);
 }
 
 slipest_status_t slipest_image_stream_model(const slipest_image_stream_t *w, slipest_model_q_t *q,
@@ -442,25 +450,18 @@ slipest_status_t slipest_image_stream_model(const slipest_image_stream_t *w, sli
     return SLIPEST_OK;
 }
 
-slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t expect32, slipest_model_q_t *mq,
-                                    slipest_image_q_storage_t *qs, slipest_model_f32_t *mf,
-                                    slipest_image_f32_storage_t *fs)
+slipest_status_t slipest_image_stream_read(slipest_image_stream_t *w, const uint8_t *img, size_t len,
+                                           uint32_t expect32, slipest_model_q_t *mq, slipest_model_f32_t *mf)
 {
-    slipest_image_stream_t w;
     slipest_model_q_t q;
     slipest_model_f32_t f;
-    slipest_status_t st;
+    slipest_status_t st = slipest_image_stream_feed(w, img, len);
 
-    if (img == NULL || mq == NULL || qs == NULL || (mf != NULL && fs == NULL)) return SLIPEST_E_NULL;
-    /* the one validator, fed the whole buffer: floats are checked only when the float model is asked for */
-    st = slipest_image_stream_init(&w, len, qs, (mf != NULL) ? fs : NULL, (mf != NULL) ? 1 : 0);
     if (st != SLIPEST_OK) return st;
-    st = slipest_image_stream_feed(&w, img, len);
+    st = slipest_image_stream_seal(w);
     if (st != SLIPEST_OK) return st;
-    st = slipest_image_stream_seal(&w);
-    if (st != SLIPEST_OK) return st;
-    if (expect32 != 0u && slipest_image_le32(&w.hdr[SLIPEST_IMAGE_OFF_HASH32]) != expect32) return SLIPEST_E_HASH;
-    if (mf != NULL && !(w.flags & SLIPEST_IMAGE_FLAG_F32)) {
+    if (expect32 != 0u && slipest_image_le32(&w->hdr[hash32_at(w)]) != expect32) return SLIPEST_E_HASH;
+    if (mf != NULL && (w->flags & SLIPEST_IMAGE_FLAG_F32) == 0u) {
         return SLIPEST_E_STATE;
     }
 #ifdef SLIPEST_Q_ONLY
@@ -469,11 +470,25 @@ slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t exp
     }
 #endif
     memset(&f, 0, sizeof f);
-    st = slipest_image_stream_model(&w, &q, (mf != NULL) ? &f : NULL);
+    st = slipest_image_stream_model(w, &q, (mf != NULL) ? &f : NULL);
     if (st != SLIPEST_OK) return st;
     if (mf != NULL) {
         *mf = f;
     }
     *mq = q;
     return SLIPEST_OK;
+}
+
+slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t expect32, slipest_model_q_t *mq,
+                                    slipest_image_q_storage_t *qs, slipest_model_f32_t *mf,
+                                    slipest_image_f32_storage_t *fs)
+{
+    slipest_image_stream_t w;
+    slipest_status_t st;
+
+    if (img == NULL || mq == NULL || qs == NULL || (mf != NULL && fs == NULL)) return SLIPEST_E_NULL;
+    /* the one validator, fed the whole buffer: floats are checked only when the float model is asked for */
+    st = slipest_image_stream_init(&w, len, qs, (mf != NULL) ? fs : NULL, (mf != NULL) ? 1 : 0);
+    if (st != SLIPEST_OK) return st;
+    return slipest_image_stream_read(&w, img, len, expect32, mq, mf);
 }

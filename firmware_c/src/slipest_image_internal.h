@@ -43,6 +43,12 @@ slipest_status_t slipest_image_stream_seal(const slipest_image_stream_t *w);
 slipest_status_t slipest_image_stream_model(const slipest_image_stream_t *w, slipest_model_q_t *q,
                                             slipest_model_f32_t *mf);
 
+/* The whole-buffer read both formats' readers share, after they set the stream up: feed all len bytes,
+ * seal, check expect32 (0 accepts any) and that a requested float model is there, then fill *mq and,
+ * when mf is not NULL, *mf; nothing is written to them unless every check passed. */
+slipest_status_t slipest_image_stream_read(slipest_image_stream_t *w, const uint8_t *img, size_t len,
+                                           uint32_t expect32, slipest_model_q_t *mq, slipest_model_f32_t *mf);
+
 /* A uint32 from its 4 little-endian bytes at p, on a core of either byte order. */
 uint32_t slipest_image_le32(const uint8_t *p);
 

@@ -386,8 +386,6 @@ slipest_status_t slipest_image_read_table(const uint8_t *img, size_t len, uint32
                                           slipest_image_table_f32_t *fs)
 {
     slipest_image_stream_t w;
-    slipest_model_q_t q;
-    slipest_model_f32_t f;
     slipest_status_t st;
 
     if (img == NULL || mq == NULL || qs == NULL || (mf != NULL && fs == NULL)) return SLIPEST_E_NULL;
@@ -395,25 +393,5 @@ slipest_status_t slipest_image_read_table(const uint8_t *img, size_t len, uint32
     st = slipest_image_stream_init(&w, len, NULL, NULL, (mf != NULL) ? 1 : 0);
     if (st != SLIPEST_OK) return st;
     slipest_image_stream_table(&w, qs, (mf != NULL) ? fs : NULL, 1);
-    st = slipest_image_stream_feed(&w, img, len);
-    if (st != SLIPEST_OK) return st;
-    st = slipest_image_stream_seal(&w);
-    if (st != SLIPEST_OK) return st;
-    if (expect32 != 0u && slipest_image_le32(&w.hdr[SLIPEST_IMAGE_V2_OFF_HASH32]) != expect32) return SLIPEST_E_HASH;
-    if (mf != NULL && (w.flags & SLIPEST_IMAGE_FLAG_F32) == 0u) {
-        return SLIPEST_E_STATE;
-    }
-#ifdef SLIPEST_Q_ONLY
-    if (mf != NULL) {
-        return SLIPEST_E_STATE;
-    }
-#endif
-    memset(&f, 0, sizeof f);
-    st = slipest_image_stream_model(&w, &q, (mf != NULL) ? &f : NULL);
-    if (st != SLIPEST_OK) return st;
-    if (mf != NULL) {
-        *mf = f;
-    }
-    *mq = q;
-    return SLIPEST_OK;
+    return slipest_image_stream_read(&w, img, len, expect32, mq, mf);
 }

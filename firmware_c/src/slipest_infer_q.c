@@ -415,13 +415,15 @@ HOT int32_t dot16(const int16_t *w, const int16_t *x, unsigned n, int32_t acc)
 
 #if SLIPEST_DUAL_MAC
 /* h[r] = b[r] + sum_j w[r n + j] x[j] for the four rows r = 0..3 of a row-major block of n columns,
- * n a positive multiple of 4 (the loop ends when x reaches x + n: n / 4 passes) and w word-aligned (so
- * is every row): each pair of inputs is loaded once for four
- * rows (several rows per pass, as CMSIS-NN does for its int16 matrix-vector products), and each row's
- * four weights of a pass in one LDRD (which needs the alignment; LDR of the inputs does not): 16
- * instructions per 16 multiply-accumulates on the M4. Written out because GCC neither keeps the 14
- * registers the loop needs nor pairs the weight loads. The sums are exact, so the order of the products
- * does not change them; every partial sum is inside the row's bound (any subset of its terms). */
+ * n a positive multiple of 4, w and x word-aligned (so is every row: LDRD needs it). Each four inputs
+ * are loaded once for the four rows in one LDRD (several rows per pass, as CMSIS-NN does for its int16
+ * matrix-vector products), and each row's four weights in one LDRD: 13 instructions per 16
+ * multiply-accumulates on the M4. The body is written out four times (16 inputs per pass, so the loop's
+ * compare and branch come once per 64 products); a first, partial pass enters it at the quarter that
+ * leaves (n / 4) mod 4 quarters, and the weight and input pointers advance with each load, so every
+ * entry runs the same code. Written out because GCC neither keeps the 14 registers the loop needs nor
+ * pairs the loads. The sums are exact, so the order of the products does not change them; every
+ * partial sum is inside the row's bound (any subset of its terms). */
 #if defined(__GNUC__)
 __attribute__((noinline)) /* a call of its own: the caller keeps its registers instead of spilling them
                              around the 14 this loop needs */
@@ -434,30 +436,40 @@ static void dot16_rows4(const int16_t *w, unsigned n, const int16_t *x, const in
     const int16_t *w3 = w2 + n;
     const int16_t *const xe = x + n;
     int32_t a0 = b[0], a1 = b[1], a2 = b[2], a3 = b[3];
-    uint32_t xa, xb, t0, t1;
+    uint32_t xa, xb, t1;
+    uint32_t t0 = (n >> 2) & 3u; /* quarters in the first pass (0: a whole pass) */
 
-    __asm__("1:\n\t"
-            "ldr %[xa], [%[x]], #4\n\t"
-            "ldr %[xb], [%[x]], #4\n\t"
-            "ldrd %[t0], %[t1], [%[w0]], #8\n\t"
-            "smlad %[a0], %[t0], %[xa], %[a0]\n\t"
-            "smlad %[a0], %[t1], %[xb], %[a0]\n\t"
-            "ldrd %[t0], %[t1], [%[w1]], #8\n\t"
-            "smlad %[a1], %[t0], %[xa], %[a1]\n\t"
-            "smlad %[a1], %[t1], %[xb], %[a1]\n\t"
-            "ldrd %[t0], %[t1], [%[w2]], #8\n\t"
-            "smlad %[a2], %[t0], %[xa], %[a2]\n\t"
-            "smlad %[a2], %[t1], %[xb], %[a2]\n\t"
-            "ldrd %[t0], %[t1], [%[w3]], #8\n\t"
-            "smlad %[a3], %[t0], %[xa], %[a3]\n\t"
-            "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
+#define SLIPEST_ROWS4_QUARTER                                                                                  \
+    "ldrd %[xa], %[xb], [%[x]], #8\n\t"                                                                         \
+    "ldrd %[t0], %[t1], [%[w0]], #8\n\t"                                                                        \
+    "smlad %[a0], %[t0], %[xa], %[a0]\n\t"                                                                      \
+    "smlad %[a0], %[t1], %[xb], %[a0]\n\t"                                                                      \
+    "ldrd %[t0], %[t1], [%[w1]], #8\n\t"                                                                        \
+    "smlad %[a1], %[t0], %[xa], %[a1]\n\t"                                                                      \
+    "smlad %[a1], %[t1], %[xb], %[a1]\n\t"                                                                      \
+    "ldrd %[t0], %[t1], [%[w2]], #8\n\t"                                                                        \
+    "smlad %[a2], %[t0], %[xa], %[a2]\n\t"                                                                      \
+    "smlad %[a2], %[t1], %[xb], %[a2]\n\t"                                                                      \
+    "ldrd %[t0], %[t1], [%[w3]], #8\n\t"                                                                        \
+    "smlad %[a3], %[t0], %[xa], %[a3]\n\t"                                                                      \
+    "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
+    __asm__("cmp %[t0], #2\n\t" /* 0: quarter 0; 1: quarter 3; 2: quarter 2; 3: quarter 1 */
+            "beq 2f\n\t"
+            "bhi 1f\n\t"
+            "cmp %[t0], #0\n\t"
+            "bne 3f\n\t"
+            "0:\n\t" SLIPEST_ROWS4_QUARTER
+            "1:\n\t" SLIPEST_ROWS4_QUARTER
+            "2:\n\t" SLIPEST_ROWS4_QUARTER
+            "3:\n\t" SLIPEST_ROWS4_QUARTER
             "cmp %[x], %[xe]\n\t"
-            "bne 1b"
+            "bne 0b"
             : [a0] "+r"(a0), [a1] "+r"(a1), [a2] "+r"(a2), [a3] "+r"(a3), [w0] "+r"(w0), [w1] "+r"(w1),
-              [w2] "+r"(w2), [w3] "+r"(w3), [x] "+r"(x), [xa] "=&r"(xa), [xb] "=&r"(xb), [t0] "=&r"(t0),
+              [w2] "+r"(w2), [w3] "+r"(w3), [x] "+r"(x), [xa] "=&r"(xa), [xb] "=&r"(xb), [t0] "+&r"(t0),
               [t1] "=&r"(t1)
             : [xe] "r"(xe)
             : "cc", "memory");
+#undef SLIPEST_ROWS4_QUARTER
     h[0] = a0;
     h[1] = a1;
     h[2] = a2;
@@ -512,7 +524,8 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
 #if SLIPEST_DUAL_MAC
     /* four rows per pass where the rows suit dot16_rows4 (n_in a positive multiple of 4, weights on a word
      * boundary: true of every exported SN-D), the rest one by one below */
-    if ((n_in != 0u) && ((n_in & 3u) == 0u) && ((((uintptr_t)(const void *)l->w) & 3u) == 0u)) {
+    if ((n_in != 0u) && ((n_in & 3u) == 0u) && ((((uintptr_t)(const void *)l->w) & 3u) == 0u) &&
+        ((((uintptr_t)(const void *)x) & 3u) == 0u)) {
         i = n & ~3u;
     }
     for (r4 = 0u; r4 < i; r4 += 4u) {
@@ -561,6 +574,16 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     hidden_pass(l, h, mult, u_shift, u_half, to_q15, out, sat);
 }
 
+/* Word alignment of a scratch array where the compiler can state it (the kernels check it at run time
+ * before they load pairs of words, and take the one-row path otherwise). */
+#if defined(__GNUC__)
+#define SLIPEST_WORD_ALIGNED __attribute__((aligned(4)))
+#else
+#define SLIPEST_WORD_ALIGNED
+#endif
+/* the activations hold the features too (a build may cap the width below 12) */
+#define ACT_N ((SLIPEST_MAX_WIDTH > SLIPEST_N_FEATURES) ? SLIPEST_MAX_WIDTH : SLIPEST_N_FEATURES)
+
 /* The blocks of the table one after the other, then the head. Scratch: SLIPEST_MAX_WIDTH int32
  * accumulators and SLIPEST_MAX_WIDTH int16 activations on the stack (slipest_model.h), in a frame of
  * its own so that the SN-S path does not carry it. */
@@ -571,12 +594,15 @@ static int infer_layers(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST
                         int32_t logits[SLIPEST_N_CLASSES], uint16_t *saturations)
 {
     int32_t h[SLIPEST_MAX_WIDTH];
-    int16_t act[SLIPEST_MAX_WIDTH];
-    const int16_t *x = feat_q;
+    int16_t act[ACT_N] SLIPEST_WORD_ALIGNED;
+    const int16_t *x = act;
     unsigned k, c, n_in = SLIPEST_N_FEATURES;
     uint32_t sat = 0u;
     int best = 0;
 
+    /* the features go to the word-aligned activations first: the caller's array may be on any int16
+     * boundary, and the four-row products load their inputs in aligned pairs of words */
+    (void)memcpy(act, feat_q, sizeof(int16_t) * (size_t)SLIPEST_N_FEATURES);
     for (k = 0u; k < m->n_layers && k < (unsigned)SLIPEST_MAX_LAYERS; ++k) {
         block_q(m, &m->layers[k], x, n_in, h, act, &sat);
         x = act;

@@ -95,6 +95,14 @@ HOT int32_t sat_sym(int32_t x, int32_t hi)
 #define SAT(x, b) sat_sym((x), (int32_t)((UINT32_C(1) << (b)) - 1u))
 #endif
 
+/* The int32 that u encodes in two's complement, without an implementation-defined conversion: 0u - u is
+ * at most 2^31 when u encodes a negative value, so it is negated minus one first. A sum accumulated in
+ * uint32_t (wrapping is defined) is the exact sum when the proof bounds it inside int32. */
+HOT int32_t s32_of_u32(uint32_t u)
+{
+    return u <= (uint32_t)INT32_MAX ? (int32_t)u : -(int32_t)(0u - u - 1u) - 1;
+}
+
 /* Number of significant bits of m (0 for 0). Frama-C EVA analyses the portable loop (same result):
  * it has no model of __builtin_clz, and the loop gives it the range [1, 32] for m != 0. */
 static unsigned bitlen32(uint32_t m)
@@ -322,7 +330,7 @@ static int infer_sn_s(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST_N
     /* h' = rsr(h, k1) has |h'| <= 2^24, so |sum| <= 30 2^24 and the wrapped unsigned sum is the
      * exact sum (for k1 = 0 the one accumulated with layer 1); 0u - usum is then <= 2^31 when usum
      * encodes a negative value, so it is negated minus one first: no value of usum overflows. */
-    sum = usum <= (uint32_t)INT32_MAX ? (int32_t)usum : -(int32_t)(0u - usum - 1u) - 1;
+    sum = s32_of_u32(usum);
     /* the saturations below never act (bounds above); sum and every h' then fit 30 h' - sum */
     sum = SAT(sum, 30);
     /* d_i = 30 h'_i - sum is monotonic in h'_i and rsr is monotonic: max|d| from hmax/hmin. */
@@ -391,11 +399,21 @@ HOT int32_t sat_var(int32_t x, unsigned b)
     return (x > hi) ? hi : ((x < lo) ? lo : x);
 }
 
+/* x clamped to [-lim, lim] (lim >= 0 known only at run time): a row bound stated where it is used. */
+HOT int32_t sat_lim(int32_t x, int32_t lim)
+{
+    return (x > lim) ? lim : ((x < -lim) ? -lim : x);
+}
+
 /* acc + sum_j w[j] x[j] over n int16 pairs; every partial sum is bounded by the row's worst case over
- * int16 inputs (checked by slipest_model_q_check). Two products per SMLAD where the core has it. */
+ * int16 inputs (checked by slipest_model_q_check). Two products per SMLAD where the core has it. The
+ * one-by-one products are summed in uint32_t: the exact sum, as the row bound keeps it inside int32,
+ * and an analyser that joins the rows of a 256-unit block (their weights together, so a bound above
+ * any one row's) sees no overflow in the loop; the caller states the row bound on the result. */
 HOT int32_t dot16(const int16_t *w, const int16_t *x, unsigned n, int32_t acc)
 {
     unsigned j = 0u;
+    uint32_t uacc;
 #if SLIPEST_DUAL_MAC
     for (; j + 7u < n; j += 8u) { /* 8 products per pass: the loop's own cost spread over 4 SMLADs */
         acc = __smlad(pair16(&w[j]), pair16(&x[j]), acc);
@@ -407,10 +425,11 @@ HOT int32_t dot16(const int16_t *w, const int16_t *x, unsigned n, int32_t acc)
         acc = __smlad(pair16(&w[j]), pair16(&x[j]), acc);
     }
 #endif
+    uacc = (uint32_t)acc;
     for (; j < n; ++j) {
-        acc += w[j] * x[j];
+        uacc += (uint32_t)(w[j] * x[j]); /* |w x| <= 2^30: the product fits int32 */
     }
-    return acc;
+    return s32_of_u32(uacc);
 }
 
 #if SLIPEST_DUAL_MAC
@@ -516,6 +535,8 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     int32_t hmax = INT32_MIN, hmin = INT32_MAX, sum, dmax, t, mult, u_half, k2_half;
     uint32_t s = 0u, usum = 0u, v;
     unsigned i, nb, k1, k2, u_shift, to_q15;
+    /* the accumulator bound of the block's rows (h_bits >= 1, checked: the shift is at most 31) */
+    const int32_t row_lim = (int32_t)((uint32_t)INT32_MAX - (UINT32_C(1) << (32u - l->h_bits)));
 #if SLIPEST_DUAL_MAC
     unsigned r4;
 #endif
@@ -538,7 +559,8 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     }
 #endif
     for (; i < n; ++i) {
-        int32_t a = dot16(&l->w[i * n_in], x, n_in, l->b[i]); /* <= 2^31 - 1 - 2^(32 - h_bits) */
+        /* |a| <= 2^31 - 1 - 2^(32 - h_bits), the row bound slipest_model_q_check checks: never acts */
+        int32_t a = sat_lim(dot16(&l->w[i * n_in], x, n_in, l->b[i]), row_lim);
         h[i] = a;
         hmax = a > hmax ? a : hmax;
         hmin = a < hmin ? a : hmin;
@@ -549,7 +571,7 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
         usum += (uint32_t)h[i];
     }
     /* |sum h'| <= H 2^h_bits <= 2^29: the wrapped unsigned sum is exact (see infer_sn_s) */
-    sum = usum <= (uint32_t)INT32_MAX ? (int32_t)usum : -(int32_t)(0u - usum - 1u) - 1;
+    sum = s32_of_u32(usum);
     sum = SAT(sum, 30);
     /* d_i = H h'_i - sum, |d| <= 2 H 2^h_bits <= 2^30; max|d| from hmax/hmin (d is monotonic in h') */
     dmax = nh * sat_var(rsr32(hmax, k1), l->h_bits + 1u) - sum;
@@ -596,12 +618,21 @@ static int infer_layers(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST
     int32_t h[SLIPEST_MAX_WIDTH];
     int16_t act[ACT_N] SLIPEST_WORD_ALIGNED;
     const int16_t *x = act;
-    unsigned k, c, n_in = SLIPEST_N_FEATURES;
+    unsigned k, c, n_in = SLIPEST_N_FEATURES, wmax = 0u;
     uint32_t sat = 0u;
     int best = 0;
 
-    /* the features go to the word-aligned activations first: the caller's array may be on any int16
-     * boundary, and the four-row products load their inputs in aligned pairs of words */
+    /* The scratch is zeroed once per inference: every element a block reads was written before by the
+     * block's own loops over its width (the widest block's units are zeroed, wmax), but an analyser that does not unroll 256 iterations cannot see
+     * that (Frama-C EVA would report reads of possibly uninitialised elements). Then the features go to
+     * the word-aligned activations: the caller's array may be on any int16 boundary, and the four-row
+     * products load their inputs in aligned pairs of words. */
+    for (k = 0u; k < m->n_layers && k < (unsigned)SLIPEST_MAX_LAYERS; ++k) {
+        wmax = (m->layers[k].width > wmax) ? m->layers[k].width : wmax; /* <= SLIPEST_MAX_WIDTH (checked) */
+    }
+    wmax = (wmax < (unsigned)SLIPEST_MAX_WIDTH) ? wmax : (unsigned)SLIPEST_MAX_WIDTH;
+    (void)memset(h, 0, sizeof(int32_t) * (size_t)wmax);
+    (void)memset(act, 0, sizeof(int16_t) * (size_t)wmax);
     (void)memcpy(act, feat_q, sizeof(int16_t) * (size_t)SLIPEST_N_FEATURES);
     for (k = 0u; k < m->n_layers && k < (unsigned)SLIPEST_MAX_LAYERS; ++k) {
         block_q(m, &m->layers[k], x, n_in, h, act, &sat);

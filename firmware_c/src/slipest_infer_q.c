@@ -266,8 +266,9 @@ HOT int32_t norm_z(int32_t e, int32_t mult)
     return SAT(z, 15);
 }
 #else
-HOT int32_t norm_z(int32_t e, int32_t mult)
+HOT int32_t norm_z(int32_t e_in, int32_t mult)
 {
+    const int32_t e = SAT(e_in, 14); /* |e| <= 2^13 already: stated for the analyser (e is read back) */
     const uint32_t m_lo = (uint32_t)mult & 0xFFFFu;
     return SAT((e * asr32(mult, 16u)) + rsr32(e * (int32_t)m_lo, 16u), 15);
 }
@@ -496,6 +497,81 @@ static void dot16_rows4(const int16_t *w, unsigned n, const int16_t *x, const in
 }
 #endif
 
+/* LayerNorm's first pass over the block's n accumulators: h'_i = rsr(h_i, k1) in place; returns the
+ * wrapped sum of the h' (exact, see block_q). No clamp here: |h| is inside the row bound, so h + 2^(k1-1)
+ * fits, and the sum is unsigned. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static uint32_t shift_pass(int32_t *h, unsigned n, unsigned k1)
+{
+    int32_t *p = h;
+    int32_t *const h_end = &h[n];
+    const int32_t half = (int32_t)((UINT32_C(1) << k1) >> 1); /* k1 <= 31 - h_bits */
+    uint32_t usum = 0u;
+
+    while (p != h_end) {
+        const int32_t v = rsr_h(*p, half, k1);
+        *p = v;
+        usum += (uint32_t)v;
+        ++p;
+    }
+    return usum;
+}
+
+/* The centring loop over p .. h_end: e = rsr(H h' - sum, k2) with h' read through HSAT, the clamp to
+ * the block's h_bits + 1 bits that never acts (|h'| <= 2^h_bits) and that an analyser needs on the read:
+ * the passes write in place, and an analysis that does not unroll the loops joins each element's old
+ * value (an accumulator) with its new one. |e| <= 2^e_bits <= 2^13: its clamp never acts either, and the
+ * constant bound (one SSAT on M3/M4/M7) is all that e * e and norm_z need; s is unsigned. */
+#define CENTRE_LOOP(HSAT)                                                                                      \
+    while (p != h_end) {                                                                                      \
+        const int32_t hp_ = (HSAT);                                                                           \
+        const int32_t e_ = SAT(rsr_h(nh * hp_ - sum, half, k2), 14);                                          \
+        *p = e_;                                                                                              \
+        s += (uint32_t)(e_ * e_);                                                                             \
+        ++p;                                                                                                  \
+    }
+
+/* LayerNorm's second pass: e_i in place; returns S = sum e^2 (<= H 4^e_bits <= 2^31, in uint32_t).
+ * Where the core has SSAT the clamp of h' is one instruction, which needs its bit count as a constant:
+ * one loop per h_bits of the widths 2..256 (21..24, docs/fixed_point.md), the compare pair otherwise. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static uint32_t centre_pass(int32_t *h, unsigned n, unsigned h_bits, int32_t sum, unsigned k2)
+{
+    int32_t *p = h;
+    int32_t *const h_end = &h[n];
+    const int32_t nh = (int32_t)n;
+    const int32_t half = (int32_t)((UINT32_C(1) << k2) >> 1); /* rounding constant (0 for k2 = 0) */
+    uint32_t s = 0u;
+
+#if SLIPEST_HAS_SSAT
+    switch (h_bits) {
+    case 21u:
+        CENTRE_LOOP(SAT(*p, 22))
+        break;
+    case 22u:
+        CENTRE_LOOP(SAT(*p, 23))
+        break;
+    case 23u:
+        CENTRE_LOOP(SAT(*p, 24))
+        break;
+    case 24u:
+        CENTRE_LOOP(SAT(*p, 25))
+        break;
+    default:
+        CENTRE_LOOP(sat_var(*p, h_bits + 1u))
+        break;
+    }
+#else
+    CENTRE_LOOP(sat_var(*p, h_bits + 1u))
+#endif
+    return s;
+}
+#undef CENTRE_LOOP
+
 /* Normalise, affine and GELU over the block's n units: out[i] from the centred e[i] and the multiplier. A
  * call of its own, so that the loop has the registers to itself (block_q's values would spill). */
 #if defined(__GNUC__)
@@ -532,8 +608,8 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
 {
     const unsigned n = l->width;
     const int32_t nh = (int32_t)n;
-    int32_t hmax = INT32_MIN, hmin = INT32_MAX, sum, dmax, t, mult, u_half, k2_half;
-    uint32_t s = 0u, usum = 0u, v;
+    int32_t hmax = INT32_MIN, hmin = INT32_MAX, sum, dmax, t, mult, u_half;
+    uint32_t s, v;
     unsigned i, nb, k1, k2, u_shift, to_q15;
     /* the accumulator bound of the block's rows (h_bits >= 1, checked: the shift is at most 31) */
     const int32_t row_lim = (int32_t)((uint32_t)INT32_MAX - (UINT32_C(1) << (32u - l->h_bits)));
@@ -566,28 +642,15 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
         hmin = a < hmin ? a : hmin;
     }
     k1 = block_shift(hmax, hmin, l->h_bits);            /* <= 31 - h_bits: the rounding term fits the margin */
-    for (i = 0u; i < n; ++i) {
-        h[i] = sat_var(rsr32(h[i], k1), l->h_bits + 1u); /* |h'| <= 2^h_bits: never acts */
-        usum += (uint32_t)h[i];
-    }
     /* |sum h'| <= H 2^h_bits <= 2^29: the wrapped unsigned sum is exact (see infer_sn_s) */
-    sum = s32_of_u32(usum);
-    sum = SAT(sum, 30);
+    sum = SAT(s32_of_u32(shift_pass(h, n, k1)), 30);
     /* d_i = H h'_i - sum, |d| <= 2 H 2^h_bits <= 2^30; max|d| from hmax/hmin (d is monotonic in h') */
     dmax = nh * sat_var(rsr32(hmax, k1), l->h_bits + 1u) - sum;
     t = sum - nh * sat_var(rsr32(hmin, k1), l->h_bits + 1u);
     dmax = t > dmax ? t : dmax;
     nb = bitlen32((uint32_t)dmax);
     k2 = nb > l->e_bits ? nb - l->e_bits : 0u;
-    k2_half = (int32_t)((1u << k2) >> 1);
-    s = 0u;
-    for (i = 0u; i < n; ++i) {
-        /* |e| <= 2^e_bits <= 2^13: never acts; the constant bound (one SSAT on M3/M4/M7) is all that e * e
-         * and norm_z need, the sum s below is unsigned */
-        int32_t e = SAT(rsr_h(nh * h[i] - sum, k2_half, k2), 14);
-        h[i] = e;
-        s += (uint32_t)(e * e);                         /* <= H 4^e_bits <= 2^31 */
-    }
+    s = centre_pass(h, n, l->h_bits, sum, k2);
     v = s + eps_scaled(l->eps_m, l->eps_e, m->eps_cap, k1 + k2, sat); /* < 2^31 + 2^30 */
     mult = rsqrt_mult(m->rsqrt_seed, (uint32_t)l->c, v);
     u_shift = (unsigned)l->fz + (unsigned)l->fg - (unsigned)l->fy;

@@ -497,76 +497,78 @@ static void dot16_rows4(const int16_t *w, unsigned n, const int16_t *x, const in
 }
 #endif
 
-/* LayerNorm's first pass over the block's n accumulators: h'_i = rsr(h_i, k1) in place; returns the
- * wrapped sum of the h' (exact, see block_q). No clamp here: |h| is inside the row bound, so h + 2^(k1-1)
- * fits, and the sum is unsigned. */
+/* LayerNorm's first pass over the block's n accumulators: the wrapped sum of h'_i = rsr(h_i, k1) (exact,
+ * see block_q). It only reads: centre_pass computes each h' again from its accumulator (two instructions)
+ * rather than this pass storing it, so no element holds values of two kinds, which an analysis that joins
+ * loop iterations (Frama-C EVA, 256 units) would mix and then widen. |h| is inside the row bound, so
+ * h + 2^(k1 - 1) fits; the sum is unsigned. */
 #if defined(__GNUC__)
 __attribute__((noinline))
 #endif
-static uint32_t shift_pass(int32_t *h, unsigned n, unsigned k1)
+static uint32_t shifted_sum(const int32_t *h, unsigned n, unsigned k1)
 {
-    int32_t *p = h;
-    int32_t *const h_end = &h[n];
+    const int32_t *p = h;
+    const int32_t *const h_end = &h[n];
     const int32_t half = (int32_t)((UINT32_C(1) << k1) >> 1); /* k1 <= 31 - h_bits */
     uint32_t usum = 0u;
 
     while (p != h_end) {
-        const int32_t v = rsr_h(*p, half, k1);
-        *p = v;
-        usum += (uint32_t)v;
+        usum += (uint32_t)rsr_h(*p, half, k1);
         ++p;
     }
     return usum;
 }
 
-/* The centring loop over p .. h_end: e = rsr(H h' - sum, k2) with h' read through HSAT, the clamp to
- * the block's h_bits + 1 bits that never acts (|h'| <= 2^h_bits) and that an analyser needs on the read:
- * the passes write in place, and an analysis that does not unroll the loops joins each element's old
- * value (an accumulator) with its new one. |e| <= 2^e_bits <= 2^13: its clamp never acts either, and the
- * constant bound (one SSAT on M3/M4/M7) is all that e * e and norm_z need; s is unsigned. */
+/* The centring loop over p .. h_end: h' = rsr(h, k1) from the accumulator, stated inside the block's
+ * h_bits + 1 bits by HSAT (a clamp that never acts: |h'| <= 2^h_bits), then e = rsr(H h' - sum, k2) in
+ * place. The clamps of d = H h' - sum to 2^30 (|d| <= (2H - 2) 2^h_bits < 2^30, so d + 2^(k2 - 1) fits)
+ * and of e to 2^14 (|e| <= 2^e_bits <= 2^13) never act either; the constant bounds (one SSAT each on
+ * M3/M4/M7) are what the rounding, e * e and norm_z need. s is unsigned. */
 #define CENTRE_LOOP(HSAT)                                                                                      \
     while (p != h_end) {                                                                                      \
+        const int32_t hr_ = rsr_h(*p, half1, k1);                                                             \
         const int32_t hp_ = (HSAT);                                                                           \
-        const int32_t e_ = SAT(rsr_h(nh * hp_ - sum, half, k2), 14);                                          \
+        const int32_t e_ = SAT(rsr_h(SAT(nh * hp_ - sum, 30), half, k2), 14);                                 \
         *p = e_;                                                                                              \
         s += (uint32_t)(e_ * e_);                                                                             \
         ++p;                                                                                                  \
     }
 
-/* LayerNorm's second pass: e_i in place; returns S = sum e^2 (<= H 4^e_bits <= 2^31, in uint32_t).
+/* LayerNorm's second pass: e_i in place, over the accumulators; returns S = sum e^2 (<= H 4^e_bits <= 2^31, in uint32_t).
  * Where the core has SSAT the clamp of h' is one instruction, which needs its bit count as a constant:
  * one loop per h_bits of the widths 2..256 (21..24, docs/fixed_point.md), the compare pair otherwise. */
 #if defined(__GNUC__)
 __attribute__((noinline))
 #endif
-static uint32_t centre_pass(int32_t *h, unsigned n, unsigned h_bits, int32_t sum, unsigned k2)
+static uint32_t centre_pass(int32_t *h, unsigned n, unsigned h_bits, unsigned k1, int32_t sum, unsigned k2)
 {
     int32_t *p = h;
     int32_t *const h_end = &h[n];
     const int32_t nh = (int32_t)n;
+    const int32_t half1 = (int32_t)((UINT32_C(1) << k1) >> 1);
     const int32_t half = (int32_t)((UINT32_C(1) << k2) >> 1); /* rounding constant (0 for k2 = 0) */
     uint32_t s = 0u;
 
 #if SLIPEST_HAS_SSAT
     switch (h_bits) {
     case 21u:
-        CENTRE_LOOP(SAT(*p, 22))
+        CENTRE_LOOP(SAT(hr_, 22))
         break;
     case 22u:
-        CENTRE_LOOP(SAT(*p, 23))
+        CENTRE_LOOP(SAT(hr_, 23))
         break;
     case 23u:
-        CENTRE_LOOP(SAT(*p, 24))
+        CENTRE_LOOP(SAT(hr_, 24))
         break;
     case 24u:
-        CENTRE_LOOP(SAT(*p, 25))
+        CENTRE_LOOP(SAT(hr_, 25))
         break;
     default:
-        CENTRE_LOOP(sat_var(*p, h_bits + 1u))
+        CENTRE_LOOP(sat_var(hr_, h_bits + 1u))
         break;
     }
 #else
-    CENTRE_LOOP(sat_var(*p, h_bits + 1u))
+    CENTRE_LOOP(sat_var(hr_, h_bits + 1u))
 #endif
     return s;
 }
@@ -643,14 +645,14 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     }
     k1 = block_shift(hmax, hmin, l->h_bits);            /* <= 31 - h_bits: the rounding term fits the margin */
     /* |sum h'| <= H 2^h_bits <= 2^29: the wrapped unsigned sum is exact (see infer_sn_s) */
-    sum = SAT(s32_of_u32(shift_pass(h, n, k1)), 30);
+    sum = SAT(s32_of_u32(shifted_sum(h, n, k1)), 30);
     /* d_i = H h'_i - sum, |d| <= 2 H 2^h_bits <= 2^30; max|d| from hmax/hmin (d is monotonic in h') */
     dmax = nh * sat_var(rsr32(hmax, k1), l->h_bits + 1u) - sum;
     t = sum - nh * sat_var(rsr32(hmin, k1), l->h_bits + 1u);
     dmax = t > dmax ? t : dmax;
     nb = bitlen32((uint32_t)dmax);
     k2 = nb > l->e_bits ? nb - l->e_bits : 0u;
-    s = centre_pass(h, n, l->h_bits, sum, k2);
+    s = centre_pass(h, n, l->h_bits, k1, sum, k2);
     v = s + eps_scaled(l->eps_m, l->eps_e, m->eps_cap, k1 + k2, sat); /* < 2^31 + 2^30 */
     mult = rsqrt_mult(m->rsqrt_seed, (uint32_t)l->c, v);
     u_shift = (unsigned)l->fz + (unsigned)l->fg - (unsigned)l->fy;

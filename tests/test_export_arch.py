@@ -122,7 +122,7 @@ def eva_bundle(tmp_path_factory):
     return out
 
 
-LAYER_SAT = "int32_t e = SAT(rsr_h(nh * h[i] - sum, k2_half, k2), 14);"
+LAYER_SAT = "SAT(rsr_h(SAT(nh * hp_ - sum, 30), half, k2), 14)"
 
 
 def test_frama_c_eva_layer_kernel_over_all_int16_inputs(eva_bundle):
@@ -141,9 +141,9 @@ def test_frama_c_eva_finds_a_removed_saturation_in_the_layer_kernel(eva_bundle, 
     need("frama-c")
     from fleetlab.assurance import analysers
 
-    src = planted_src(tmp_path, "slipest_infer_q.c", LAYER_SAT, "int32_t e = rsr_h(nh * h[i] - sum, k2_half, k2);")
+    src = planted_src(tmp_path, "slipest_infer_q.c", LAYER_SAT, "rsr_h(SAT(nh * hp_ - sum, 30), half, k2)")
     (res,) = analysers.frama_c_eva(eva_bundle, entries=["eva_infer_q"], src_dir=src)
-    assert any("e * e" in a for a in res.alarms), "\n".join(res.alarms)
+    assert any("e_ * e_" in a for a in res.alarms), "\n".join(res.alarms)
 
 
 # --- the SN-D bundle served by the emulator, and on CPU targets under QEMU ------------------------

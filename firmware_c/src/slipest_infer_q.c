@@ -459,37 +459,74 @@ static void dot16_rows4(const int16_t *w, unsigned n, const int16_t *x, const in
     uint32_t xa, xb, t1;
     uint32_t t0 = (n >> 2) & 3u; /* quarters in the first pass (0: a whole pass) */
 
-#define SLIPEST_ROWS4_QUARTER                                                                                  \
-    "ldrd %[xa], %[xb], [%[x]], #8\n\t"                                                                         \
-    "ldrd %[t0], %[t1], [%[w0]], #8\n\t"                                                                        \
-    "smlad %[a0], %[t0], %[xa], %[a0]\n\t"                                                                      \
-    "smlad %[a0], %[t1], %[xb], %[a0]\n\t"                                                                      \
-    "ldrd %[t0], %[t1], [%[w1]], #8\n\t"                                                                        \
-    "smlad %[a1], %[t0], %[xa], %[a1]\n\t"                                                                      \
-    "smlad %[a1], %[t1], %[xb], %[a1]\n\t"                                                                      \
-    "ldrd %[t0], %[t1], [%[w2]], #8\n\t"                                                                        \
-    "smlad %[a2], %[t0], %[xa], %[a2]\n\t"                                                                      \
-    "smlad %[a2], %[t1], %[xb], %[a2]\n\t"                                                                      \
-    "ldrd %[t0], %[t1], [%[w3]], #8\n\t"                                                                        \
-    "smlad %[a3], %[t0], %[xa], %[a3]\n\t"                                                                      \
-    "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
     __asm__("cmp %[t0], #2\n\t" /* 0: quarter 0; 1: quarter 3; 2: quarter 2; 3: quarter 1 */
             "beq 2f\n\t"
             "bhi 1f\n\t"
             "cmp %[t0], #0\n\t"
             "bne 3f\n\t"
-            "0:\n\t" SLIPEST_ROWS4_QUARTER
-            "1:\n\t" SLIPEST_ROWS4_QUARTER
-            "2:\n\t" SLIPEST_ROWS4_QUARTER
-            "3:\n\t" SLIPEST_ROWS4_QUARTER
+            "0:\n\t"
+            "ldrd %[xa], %[xb], [%[x]], %[step]\n\t"
+            "ldrd %[t0], %[t1], [%[w0]], %[step]\n\t"
+            "smlad %[a0], %[t0], %[xa], %[a0]\n\t"
+            "smlad %[a0], %[t1], %[xb], %[a0]\n\t"
+            "ldrd %[t0], %[t1], [%[w1]], %[step]\n\t"
+            "smlad %[a1], %[t0], %[xa], %[a1]\n\t"
+            "smlad %[a1], %[t1], %[xb], %[a1]\n\t"
+            "ldrd %[t0], %[t1], [%[w2]], %[step]\n\t"
+            "smlad %[a2], %[t0], %[xa], %[a2]\n\t"
+            "smlad %[a2], %[t1], %[xb], %[a2]\n\t"
+            "ldrd %[t0], %[t1], [%[w3]], %[step]\n\t"
+            "smlad %[a3], %[t0], %[xa], %[a3]\n\t"
+            "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
+            "1:\n\t"
+            "ldrd %[xa], %[xb], [%[x]], %[step]\n\t"
+            "ldrd %[t0], %[t1], [%[w0]], %[step]\n\t"
+            "smlad %[a0], %[t0], %[xa], %[a0]\n\t"
+            "smlad %[a0], %[t1], %[xb], %[a0]\n\t"
+            "ldrd %[t0], %[t1], [%[w1]], %[step]\n\t"
+            "smlad %[a1], %[t0], %[xa], %[a1]\n\t"
+            "smlad %[a1], %[t1], %[xb], %[a1]\n\t"
+            "ldrd %[t0], %[t1], [%[w2]], %[step]\n\t"
+            "smlad %[a2], %[t0], %[xa], %[a2]\n\t"
+            "smlad %[a2], %[t1], %[xb], %[a2]\n\t"
+            "ldrd %[t0], %[t1], [%[w3]], %[step]\n\t"
+            "smlad %[a3], %[t0], %[xa], %[a3]\n\t"
+            "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
+            "2:\n\t"
+            "ldrd %[xa], %[xb], [%[x]], %[step]\n\t"
+            "ldrd %[t0], %[t1], [%[w0]], %[step]\n\t"
+            "smlad %[a0], %[t0], %[xa], %[a0]\n\t"
+            "smlad %[a0], %[t1], %[xb], %[a0]\n\t"
+            "ldrd %[t0], %[t1], [%[w1]], %[step]\n\t"
+            "smlad %[a1], %[t0], %[xa], %[a1]\n\t"
+            "smlad %[a1], %[t1], %[xb], %[a1]\n\t"
+            "ldrd %[t0], %[t1], [%[w2]], %[step]\n\t"
+            "smlad %[a2], %[t0], %[xa], %[a2]\n\t"
+            "smlad %[a2], %[t1], %[xb], %[a2]\n\t"
+            "ldrd %[t0], %[t1], [%[w3]], %[step]\n\t"
+            "smlad %[a3], %[t0], %[xa], %[a3]\n\t"
+            "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
+            "3:\n\t"
+            "ldrd %[xa], %[xb], [%[x]], %[step]\n\t"
+            "ldrd %[t0], %[t1], [%[w0]], %[step]\n\t"
+            "smlad %[a0], %[t0], %[xa], %[a0]\n\t"
+            "smlad %[a0], %[t1], %[xb], %[a0]\n\t"
+            "ldrd %[t0], %[t1], [%[w1]], %[step]\n\t"
+            "smlad %[a1], %[t0], %[xa], %[a1]\n\t"
+            "smlad %[a1], %[t1], %[xb], %[a1]\n\t"
+            "ldrd %[t0], %[t1], [%[w2]], %[step]\n\t"
+            "smlad %[a2], %[t0], %[xa], %[a2]\n\t"
+            "smlad %[a2], %[t1], %[xb], %[a2]\n\t"
+            "ldrd %[t0], %[t1], [%[w3]], %[step]\n\t"
+            "smlad %[a3], %[t0], %[xa], %[a3]\n\t"
+            "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
             "cmp %[x], %[xe]\n\t"
             "bne 0b"
             : [a0] "+r"(a0), [a1] "+r"(a1), [a2] "+r"(a2), [a3] "+r"(a3), [w0] "+r"(w0), [w1] "+r"(w1),
               [w2] "+r"(w2), [w3] "+r"(w3), [x] "+r"(x), [xa] "=&r"(xa), [xb] "=&r"(xb), [t0] "+&r"(t0),
               [t1] "=&r"(t1)
-            : [xe] "r"(xe)
+            : [xe] "r"(xe), [step] "I"(8) /* bytes per load: the immediate as an operand, printed as #8 */
             : "cc", "memory");
-#undef SLIPEST_ROWS4_QUARTER
     h[0] = a0;
     h[1] = a1;
     h[2] = a2;
@@ -534,7 +571,8 @@ static uint32_t shifted_sum(const int32_t *h, unsigned n, unsigned k1)
         ++p;                                                                                                  \
     }
 
-/* LayerNorm's second pass: e_i in place, over the accumulators; returns S = sum e^2 (<= H 4^e_bits <= 2^31, in uint32_t).
+/* LayerNorm's second pass: e_i in place, over the accumulators; returns S = sum e^2 (<= H 4^e_bits <=
+ * 2^31, in uint32_t).
  * Where the core has SSAT the clamp of h' is one instruction, which needs its bit count as a constant:
  * one loop per h_bits of the widths 2..256 (21..24, docs/fixed_point.md), the compare pair otherwise. */
 #if defined(__GNUC__)
@@ -572,7 +610,6 @@ static uint32_t centre_pass(int32_t *h, unsigned n, unsigned h_bits, unsigned k1
 #endif
     return s;
 }
-#undef CENTRE_LOOP
 
 /* Normalise, affine and GELU over the block's n units: out[i] from the centred e[i] and the multiplier. A
  * call of its own, so that the loop has the registers to itself (block_q's values would spill). */
@@ -688,8 +725,9 @@ static int infer_layers(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST
     int best = 0;
 
     /* The scratch is zeroed once per inference: every element a block reads was written before by the
-     * block's own loops over its width (the widest block's units are zeroed, wmax), but an analyser that does not unroll 256 iterations cannot see
-     * that (Frama-C EVA would report reads of possibly uninitialised elements). Then the features go to
+     * block's own loops over its width (the widest block's units are zeroed, wmax), but an analyser that
+     * does not unroll 256 iterations cannot see that (Frama-C EVA would report reads of possibly
+     * uninitialised elements). Then the features go to
      * the word-aligned activations: the caller's array may be on any int16 boundary, and the four-row
      * products load their inputs in aligned pairs of words. */
     for (k = 0u; k < m->n_layers && k < (unsigned)SLIPEST_MAX_LAYERS; ++k) {

@@ -189,13 +189,13 @@ HOT int32_t gelu_q(const int16_t *table, unsigned to_q15, int32_t u)
     int32_t v = u < 0 ? -u : u;                         /* u >= -32768: no overflow */
     int32_t w = v << to_q15;                            /* v >= 0, w <= 2^30 */
     int32_t k = w >> 15;                                /* w >= 0: plain shift is defined */
-    int32_t tneg = 0;
-    if (k < SLIPEST_Q_GELU_N - 1) {
+    int32_t g = u > 0 ? u : 0;
+    if (k < SLIPEST_Q_GELU_N - 1) { /* else GELU(-|u|) is 0 in Q(FY) */
         int32_t t0 = table[k];
         int32_t t1 = table[k + 1];
-        tneg = t0 + rsr32((t1 - t0) * (w & 0x7FFF), 15u);
+        g += t0 + rsr32((t1 - t0) * (w & 0x7FFF), 15u);
     }
-    return (u > 0 ? u : 0) + tneg;
+    return g;
 }
 
 /* The LayerNorm block shift k1 = max(0, bitlen(max|h|) - bits), max|h| from the row maximum and minimum

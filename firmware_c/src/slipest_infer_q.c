@@ -459,67 +459,30 @@ static void dot16_rows4(const int16_t *w, unsigned n, const int16_t *x, const in
     uint32_t xa, xb, t1;
     uint32_t t0 = (n >> 2) & 3u; /* quarters in the first pass (0: a whole pass) */
 
+    /* one quarter of a pass: four inputs, four rows (the immediate as an operand: #8) */
+#define SLIPEST_ROWS4_QUARTER                                                                                  \
+    "ldrd %[xa], %[xb], [%[x]], %[step]\n\t"                                                                   \
+    "ldrd %[t0], %[t1], [%[w0]], %[step]\n\t"                                                                  \
+    "smlad %[a0], %[t0], %[xa], %[a0]\n\t"                                                                     \
+    "smlad %[a0], %[t1], %[xb], %[a0]\n\t"                                                                     \
+    "ldrd %[t0], %[t1], [%[w1]], %[step]\n\t"                                                                  \
+    "smlad %[a1], %[t0], %[xa], %[a1]\n\t"                                                                     \
+    "smlad %[a1], %[t1], %[xb], %[a1]\n\t"                                                                     \
+    "ldrd %[t0], %[t1], [%[w2]], %[step]\n\t"                                                                  \
+    "smlad %[a2], %[t0], %[xa], %[a2]\n\t"                                                                     \
+    "smlad %[a2], %[t1], %[xb], %[a2]\n\t"                                                                     \
+    "ldrd %[t0], %[t1], [%[w3]], %[step]\n\t"                                                                  \
+    "smlad %[a3], %[t0], %[xa], %[a3]\n\t"                                                                     \
+    "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
     __asm__("cmp %[t0], #2\n\t" /* 0: quarter 0; 1: quarter 3; 2: quarter 2; 3: quarter 1 */
             "beq 2f\n\t"
             "bhi 1f\n\t"
             "cmp %[t0], #0\n\t"
             "bne 3f\n\t"
-            "0:\n\t"
-            "ldrd %[xa], %[xb], [%[x]], %[step]\n\t"
-            "ldrd %[t0], %[t1], [%[w0]], %[step]\n\t"
-            "smlad %[a0], %[t0], %[xa], %[a0]\n\t"
-            "smlad %[a0], %[t1], %[xb], %[a0]\n\t"
-            "ldrd %[t0], %[t1], [%[w1]], %[step]\n\t"
-            "smlad %[a1], %[t0], %[xa], %[a1]\n\t"
-            "smlad %[a1], %[t1], %[xb], %[a1]\n\t"
-            "ldrd %[t0], %[t1], [%[w2]], %[step]\n\t"
-            "smlad %[a2], %[t0], %[xa], %[a2]\n\t"
-            "smlad %[a2], %[t1], %[xb], %[a2]\n\t"
-            "ldrd %[t0], %[t1], [%[w3]], %[step]\n\t"
-            "smlad %[a3], %[t0], %[xa], %[a3]\n\t"
-            "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
-            "1:\n\t"
-            "ldrd %[xa], %[xb], [%[x]], %[step]\n\t"
-            "ldrd %[t0], %[t1], [%[w0]], %[step]\n\t"
-            "smlad %[a0], %[t0], %[xa], %[a0]\n\t"
-            "smlad %[a0], %[t1], %[xb], %[a0]\n\t"
-            "ldrd %[t0], %[t1], [%[w1]], %[step]\n\t"
-            "smlad %[a1], %[t0], %[xa], %[a1]\n\t"
-            "smlad %[a1], %[t1], %[xb], %[a1]\n\t"
-            "ldrd %[t0], %[t1], [%[w2]], %[step]\n\t"
-            "smlad %[a2], %[t0], %[xa], %[a2]\n\t"
-            "smlad %[a2], %[t1], %[xb], %[a2]\n\t"
-            "ldrd %[t0], %[t1], [%[w3]], %[step]\n\t"
-            "smlad %[a3], %[t0], %[xa], %[a3]\n\t"
-            "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
-            "2:\n\t"
-            "ldrd %[xa], %[xb], [%[x]], %[step]\n\t"
-            "ldrd %[t0], %[t1], [%[w0]], %[step]\n\t"
-            "smlad %[a0], %[t0], %[xa], %[a0]\n\t"
-            "smlad %[a0], %[t1], %[xb], %[a0]\n\t"
-            "ldrd %[t0], %[t1], [%[w1]], %[step]\n\t"
-            "smlad %[a1], %[t0], %[xa], %[a1]\n\t"
-            "smlad %[a1], %[t1], %[xb], %[a1]\n\t"
-            "ldrd %[t0], %[t1], [%[w2]], %[step]\n\t"
-            "smlad %[a2], %[t0], %[xa], %[a2]\n\t"
-            "smlad %[a2], %[t1], %[xb], %[a2]\n\t"
-            "ldrd %[t0], %[t1], [%[w3]], %[step]\n\t"
-            "smlad %[a3], %[t0], %[xa], %[a3]\n\t"
-            "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
-            "3:\n\t"
-            "ldrd %[xa], %[xb], [%[x]], %[step]\n\t"
-            "ldrd %[t0], %[t1], [%[w0]], %[step]\n\t"
-            "smlad %[a0], %[t0], %[xa], %[a0]\n\t"
-            "smlad %[a0], %[t1], %[xb], %[a0]\n\t"
-            "ldrd %[t0], %[t1], [%[w1]], %[step]\n\t"
-            "smlad %[a1], %[t0], %[xa], %[a1]\n\t"
-            "smlad %[a1], %[t1], %[xb], %[a1]\n\t"
-            "ldrd %[t0], %[t1], [%[w2]], %[step]\n\t"
-            "smlad %[a2], %[t0], %[xa], %[a2]\n\t"
-            "smlad %[a2], %[t1], %[xb], %[a2]\n\t"
-            "ldrd %[t0], %[t1], [%[w3]], %[step]\n\t"
-            "smlad %[a3], %[t0], %[xa], %[a3]\n\t"
-            "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
+            "0:\n\t" SLIPEST_ROWS4_QUARTER
+            "1:\n\t" SLIPEST_ROWS4_QUARTER
+            "2:\n\t" SLIPEST_ROWS4_QUARTER
+            "3:\n\t" SLIPEST_ROWS4_QUARTER
             "cmp %[x], %[xe]\n\t"
             "bne 0b"
             : [a0] "+r"(a0), [a1] "+r"(a1), [a2] "+r"(a2), [a3] "+r"(a3), [w0] "+r"(w0), [w1] "+r"(w1),
@@ -571,6 +534,14 @@ static uint32_t shifted_sum(const int32_t *h, unsigned n, unsigned k1)
         ++p;                                                                                                  \
     }
 
+#if SLIPEST_HAS_SSAT
+/* The loop for blocks with h_bits = HB (a constant: one SSAT for the clamp of h' to HB + 1 bits). */
+#define CENTRE_CASE(HB)                                                                                        \
+    case (HB):                                                                                                \
+        CENTRE_LOOP(SAT(hr_, (HB) + 1u))                                                                      \
+        break;
+#endif
+
 /* LayerNorm's second pass: e_i in place, over the accumulators; returns S = sum e^2 (<= H 4^e_bits <=
  * 2^31, in uint32_t).
  * Where the core has SSAT the clamp of h' is one instruction, which needs its bit count as a constant:
@@ -589,18 +560,10 @@ static uint32_t centre_pass(int32_t *h, unsigned n, unsigned h_bits, unsigned k1
 
 #if SLIPEST_HAS_SSAT
     switch (h_bits) {
-    case 21u:
-        CENTRE_LOOP(SAT(hr_, 22))
-        break;
-    case 22u:
-        CENTRE_LOOP(SAT(hr_, 23))
-        break;
-    case 23u:
-        CENTRE_LOOP(SAT(hr_, 24))
-        break;
-    case 24u:
-        CENTRE_LOOP(SAT(hr_, 25))
-        break;
+        CENTRE_CASE(21u)
+        CENTRE_CASE(22u)
+        CENTRE_CASE(23u)
+        CENTRE_CASE(24u)
     default:
         CENTRE_LOOP(sat_var(hr_, h_bits + 1u))
         break;

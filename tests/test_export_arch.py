@@ -137,7 +137,7 @@ def test_frama_c_eva_layer_kernel_over_all_int16_inputs(eva_bundle):
 
 def test_frama_c_eva_finds_a_removed_saturation_in_the_layer_kernel(eva_bundle, tmp_path):
     """Without the clamp that states |e| <= 2^14 (a bound that holds only through e's relation to
-    max|d|), EVA reports the possible overflow of e * e in block_q: the zero above is not vacuous."""
+    max|d|), EVA reports the possible overflow of e * e in centre_pass: the zero above is not vacuous."""
     need("frama-c")
     from fleetlab.assurance import analysers
 

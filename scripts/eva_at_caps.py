@@ -1,6 +1,6 @@
-"""Frama-C EVA on the layer-table fixed-point kernel at the build's caps (issue 28): opt-in, as one run
-takes minutes, longer than the test suite's budget allows (the suite runs the same analysis on a small
-two-block model, tests/test_export_arch.py).
+"""Frama-C EVA on the layer-table fixed-point kernel at the build's caps (issue 28) at the default
+precision 5: opt-in, as one run takes minutes, longer than the test suite's budget allows (the suite runs
+the same analysis and control at precision 3, about 30 s each: tests/test_export_arch.py).
 
     python scripts/eva_at_caps.py [--out DIR] [--no-control]
 

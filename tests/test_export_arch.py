@@ -115,34 +115,41 @@ def test_fixed_point_agrees_with_float_on_real_data(arch, real_data_dir, tmp_pat
 # --- Frama-C EVA on the layer-table kernel -----------------------------------------------------
 
 @pytest.fixture(scope="module")
-def eva_bundle(tmp_path_factory):
-    """A small irregular two-block model (EVA analyses every row with its own weights)."""
-    out = tmp_path_factory.mktemp("eva") / "bundle"
-    export_bundle(quick_model("8,5"), out, inputs=draw_inputs(1000, None, seed=3))
+def caps_bundle(tmp_path_factory):
+    """A model at the build's caps: SLIPEST_MAX_LAYERS blocks of SLIPEST_MAX_WIDTH units (4 x 256)."""
+    out = tmp_path_factory.mktemp("eva_caps") / "bundle"
+    export_bundle(quick_model("256,256,256,256"), out, inputs=draw_inputs(200, None, seed=3))
     return out
 
 
 LAYER_SAT = "SAT(rsr_h(SAT(nh * hp_ - sum, 30), half, k2), 14)"
+# At the caps EVA joins the rows and units of a block (256 of them); precision 3 unrolls the short loops
+# (bit lengths, the block loop) and proves the kernel in about 30 s; the default precision 5 takes minutes
+# (scripts/eva_at_caps.py, opt-in, docs/assurance.md).
+CAPS_PRECISION = ["-eva-precision", "3"]
 
 
-def test_frama_c_eva_layer_kernel_over_all_int16_inputs(eva_bundle):
-    """EVA, sound: no alarm in the layer-table kernel (both blocks and the head) for every int16 input."""
+def test_frama_c_eva_layer_kernel_at_the_caps(caps_bundle):
+    """EVA at the caps (4 blocks of 256 units): no alarm for every int16 input, although the analysis joins
+    the rows and units of each block (the clamps the proof states where they are used, docs/fixed_point.md)."""
     need("frama-c")
     from fleetlab.assurance import analysers
 
-    (res,) = analysers.frama_c_eva(eva_bundle, entries=["eva_infer_q"])
+    (res,) = analysers.frama_c_eva(caps_bundle, entries=["eva_infer_q"],
+                                   options=analysers.EVA_OPTIONS + CAPS_PRECISION)
     assert "Frama_C_show_each_class: {0; 1; 2}" in res.log  # the analysis ran through the whole kernel
     assert res.alarms == [], "\n".join(res.alarms)
 
 
-def test_frama_c_eva_finds_a_removed_saturation_in_the_layer_kernel(eva_bundle, tmp_path):
-    """Without the clamp that states |e| <= 2^14 (a bound that holds only through e's relation to
-    max|d|), EVA reports the possible overflow of e * e in centre_pass: the zero above is not vacuous."""
+def test_frama_c_eva_finds_a_removed_saturation_in_the_layer_kernel(caps_bundle, tmp_path):
+    """At the caps, without the clamp that states |e| <= 2^14 (a bound that holds only through e's relation
+    to max|d|), EVA reports the possible overflow of e * e in centre_pass: the zero above is not vacuous."""
     need("frama-c")
     from fleetlab.assurance import analysers
 
     src = planted_src(tmp_path, "slipest_infer_q.c", LAYER_SAT, "rsr_h(SAT(nh * hp_ - sum, 30), half, k2)")
-    (res,) = analysers.frama_c_eva(eva_bundle, entries=["eva_infer_q"], src_dir=src)
+    (res,) = analysers.frama_c_eva(caps_bundle, entries=["eva_infer_q"], src_dir=src,
+                                   options=analysers.EVA_OPTIONS + CAPS_PRECISION)
     assert any("e_ * e_" in a for a in res.alarms), "\n".join(res.alarms)
 
 

@@ -512,9 +512,13 @@ static uint32_t shifted_sum(const int32_t *h, unsigned n, unsigned k1)
     const int32_t half = (int32_t)((UINT32_C(1) << k1) >> 1); /* k1 <= 31 - h_bits */
     uint32_t usum = 0u;
 
-    while (p != h_end) {
-        usum += (uint32_t)rsr_h(*p, half, k1);
+    if ((n & 1u) != 0u) { /* an odd width: one unit first, then pairs (the loop's cost over two units) */
+        usum = (uint32_t)rsr_h(*p, half, k1);
         ++p;
+    }
+    while (p != h_end) {
+        usum += (uint32_t)rsr_h(p[0], half, k1) + (uint32_t)rsr_h(p[1], half, k1);
+        p += 2;
     }
     return usum;
 }

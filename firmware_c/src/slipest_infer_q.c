@@ -518,7 +518,7 @@ static uint32_t shifted_sum(const int32_t *h, unsigned n, unsigned k1)
     }
     while (p != h_end) {
         usum += (uint32_t)rsr_h(p[0], half, k1) + (uint32_t)rsr_h(p[1], half, k1);
-        p += 2;
+        p = &p[2];
     }
     return usum;
 }

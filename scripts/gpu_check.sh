@@ -81,9 +81,9 @@ if [ -n "$DATA" ]; then
     --json "$OUT_DIR/table_sn-s_cpu.json" > /dev/null 2> "$OUT_DIR/table_sn-s_cpu.err" &
   cpu_table=$!
 fi
-step "bench fusion --device cuda --arch sn-s" 60 "${TO_FILE[@]}" "$OUT_DIR/bench_gpu_sn-s.json" \
+step "bench fusion --device cuda --arch sn-s" 150 "${TO_FILE[@]}" "$OUT_DIR/bench_gpu_sn-s.json" \
   "${FL[@]}" bench fusion --device cuda --arch sn-s --full-runs 3 --repeats 50 --json
-[ "$QUICK" = 1 ] || step "bench fusion --device cuda --arch sn-d" 90 "${TO_FILE[@]}" "$OUT_DIR/bench_gpu_sn-d.json" \
+[ "$QUICK" = 1 ] || step "bench fusion --device cuda --arch sn-d" 150 "${TO_FILE[@]}" "$OUT_DIR/bench_gpu_sn-d.json" \
   "${FL[@]}" bench fusion --device cuda --arch sn-d --full-runs 2 --repeats 20 --json
 if [ -z "$DATA" ]; then
   echo "gpu_check: no Fleet-To-Lab CSVs found (give DATA_DIR or FLEETLAB_REAL_DATA): table steps skipped" >&2

@@ -318,3 +318,20 @@ def test_failed_compilation_warns_once_and_runs_the_plain_steps(cals, experts, c
     assert tried.after_draws is lockstep._after_draws
     for name, value in _tensors(plain).items():
         assert torch.equal(value, _tensors(tried)[name]), name
+
+
+def test_bench_fusion_runs_without_the_can_stack():
+    """A GPU image often lacks the CAN packages: `bench fusion` (scripts/gpu_check.sh) must still run,
+    and the benchmark that needs them says which package is missing, in one line."""
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['cantools'] = None; from fleetlab.cli import main; "
+            "sys.exit(main(sys.argv[1:]))")
+    fusion = subprocess.run([sys.executable, "-c", code, "bench", "fusion", "--help"],
+                            capture_output=True, text=True, timeout=120)
+    assert fusion.returncode == 0, fusion.stderr
+    assert "--device" in fusion.stdout and "--table-runs" in fusion.stdout
+    link = subprocess.run([sys.executable, "-c", code, "bench", "link"], capture_output=True, text=True, timeout=120)
+    assert link.returncode == 1 and link.stderr.strip().splitlines() == [
+        "fleetlab bench: error: benchmark 'link' needs the Python package 'cantools', which is not installed here"]

@@ -51,6 +51,7 @@ class CalibrationFitness:
         self.xt_t = xt.T.contiguous()  # (13, N)
         self.xx = (xt[:, :, None] * xt[:, None, :]).reshape(n, -1).T.contiguous()  # (169, N)
         self.fast = len(hidden_sizes(arch)) == 1  # one hidden block: the closed-form path below
+        self._act: torch.Tensor | None = None  # the SN-S activations' buffer, see _activations
 
     def __call__(self, flats: torch.Tensor) -> torch.Tensor:
         if flats.dim() == 1:
@@ -79,11 +80,25 @@ class CalibrationFitness:
         gram = torch.bmm(wc.transpose(1, 2), wc).reshape(p, -1)  # (P, 169)
         inv_std = torch.mm(gram, self.xx).div_(h).add_(LN_EPS).rsqrt_().unsqueeze(1)  # (P, 1, N)
         # Scaling the (13, N) inputs per ant by 1/std costs a tenth of scaling the (H, N)
-        # pre-activations, and baddbmm adds β inside the GEMM: γ ⊙ normalised + β in one pass.
-        act = torch.baddbmm(beta.unsqueeze(-1), wc * g.unsqueeze(-1), self.xt_t * inv_std)  # (P, H, N)
+        # pre-activations, and the GEMM adds onto β: γ ⊙ normalised + β in one pass.
+        act = self._activations(p, h)
+        act.copy_(beta.unsqueeze(-1).expand_as(act)).baddbmm_(wc * g.unsqueeze(-1), self.xt_t * inv_std)
         torch.ops.aten.gelu_(act)
         logits = torch.baddbmm(b2.unsqueeze(-1), w2, act)  # (P, 3, N)
         return self._loss(logits)
+
+    def _activations(self, p: int, h: int) -> torch.Tensor:
+        """A (p, H, N) view of one buffer kept for the whole search (p ≤ chunk).
+
+        Why: `torch.baddbmm(β, ...)` allocated a fresh (chunk, H, N) result every call (3.6 MB for 150
+        ants), paid the page faults of that memory, and filled it with β through a broadcast copy:
+        together as long as the GEMM itself. Filling a kept buffer and multiplying into it in place
+        (`baddbmm_`) is the same computation, bit for bit, about 5 % less CPU per SN-S run.
+        """
+        n = self.xt_t.shape[1]
+        if self._act is None or self._act.shape[0] < p:
+            self._act = torch.empty(max(p, self.chunk), h, n)
+        return self._act[:p]
 
     def _generic(self, vals: torch.Tensor) -> torch.Tensor:
         return self._loss(batched_logits(self.arch, vals, self.x).transpose(1, 2))

@@ -61,6 +61,21 @@ def test_batched_fitness_equals_module_loss(arch, cal):
     torch.testing.assert_close(batched, expected, rtol=1e-5, atol=1e-5)
 
 
+def test_fitness_buffer_reuse_keeps_every_call_independent(cal):
+    """The SN-S path multiplies into one activation buffer kept across calls (fitness._activations):
+    calls of different sizes in any order, the last chunk shorter, give the same bits as a fresh
+    object per call, and as a NaN-filled new buffer per chunk (every value is written before it is read)."""
+    x, y = cal
+    gen = torch.Generator().manual_seed(1)
+    flats = torch.stack([flatten(build("sn-s", seed=s)) for s in range(3)]).repeat(70, 1)[:203]
+    flats = flats + 0.3 * torch.randn(flats.shape, generator=gen)
+    kept = CalibrationFitness("sn-s", x, y, chunk=150)
+    for part in (flats, flats[:7], flats[50:], flats[:2], flats):  # 150 + 53, 7, 150 + 3, 2, 150 + 53
+        assert torch.equal(kept(part), CalibrationFitness("sn-s", x, y, chunk=150)(part))
+    fresh = CalibrationFitness("sn-s", x, y, chunk=150)
+    fresh._activations = lambda p, h: torch.empty(p, h, x.shape[0]).fill_(float("nan"))  # no reuse at all
+    assert torch.equal(kept(flats), fresh(flats))
+
 def test_fitness_rejects_bad_calibration():
     with pytest.raises(ValueError, match="NaN"):
         CalibrationFitness("sn-s", np.full((4, 12), np.nan, dtype=np.float32), np.zeros(4, dtype=np.int64))

@@ -11,6 +11,10 @@
 #   FUZZ_TARGETS="fuzz_push fuzz_cobs" scripts/fuzz.sh ...   only these targets (default: all)
 #   FUZZ_MAX_SECONDS=N scripts/fuzz.sh --long ...  also stop each target after N seconds (recorded
 #                                             with the executions it reached)
+#   FUZZ_BUNDLE=DIR scripts/fuzz.sh ...       build for that bundle (default: the example SN-S one); a
+#                                             layer-table bundle (SN-D, any hidden sizes) adds
+#                                             fuzz_image_table, and the store fuzzers start from its
+#                                             format-2 model.img: e.g. FUZZ_TARGETS="fuzz_image_table fuzz_store"
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 MODE=short
@@ -30,7 +34,10 @@ fi
 PY="${PYTHON:-$(command -v python3 || command -v python)}"
 
 command -v clang >/dev/null || { echo "fuzz.sh: clang not found (scripts/setup.sh installs it)" >&2; exit 2; }
-cmake -S "$ROOT" -B "$BUILD" -DCMAKE_C_COMPILER=clang -DSLIPEST_FUZZ=ON -DPython3_EXECUTABLE="$PY" >/dev/null
+BUNDLE="${FUZZ_BUNDLE:-$ROOT/firmware_c/bundles/example}"
+[[ -f "$BUNDLE/model.img" ]] || { echo "fuzz.sh: no model.img in FUZZ_BUNDLE=$BUNDLE" >&2; exit 2; }
+cmake -S "$ROOT" -B "$BUILD" -DCMAKE_C_COMPILER=clang -DSLIPEST_FUZZ=ON -DSLIPEST_BUNDLE="$BUNDLE" \
+  -DPython3_EXECUTABLE="$PY" >/dev/null
 cmake --build "$BUILD" -j2 --target "${TARGETS[@]}" >/dev/null
 
 LOGS="$BUILD/fuzz-logs"
@@ -40,10 +47,14 @@ run_one() { # target, extra libFuzzer options...; crashes leave a reproducer in 
   local t="$1"; shift
   mkdir -p "$BUILD/corpus/$t"
   # seed: a valid image, so that mutations start past the magic, sizes and CRC
-  if [ "$t" = fuzz_image ] && [ -z "$(ls -A "$BUILD/corpus/$t")" ]; then
-    cp "$ROOT/firmware_c/bundles/example/model.img" "$BUILD/corpus/$t/example.img"
+  if [[ "$t" = fuzz_image || "$t" = fuzz_image_table ]] && [ -z "$(ls -A "$BUILD/corpus/$t")" ]; then
+    cp "$BUNDLE/model.img" "$BUILD/corpus/$t/seed.img"
   fi
-  "$BUILD/$t" "$@" -max_len=4096 -print_final_stats=1 -artifact_prefix="$LOGS/$t-" \
+  local max_len=4096
+  if [ "$t" = fuzz_image_table ]; then  # room for the seed image (a layer-table image may be ~80 KB)
+    max_len=$(( $(stat -c %s "$BUNDLE/model.img") + 64 ))
+  fi
+  "$BUILD/$t" "$@" -max_len="$max_len" -print_final_stats=1 -artifact_prefix="$LOGS/$t-" \
       "$BUILD/corpus/$t" >"$LOGS/$t.log" 2>&1
 }
 report_fail() {

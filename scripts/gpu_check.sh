@@ -14,15 +14,16 @@
 # else data/fleet_to_lab); without them the table step is skipped, saying so.
 #
 # Prints (and writes to ${OUT:-build/gpu_check}/): bench fusion --device cuda for SN-S and SN-D
-# (generation ms, full run s, 30 runs batched), the CPU figures of the same host beside them,
-# the SN-D paper table's wall time on the GPU (30 runs x 2 budgets, every method), and the
-# 30-run SN-S table's scores on the GPU against the CPU's: with `--rng host` (the GPU draws the
-# CPU reference's random numbers, so the difference is float rounding only: the criterion,
-# |difference| <= 0.01 per method) and with the default `--rng device` (another random stream:
-# shown as information).
+# (generation ms compiled and not, full run s, 30 runs batched), the SN-D paper table's wall time
+# on the GPU (30 runs x 2 budgets, every method), and the 30-run SN-S table's scores on the GPU
+# with `--rng host` (the GPU draws the CPU reference's random numbers, so the difference is float
+# rounding only: the criterion, |difference| <= 0.01 per method) against the CPU's. Each step
+# says how long it took.
 #
-# GPU_CHECK_QUICK=1: only the SN-S benchmark and the SN-S 30-run GPU-vs-CPU comparisons
-# (< 150 s on one H200 with 16 CPU cores).
+# GPU_CHECK_QUICK=1: only the SN-S benchmark and the SN-S GPU-vs-CPU comparison.
+# GPU_CHECK_EXTRA=1: also the SN-S table with the default `--rng device` (another random stream:
+# information) and the CPU path's bench fusion on this host (SN-S with a core busy, SN-D); they
+# take the whole check past 5 minutes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
@@ -59,10 +60,12 @@ step() {  # step NAME SECONDS CMD...: run with a time limit; a failure is report
   local name=$1 limit=$2
   shift 2
   echo "== $name"
+  local t0=$SECONDS
   if ! timeout "$limit" "$@"; then
     failed+=("$name")
     echo "gpu_check: step '$name' failed or ran over ${limit} s" >&2
   fi
+  echo "== $name: $(( SECONDS - t0 )) s"
 }
 TO_FILE=(bash -c '"$@" > "$0" && cat "$0"')  # TO_FILE FILE CMD...: the command's stdout into FILE, and shown
 DATA=${1:-${FLEETLAB_REAL_DATA:-}}
@@ -74,6 +77,7 @@ CPU_JOBS=$(( NPROC > 6 ? NPROC - 4 : 2 ))
 GPU_SIDE_JOBS=$(( NPROC > 6 ? 3 : 1 ))
 SNS=(--runs 30 --methods acomerge --no-progress)
 QUICK=${GPU_CHECK_QUICK:-0}
+EXTRA=${GPU_CHECK_EXTRA:-0}
 cpu_table=""
 if [ -n "$DATA" ]; then
   # the CPU side of the SN-S comparison runs on most cores while the GPU benchmarks run
@@ -81,9 +85,9 @@ if [ -n "$DATA" ]; then
     --json "$OUT_DIR/table_sn-s_cpu.json" > /dev/null 2> "$OUT_DIR/table_sn-s_cpu.err" &
   cpu_table=$!
 fi
-step "bench fusion --device cuda --arch sn-s" 60 "${TO_FILE[@]}" "$OUT_DIR/bench_gpu_sn-s.json" \
+step "bench fusion --device cuda --arch sn-s" 150 "${TO_FILE[@]}" "$OUT_DIR/bench_gpu_sn-s.json" \
   "${FL[@]}" bench fusion --device cuda --arch sn-s --full-runs 3 --repeats 50 --json
-[ "$QUICK" = 1 ] || step "bench fusion --device cuda --arch sn-d" 90 "${TO_FILE[@]}" "$OUT_DIR/bench_gpu_sn-d.json" \
+[ "$QUICK" = 1 ] || step "bench fusion --device cuda --arch sn-d" 150 "${TO_FILE[@]}" "$OUT_DIR/bench_gpu_sn-d.json" \
   "${FL[@]}" bench fusion --device cuda --arch sn-d --full-runs 2 --repeats 20 --json
 if [ -z "$DATA" ]; then
   echo "gpu_check: no Fleet-To-Lab CSVs found (give DATA_DIR or FLEETLAB_REAL_DATA): table steps skipped" >&2
@@ -91,7 +95,7 @@ else
   step "SN-S table, 30 runs x 2 budgets, AcoMerge on the GPU, --rng host (the CPU's random numbers)" 150 \
     "${FL[@]}" evaluate --data "$DATA" "${SNS[@]}" --device cuda --rng host --jobs "$GPU_SIDE_JOBS" \
     --json "$OUT_DIR/table_sn-s_gpu_host_rng.json"
-  step "SN-S table, 30 runs x 2 budgets, AcoMerge on the GPU, --rng device (default)" 150 \
+  [ "$EXTRA" != 1 ] || step "SN-S table, 30 runs x 2 budgets, AcoMerge on the GPU, --rng device (default)" 150 \
     "${FL[@]}" evaluate --data "$DATA" "${SNS[@]}" --device cuda --jobs "$GPU_SIDE_JOBS" \
     --json "$OUT_DIR/table_sn-s_gpu.json"
   wait "$cpu_table" || { failed+=("SN-S table on the CPU"); tail -3 "$OUT_DIR/table_sn-s_cpu.err" >&2; }
@@ -104,9 +108,9 @@ if [ -n "$DATA" ] && [ "$QUICK" != 1 ]; then
   t1=$(date +%s.%N)
   "$PY" -c "import sys; print(f'{float(sys.argv[2]) - float(sys.argv[1]):.1f}')" "$t0" "$t1" > "$OUT_DIR/table_sn-d_seconds.txt"
 fi
-[ "$QUICK" = 1 ] || step "bench fusion, CPU path on this host (SN-S, with --load 1)" 60 "${TO_FILE[@]}" "$OUT_DIR/bench_cpu_sn-s.json" \
+[ "$EXTRA" != 1 ] || step "bench fusion, CPU path on this host (SN-S, with --load 1)" 60 "${TO_FILE[@]}" "$OUT_DIR/bench_cpu_sn-s.json" \
   "${FL[@]}" bench fusion --arch sn-s --repeats 10 --full-runs 3 --json
-[ "$QUICK" = 1 ] || step "bench fusion, CPU path on this host (SN-D, one full run)" 90 "${TO_FILE[@]}" "$OUT_DIR/bench_cpu_sn-d.json" \
+[ "$EXTRA" != 1 ] || step "bench fusion, CPU path on this host (SN-D, one full run)" 90 "${TO_FILE[@]}" "$OUT_DIR/bench_cpu_sn-d.json" \
   "${FL[@]}" bench fusion --arch sn-d --repeats 2 --full-runs 1 --load 0 --json
 "$PY" "$ROOT/scripts/gpu_check_report.py" "$OUT_DIR" | tee "$OUT_DIR/summary.txt"
 echo "gpu_check: done in $(( $(date +%s) - t_start )) s; files in $OUT_DIR"

@@ -23,12 +23,15 @@ def main(folder: Path) -> int:
         print(f"device: {g['device']}")
         print(f"SN-S generation, one run:  {g['generation_ms']:.4f} ms (goal <= 0.15 ms; fitness call alone "
               f"{g['fitness_ms']:.4f} ms; one more generation {g.get('generation_ms_steady', float('nan')):.4f} ms; "
-              f"eager {g['generation_ms_eager']:.4f} ms; graph run == eager run: {g.get('cuda_graph_same_search')}; "
+              f"eager {g['generation_ms_eager']:.4f} ms; uncompiled {g.get('generation_ms_uncompiled', float('nan')):.4f} "
+              f"ms; compiling took {g.get('compile_s', float('nan')):.1f} s once; "
+              f"graph run == eager run: {g.get('cuda_graph_same_search')}; "
               f"{g['batch_runs']} runs batched: {g['batched_generation_ms']:.4f} ms per "
               f"generation, {g['per_run_generation_ms']:.4f} ms per run)")
     if s["sn-d"]:
         g = s["sn-d"]
-        print(f"SN-D AcoMerge run:         {g['full_run_s']:.3f} s (goal <= 0.5 s; generation {g['generation_ms']:.3f} ms; "
+        print(f"SN-D AcoMerge run:         {g['full_run_s']:.3f} s (goal <= 0.5 s; generation {g['generation_ms']:.3f} ms, "
+              f"uncompiled {g.get('generation_ms_uncompiled', float('nan')):.3f} ms; "
               f"{g['batch_runs']} runs batched: {g['batched_full_runs_s']:.3f} s for all)")
     table = load(folder, "table_sn-d_gpu/results.json")
     if table:

@@ -22,6 +22,7 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--arch", default="sn-s", choices=("sn-s", "sn-d"))
     p.add_argument("--generations", type=int, default=24)
+    p.add_argument("--compiled", action="store_true", help="the compiled steps (lockstep.generation_steps)")
     args = p.parse_args()
     if not torch.cuda.is_available():
         print("gpu_profile_generation: torch sees no CUDA GPU here", file=sys.stderr)
@@ -31,7 +32,8 @@ def main() -> int:
     cfg = AcoMergeConfig(generations=args.generations, device="cuda")
     buffer = checked_inputs(experts, args.arch, cfg, 0, None)[2]
     fitness = StackedFitness(args.arch, [(x, y)], "cuda")
-    run = lambda: search_lockstep([experts], [buffer], fitness, cfg, [0], "cuda", cuda_graph=False)  # noqa: E731
+    run = lambda: search_lockstep([experts], [buffer], fitness, cfg, [0], "cuda", cuda_graph=False,  # noqa: E731
+                                compiled=args.compiled)
     run()
     torch.cuda.synchronize()
     with profile(activities=[ProfilerActivity.CUDA]) as prof:
@@ -39,7 +41,7 @@ def main() -> int:
         torch.cuda.synchronize()
     kernels = [e for e in prof.events() if e.device_type == torch.autograd.DeviceType.CUDA]
     total_us = sum(e.device_time for e in kernels)
-    print(f"{args.arch}: {len(kernels) / args.generations:.0f} GPU kernels per generation, "
+    print(f"{args.arch}{' compiled' if args.compiled else ''}: {len(kernels) / args.generations:.0f} GPU kernels per generation, "
           f"{total_us / args.generations / 1e3:.4f} ms of kernel time per generation (set-up included)")
     by_name: dict[str, list[float]] = {}
     for e in kernels:

@@ -61,6 +61,31 @@ def test_batched_fitness_equals_module_loss(arch, cal):
     torch.testing.assert_close(batched, expected, rtol=1e-5, atol=1e-5)
 
 
+def test_fitness_buffer_reuse_keeps_every_call_independent(cal):
+    """The SN-S path writes its first layer's operands and activations into buffers kept across calls
+    (fitness._operands): calls of different sizes in any order, the last chunk shorter, give the same bits
+    as a fresh object per call, and as new NaN-filled buffers per chunk (every value is written before
+    it is read)."""
+    x, y = cal
+    gen = torch.Generator().manual_seed(1)
+    flats = torch.stack([flatten(build("sn-s", seed=s)) for s in range(3)]).repeat(70, 1)[:203]
+    flats = flats + 0.3 * torch.randn(flats.shape, generator=gen)
+    kept = CalibrationFitness("sn-s", x, y, chunk=150)
+    for part in (flats, flats[:7], flats[50:], flats[:2], flats):  # 150 + 53, 7, 150 + 3, 2, 150 + 53
+        assert torch.equal(kept(part), CalibrationFitness("sn-s", x, y, chunk=150)(part))
+    fresh = CalibrationFitness("sn-s", x, y, chunk=150)
+    unkept = fresh._operands
+
+    def nan_filled(p: int, h: int):  # new buffers every call, NaN wherever the fitness would not write
+        fresh._kept = None
+        a, b, act = unkept(p, h)
+        for buf in (a, b[:, :-1], act):
+            buf.fill_(float("nan"))
+        return a, b, act
+
+    fresh._operands = nan_filled
+    assert torch.equal(kept(flats), fresh(flats))
+
 def test_fitness_rejects_bad_calibration():
     with pytest.raises(ValueError, match="NaN"):
         CalibrationFitness("sn-s", np.full((4, 12), np.nan, dtype=np.float32), np.zeros(4, dtype=np.int64))

@@ -5,8 +5,10 @@ twin) reproduce its vectors bit for bit under ASan/UBSan; agreement with float o
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,6 +25,7 @@ from planted import planted_src
 from test_export_c import INCLUDE, build_check, need
 
 ARCHS = ["sn-d", "24,9", "256,256,256,256"]
+REPO = Path(__file__).resolve().parents[1]
 
 
 def quick_model(arch: str, seed: int = 4):
@@ -74,6 +77,24 @@ def test_c_kernels_match_the_vectors_sanitized(arch_bundle, tmp_path):
     res = subprocess.run([str(exe), str(out / "vectors.bin")], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stdout + res.stderr
     assert re.search(r"q mismatches 0 .*f32 > tol 0", res.stdout)
+
+
+@pytest.mark.parametrize("arch_bundle", ["24,9"], indirect=True)
+def test_fuzzers_run_clean_on_a_layer_table_image(arch_bundle, tmp_path):
+    """libFuzzer (ASan + UBSan) on the format-2 path: fuzz_image_table mutates the bundle's image through
+    the layer-table reader into both kernels at the int16 rails, fuzz_store drives the store (uploads,
+    activation, power cuts) from that image. A small shape, so that most mutations land in the table,
+    the shifts and the bounds rather than in weights; SN-D runs the same reader and kernel."""
+    _, bundle = arch_bundle
+    need("clang")
+    env = {**os.environ, "FUZZ_BUNDLE": str(bundle), "FUZZ_TARGETS": "fuzz_image_table fuzz_store"}
+    proc = subprocess.run([str(REPO / "scripts" / "fuzz.sh"), "10", str(tmp_path / "fuzz")], env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr[-4000:]
+    execs = dict(re.findall(r"^(fuzz_\w+) executions=(\d+)", proc.stdout, flags=re.M))
+    assert set(execs) == {"fuzz_image_table", "fuzz_store"} and all(int(v) > 1000 for v in execs.values()), execs
+    seed = tmp_path / "fuzz" / "corpus" / "fuzz_image_table" / "seed.img"
+    assert seed.read_bytes() == (bundle / "model.img").read_bytes()
 
 
 def test_a_build_below_the_model_is_refused(arch_bundle, tmp_path):

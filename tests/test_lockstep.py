@@ -267,3 +267,71 @@ def test_rng_option_reaches_the_search_config():
     settings = evaluate.settings_from_args(p.parse_args(["--data", "unused", "--rng", "host"]))
     assert aco_config(settings.budget).rng == "host"
     assert aco_config(evaluate.settings_from_args(p.parse_args(["--data", "unused"])).budget).rng == "device"
+
+
+# --- the compiled generation (issue 30: an SN-S generation <= 0.15 ms on one GPU) ------------
+
+def test_compiled_generation_steps_the_same_search(cals, experts):
+    """The random-free steps traced by torch.compile (aot_eager here: the same graph capture and
+    functionalisation of the in-place state as inductor on a GPU, without a code generator) give the
+    plain steps' search: the same ants' paths every generation, the state in the same tensors."""
+    from torch._dynamo.utils import counters
+
+    from fleetlab.fusion.lockstep import generation_steps
+
+    cfg = dataclasses.replace(TINY, heuristic="best_distance")
+    plain, traced = _state(experts, cals, cfg, [5, 6]), _state(experts, cals, cfg, [5, 6])
+    traced.before_draws, traced.after_draws = generation_steps(True, backend="aot_eager")
+    assert traced.after_draws is not generation_steps(False)[1]
+    before = {k: v.data_ptr() for k, v in _tensors(traced).items()}
+    counters.clear()
+    for g in range(cfg.generations):
+        plain.generation()
+        traced.generation()
+        if plain.iwoa_flags[g]:
+            plain.iwoa()
+            traced.iwoa()
+        assert torch.equal(plain.best_path, traced.best_path), g
+        assert torch.allclose(plain.tau, traced.tau, rtol=1e-5, atol=0), g
+        assert torch.allclose(plain.hist["ants"], traced.hist["ants"], rtol=1e-5, atol=0), g
+    assert {k: v.data_ptr() for k, v in _tensors(traced).items()} == before
+    assert int(traced.g) == cfg.generations
+    # each step is one whole graph (nothing left to eager Python between kernels), traced once
+    assert not counters["graph_break"] and counters["stats"]["unique_graphs"] == 2, dict(counters)
+
+
+def test_failed_compilation_warns_once_and_runs_the_plain_steps(cals, experts, capsys):
+    """Where compiling fails (no Triton, no C compiler), one warning line, and the generation runs
+    the plain steps from then on: the same search as an engine that never tried."""
+    from fleetlab.fusion import lockstep
+
+    def broken(state, *args):
+        raise RuntimeError("Triton not found\ndetail")
+
+    plain, tried = _state(experts, cals, TINY, [5]), _state(experts, cals, TINY, [5])
+    tried.before_draws, tried.after_draws = broken, broken
+    for _ in range(3):
+        plain.generation()
+        tried.generation()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "compiling the AcoMerge generation failed (RuntimeError: Triton not found)" in err[0]
+    assert tried.after_draws is lockstep._after_draws
+    for name, value in _tensors(plain).items():
+        assert torch.equal(value, _tensors(tried)[name]), name
+
+
+def test_bench_fusion_runs_without_the_can_stack():
+    """A GPU image often lacks the CAN packages: `bench fusion` (scripts/gpu_check.sh) must still run,
+    and the benchmark that needs them says which package is missing, in one line."""
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['cantools'] = None; from fleetlab.cli import main; "
+            "sys.exit(main(sys.argv[1:]))")
+    fusion = subprocess.run([sys.executable, "-c", code, "bench", "fusion", "--help"],
+                            capture_output=True, text=True, timeout=120)
+    assert fusion.returncode == 0, fusion.stderr
+    assert "--device" in fusion.stdout and "--table-runs" in fusion.stdout
+    link = subprocess.run([sys.executable, "-c", code, "bench", "link"], capture_output=True, text=True, timeout=120)
+    assert link.returncode == 1 and link.stderr.strip().splitlines() == [
+        "fleetlab bench: error: benchmark 'link' needs the Python package 'cantools', which is not installed here"]

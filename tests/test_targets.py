@@ -204,6 +204,23 @@ def test_bench_counts_instructions_as_published(cross_builds, name):
     assert 1_000 < row["flash_bytes_kernel_and_model"] < row["flash_bytes_can_node"]
 
 
+def test_a_slow_phase_is_timed_over_the_calls_that_fit_the_counter():
+    """A phase times fewer calls than the empty loop where its full count would wrap the counter
+    (bench_target.c calls_that_fit; the 24-bit SysTick wrapped three times under 1,024 soft-float SN-D
+    inferences on the M3 and showed 80,059 instructions instead of 1.39 million): the loop overhead is
+    taken per call; a phase of which not one call fits is refused by name, not printed."""
+    from fleetlab.host_tools.firmware.measure import costs_from_counts
+
+    counts = {"calib_instructions": 2_000_000, "calib_ticks": 50_000, "inferences": 1024, "empty_ticks": 2048,
+              "q_calls": 1024, "q_ticks": 2048 + 1024 * 70, "f32_calls": 3, "f32_ticks": 6 + 3 * 50_000,
+              "node_99_samples_ticks": 99 * 100, "stack_q": 200, "stack_f32": 300, "stack_node_window": 500,
+              "node_bytes": 700}
+    costs = costs_from_counts("cortex-m3", counts, counts)
+    assert costs["q"] == 70 * 40 and costs["f32"] == 50_000 * 40 and costs["node_instructions_per_sample"] == 4000
+    with pytest.raises(ValueError, match="cortex-m3: one f32 inference takes more than half"):
+        costs_from_counts("cortex-m3", counts, {**counts, "f32_calls": 0})
+
+
 # --------------------------------------------------------------------------- required tools
 def test_a_missing_emulator_fails_the_configure_naming_its_package(tmp_path):
     """CMake refuses a target whose QEMU is missing (it would register none of its QEMU tests), naming the

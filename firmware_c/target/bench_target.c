@@ -20,6 +20,7 @@
 #define N_BENCH 64u
 #define REPS 16u
 #endif
+#define N_CALLS (REPS * N_BENCH) /* calls per phase, at most (see calls_that_fit) */
 
 static int16_t q_in[N_BENCH][12];
 static float f_in[N_BENCH][12];
@@ -88,6 +89,38 @@ __attribute__((noinline)) static void calibration_loop(uint32_t n)
 #endif
 }
 #endif
+
+/* How many calls of `one` a phase times: N_CALLS, or as many as fit half the counter's range,
+ * judged from one timed call. Why: the 24-bit SysTick wraps after 2^24 ticks (671 million
+ * instructions at 40 per tick), and a soft-float SN-D inference (about 2 million instructions on
+ * the Cortex-M3) times 1,024 went round it three times, which printed a fraction of the cost.
+ * 0: not even one call fits (the host refuses the figure). The trace counter cannot wrap. */
+static uint32_t calls_that_fit(void (*one)(uint32_t))
+{
+#if defined(SLIPEST_COUNT_BY_TRACE)
+    (void)one;
+    return N_CALLS;
+#else
+#if defined(__riscv)
+    const uint32_t range = 0xFFFFFFFFu;
+#else
+    const uint32_t range = 0xFFFFFFu;
+#endif
+    uint32_t t = ticks_now(), per_call, fit;
+    one(0u);
+    per_call = ticks_since(t) + 1u;
+    fit = range / 2u / per_call;
+    return fit < N_CALLS ? fit : N_CALLS;
+#endif
+}
+
+/* `calls` calls of `one` over the N_BENCH inputs in turn; returns the ticks they took */
+static uint32_t timed_calls(void (*one)(uint32_t), uint32_t calls)
+{
+    uint32_t k, t = ticks_now();
+    for (k = 0; k < calls; k++) one(k & (N_BENCH - 1u));
+    return ticks_since(t);
+}
 
 __attribute__((noinline)) static void one_q(uint32_t i)
 {
@@ -192,22 +225,19 @@ int main(void)
 #endif
 
     t = ticks_now();
-    for (r = 0; r < REPS; r++)
-        for (i = 0; i < N_BENCH; i++) sink += (int32_t)i; /* loop overhead only */
+    for (r = 0; r < N_CALLS; r++) sink += (int32_t)(r & (N_BENCH - 1u)); /* loop overhead only */
     target_put_kv("empty_ticks", ticks_since(t));
+    target_put_kv("inferences", N_CALLS);
 
-    t = ticks_now();
-    for (r = 0; r < REPS; r++)
-        for (i = 0; i < N_BENCH; i++) one_q(i);
-    target_put_kv("q_ticks", ticks_since(t));
+    r = calls_that_fit(one_q);
+    target_put_kv("q_ticks", timed_calls(one_q, r));
+    target_put_kv("q_calls", r);
 #ifndef SLIPEST_Q_ONLY
-    t = ticks_now();
-    for (r = 0; r < REPS; r++)
-        for (i = 0; i < N_BENCH; i++) one_f32(i);
-    target_put_kv("f32_ticks", ticks_since(t));
+    r = calls_that_fit(one_f32);
+    target_put_kv("f32_ticks", timed_calls(one_f32, r));
+    target_put_kv("f32_calls", r);
     target_put_kv("stack_f32", target_stack_use(one_f32));
 #endif
-    target_put_kv("inferences", REPS * N_BENCH);
 
 #ifndef SLIPEST_Q_ONLY
     if (slipest_node_init(&node, model_q, model_f32) != SLIPEST_OK) return 1;

@@ -78,17 +78,28 @@ def target_costs(target: Target | str, build_dir: Path) -> dict[str, float | Non
     t = target_registry.get(target) if isinstance(target, str) else target
     qonly = _counted_kv(t, build_dir, "slipest_bench_target_q.elf")
     full = None if t.integer_only else _counted_kv(t, build_dir, "slipest_bench_target.elf")
+    return costs_from_counts(t.name, qonly, full)
+
+
+def costs_from_counts(name: str, qonly: dict, full: dict | None) -> dict[str, float | None]:
+    """target_costs from the key=value counts of the two cost images (full is None on an integer-only target)."""
     ref = full or qonly
     per_tick = ref["calib_instructions"] / ref["calib_ticks"]
-    n = ref["inferences"]
+    n = ref["inferences"]  # the empty loop's iterations
 
-    def per_inference(ticks: int) -> float:
-        return (ticks - ref["empty_ticks"]) * per_tick / n
+    def per_inference(phase: str) -> float:
+        # a slow model times fewer calls than the empty loop ran, so that its phase does not wrap the
+        # counter (bench_target.c calls_that_fit): the loop overhead is taken per call
+        calls = ref[f"{phase}_calls"]
+        if calls < 1:
+            raise ValueError(f"{name}: one {phase} inference takes more than half the cycle counter's range; "
+                             "its cost cannot be measured on this target")
+        return (ref[f"{phase}_ticks"] - ref["empty_ticks"] * calls / n) * per_tick / calls
 
     return {
         "instructions_per_tick": per_tick,
-        "q": per_inference(ref["q_ticks"]),
-        "f32": per_inference(full["f32_ticks"]) if full else None,
+        "q": per_inference("q"),
+        "f32": per_inference("f32") if full else None,
         "node_instructions_per_sample": qonly["node_99_samples_ticks"] * per_tick / 99,
         "stack_q": qonly["stack_q"],
         "stack_f32": full["stack_f32"] if full else None,

@@ -33,12 +33,14 @@ Figures (one JSON object with --json):
 
 With `--device cuda` it measures the accelerator path instead (fusion/lockstep.py):
 generation_ms (one run's generation: construction, fitness of every ant, updates, IWOA
-amortised, the run's set-up and CUDA graph captures included; _eager: without any CUDA graph;
-_steady: what one more generation adds, from a full run less a run of a fifth of the
-generations, i.e. one replay of the generation's graph), fitness_ms (one generation's fitness
-call alone; _cuda_graph: replayed, with cuda_graph_max_abs_diff against the call), full_run_s, and the same with
-`--batch-runs` runs in lockstep (batched_generation_ms for all of them, per_run_generation_ms),
-against the goals of issue 30 (SN-S generation ≤ 0.15 ms, SN-D run ≤ 0.5 s on an H100-class GPU).
+amortised, the run's set-up and CUDA graph captures included, its random-free steps compiled
+(lockstep.generation_steps); _eager: compiled, without any CUDA graph; _uncompiled: the graph of
+the plain steps, the peer; _steady: what one more generation adds, from a full run less a run of
+a fifth of the generations, i.e. one replay of the generation's graph), compile_s (the first
+run's extra time: torch.compile, paid once per process and shape), fitness_ms (one generation's
+fitness call alone; _cuda_graph: replayed, with cuda_graph_max_abs_diff against the call),
+full_run_s, and the same with `--batch-runs` runs in lockstep as `evaluate` runs them, uncompiled
+(batched_generation_ms for all of them, per_run_generation_ms; _compiled beside it), against the goals of issue 30 (SN-S generation ≤ 0.15 ms, SN-D run ≤ 0.5 s on an H100-class GPU).
 
 Calibration data: a paper-protocol draw from `--data` (the target rover's rows) or,
 without --data, a synthetic three-class set whose feature means and spreads are of
@@ -339,14 +341,19 @@ def measure_device(args) -> dict:
 
     results = {}
 
-    def timed_runs(n_runs: int, generations: int, cuda_graph: bool = True) -> float:
+    first_s = {}
+
+    def timed_runs(n_runs: int, generations: int, cuda_graph: bool = True, compiled: bool = True) -> float:
         """Best wall seconds of a lockstep search of n_runs runs (different seeds)."""
         cfg = replace(config, generations=generations)
         fitness = StackedFitness(args.arch, [(x, y)] * n_runs, device)
         go = lambda: search_lockstep([experts] * n_runs, [buffer] * n_runs, fitness, cfg,  # noqa: E731
-                                     [args.seed + r for r in range(n_runs)], device, cuda_graph=cuda_graph)
-        results[n_runs, generations, cuda_graph] = go()  # also the warm-up: kernels loaded, allocator primed
+                                     [args.seed + r for r in range(n_runs)], device, cuda_graph=cuda_graph,
+                                     compiled=compiled)
+        t0 = time.perf_counter()
+        results[n_runs, generations, cuda_graph, compiled] = go()  # also the warm-up: compiled, kernels loaded
         sync()
+        first_s[n_runs, generations, cuda_graph, compiled] = time.perf_counter() - t0
         best = math.inf
         for _ in range(args.full_runs):
             t0 = time.perf_counter()
@@ -356,12 +363,15 @@ def measure_device(args) -> dict:
         return best
 
     run_s = timed_runs(1, args.generations)
+    compile_s = first_s[1, args.generations, True, True] - run_s
     run_s_eager = timed_runs(1, args.generations, cuda_graph=False)
+    run_s_uncompiled = timed_runs(1, args.generations, compiled=False)
     short = max(1, args.generations // 5)
     steady_ms = (1e3 * (run_s - timed_runs(1, short)) / (args.generations - short)
                  if args.generations > short else math.nan)
-    batched_s = timed_runs(args.batch_runs, args.generations)
-    graphed_run, eager_run = results[1, args.generations, True][0], results[1, args.generations, False][0]
+    batched_s = timed_runs(args.batch_runs, args.generations, compiled=False)  # as `evaluate` runs them
+    batched_s_compiled = timed_runs(args.batch_runs, args.generations)
+    graphed_run, eager_run = results[1, args.generations, True, True][0], results[1, args.generations, False, True][0]
     same_search = (graphed_run.history == eager_run.history and torch.equal(graphed_run.best_flat, eager_run.best_flat))
     fitness = StackedFitness(args.arch, [(x, y)], device)
     gen = torch.Generator(device=device).manual_seed(args.seed)
@@ -389,12 +399,14 @@ def measure_device(args) -> dict:
         "fitness_ms": round(1e3 * fit_best, 4), "fitness_ms_cuda_graph": round(1e3 * fit_graph, 4),
         "cuda_graph_max_abs_diff": graph_diff,
         "generation_ms": round(gen_ms, 4), "generation_ms_eager": round(1e3 * run_s_eager / args.generations, 4),
-        "generation_ms_steady": round(steady_ms, 4),
+        "generation_ms_uncompiled": round(1e3 * run_s_uncompiled / args.generations, 4),
+        "generation_ms_steady": round(steady_ms, 4), "compile_s": round(compile_s, 2),
         "cuda_graph_same_search": same_search,  # the replayed run's history and model equal the eager run's
         "full_run_s": round(run_s, 3), "full_run_s_eager": round(run_s_eager, 3),
         "batch_runs": args.batch_runs, "batched_generation_ms": round(1e3 * batched_s / args.generations, 4),
         "per_run_generation_ms": round(1e3 * batched_s / args.generations / args.batch_runs, 4),
         "batched_full_runs_s": round(batched_s, 3),
+        "batched_generation_ms_compiled": round(1e3 * batched_s_compiled / args.generations, 4),
     }
     goals = {}
     if args.arch in GOAL_GPU_GENERATION_MS:
@@ -427,9 +439,11 @@ def run(args: argparse.Namespace) -> int:
     if device.type != "cpu":
         print(f"AcoMerge on {result['device']}: {result['arch']}, {result['ants']} ants, |D_Cal| = {result['cal_size']}")
         for key, unit in (("fitness_ms", "ms"), ("fitness_ms_cuda_graph", "ms"), ("generation_ms", "ms"),
-                          ("generation_ms_eager", "ms"), ("generation_ms_steady", "ms"), ("full_run_s", "s"),
-                          ("full_run_s_eager", "s"),
-                          ("batched_generation_ms", "ms"), ("per_run_generation_ms", "ms"), ("batched_full_runs_s", "s")):
+                          ("generation_ms_eager", "ms"), ("generation_ms_uncompiled", "ms"),
+                          ("generation_ms_steady", "ms"), ("compile_s", "s"), ("full_run_s", "s"),
+                          ("full_run_s_eager", "s"), ("batched_generation_ms", "ms"),
+                          ("batched_generation_ms_compiled", "ms"), ("per_run_generation_ms", "ms"),
+                          ("batched_full_runs_s", "s")):
             print(f"  {key:40s} {result[key]:10.4f} {unit}")
         print(f"  the graph-replayed run is the eager run's search: {result['cuda_graph_same_search']}")
         print(f"  goals: {result['goals']}")

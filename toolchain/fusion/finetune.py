@@ -35,4 +35,5 @@ def finetune(
     if len(y) == 0:
         raise ValueError("cannot fine-tune on an empty calibration set")
     tuned = copy.deepcopy(model)
-    return train_classifier(tuned, x, y, epochs=None, steps=steps, lr=lr, batch_size=batch_size, seed=seed)
+    return train_classifier(tuned, x, y, epochs=None, steps=steps, lr=lr, batch_size=batch_size, seed=seed,
+                            fused_adam=True)  # per-run work: the fast Adam (models/train.py, adam)

@@ -51,6 +51,7 @@ class CalibrationFitness:
         self.xt_t = xt.T.contiguous()  # (13, N)
         self.xx = (xt[:, :, None] * xt[:, None, :]).reshape(n, -1).T.contiguous()  # (169, N)
         self.fast = len(hidden_sizes(arch)) == 1  # one hidden block: the closed-form path below
+        self._kept: tuple[torch.Tensor, ...] | None = None  # the SN-S path's buffers, see _operands
 
     def __call__(self, flats: torch.Tensor) -> torch.Tensor:
         if flats.dim() == 1:
@@ -79,11 +80,36 @@ class CalibrationFitness:
         gram = torch.bmm(wc.transpose(1, 2), wc).reshape(p, -1)  # (P, 169)
         inv_std = torch.mm(gram, self.xx).div_(h).add_(LN_EPS).rsqrt_().unsqueeze(1)  # (P, 1, N)
         # Scaling the (13, N) inputs per ant by 1/std costs a tenth of scaling the (H, N)
-        # pre-activations, and baddbmm adds β inside the GEMM: γ ⊙ normalised + β in one pass.
-        act = torch.baddbmm(beta.unsqueeze(-1), wc * g.unsqueeze(-1), self.xt_t * inv_std)  # (P, H, N)
+        # pre-activations, and β rides in the same GEMM as a 14th input that is always 1:
+        # [γ ⊙ W̃c, β] @ [x̃ / std; 1] = γ ⊙ normalised + β in one pass.
+        a, b, act = self._operands(p, h)
+        k = self.xt_t.shape[0]
+        torch.mul(wc, g.unsqueeze(-1), out=a[:, :, :k])
+        a[:, :, k].copy_(beta)
+        torch.mul(self.xt_t, inv_std, out=b[:, :k])
+        torch.bmm(a, b, out=act)  # (P, H, N)
         torch.ops.aten.gelu_(act)
         logits = torch.baddbmm(b2.unsqueeze(-1), w2, act)  # (P, 3, N)
         return self._loss(logits)
+
+    def _operands(self, p: int, h: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Views (p ≤ chunk) of three buffers kept for the whole search: the first layer's weights
+        (p, H, 14), its inputs (p, 14, N) whose last row is 1 once and for all, and the activations
+        (p, H, N).
+
+        Why (issue 30): `torch.baddbmm(β, ...)` allocated a fresh (chunk, H, N) result every call
+        (3.6 MB for 150 ants), paid the page faults of that memory and filled it with β through a
+        broadcast copy, together as long as the GEMM itself; building the operands with `torch.cat`
+        instead cost as much. Written into kept buffers, a 300-ant fitness call takes about 12 % less
+        CPU, and gives the same bits as before on this machine (docs/scaling.md, "Profile and cuts").
+        """
+        k, n = self.xt_t.shape
+        if self._kept is None or self._kept[0].shape[0] < p:
+            rows = max(p, self.chunk)
+            b = torch.empty(rows, k + 1, n)
+            b[:, k].fill_(1.0)
+            self._kept = (torch.empty(rows, h, k + 1), b, torch.empty(rows, h, n))
+        return tuple(t[:p] for t in self._kept)
 
     def _generic(self, vals: torch.Tensor) -> torch.Tensor:
         return self._loss(batched_logits(self.arch, vals, self.x).transpose(1, 2))

@@ -94,9 +94,12 @@ def run_acomerge_many(
     dev = resolve_device(config.device)
     checked = [checked_inputs(e, arch, config, s, b) for e, _, _, s, b in runs]
     fitness = StackedFitness(arch, [(x, y) for _, x, y, _, _ in runs], dev)
+    # One run (fuse) is bound by its ~80 kernel launches, which compiling fuses; a batch of runs
+    # (evaluate) fills the GPU, and its shapes and configurations (every method, both calibration
+    # sizes) would each cost a compilation of several seconds: it runs the plain steps.
     return search_lockstep([c[1] for c in checked], [c[2] for c in checked], fitness, config,
                            [s for _, _, _, s, _ in runs], dev, progress=progress,
-                           desc=f"{desc} x{len(runs)} on {device_label(dev)}")
+                           desc=f"{desc} x{len(runs)} on {device_label(dev)}", compiled=len(runs) == 1)
 
 
 class StackedFitness:
@@ -205,8 +208,17 @@ def construct_ants_dense(
     done for every decision and kept only where the ant departs. q0 may be a float64 tensor of
     one element (the engine's schedule, read on the device). The uniforms are drawn where each
     generator lives and moved to tau's device (`--rng host`: CPU generators on a GPU run).
+    Three steps, so that the engine can compile the two without random numbers (see _Lockstep).
     """
-    r, n_idx, m = tau.shape
+    greedy, leave, cdf = ant_weights(tau, eta, q0, alpha, beta)
+    return pick_paths(uniforms(gens, tau.shape[1], n_ants, tau.device), greedy, leave, cdf)
+
+
+def ant_weights(tau: torch.Tensor, eta: torch.Tensor | None, q0: float | torch.Tensor, alpha: float, beta: float
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Per decision (R, T): the greedy candidate (R, T, 1), the departure probability π_t (R, T, 1)
+    and the cumulative weights of the non-greedy candidates (R, T, M), float64."""
+    m = tau.shape[2]
     greedy = tau.argmax(dim=2, keepdim=True)  # (R, T, 1)
     weight = tau if alpha == 1.0 else tau.pow(alpha)
     if eta is not None:
@@ -215,10 +227,19 @@ def construct_ants_dense(
     w_greedy = weight.gather(2, greedy)
     w_others = weight.sum(dim=2, keepdim=True) - w_greedy
     leave = ((1.0 - q0) * w_others / (w_others + w_greedy)).to(torch.float32)  # (R, T, 1): π_t
-    cdf = weight.scatter(2, greedy, 0.0).cumsum_(dim=2).div_(w_others)
-    cdf[..., -1] = 1.0
-    u = torch.stack([torch.rand(n_idx, n_ants, generator=g, device=g.device) for g in gens])
-    u = u.to(tau.device)  # (R, T, P)
+    cdf = weight.scatter(2, greedy, 0.0).cumsum(dim=2).div(w_others)
+    last = torch.arange(m, device=tau.device) == m - 1
+    return greedy, leave, torch.where(last, 1.0, cdf)
+
+
+def uniforms(gens: Sequence[torch.Generator], n_idx: int, n_ants: int, device: torch.device) -> torch.Tensor:
+    """(R, T, P) uniforms, (T, P) from each run's generator, on `device`."""
+    return torch.stack([torch.rand(n_idx, n_ants, generator=g, device=g.device) for g in gens]).to(device)
+
+
+def pick_paths(u: torch.Tensor, greedy: torch.Tensor, leave: torch.Tensor, cdf: torch.Tensor) -> torch.Tensor:
+    """The decisions for uniforms u (R, T, P): greedy unless u < π_t, else u/π_t inverted in cdf."""
+    m = cdf.shape[2]
     depart = u < leave
     v = u.to(torch.float64) / leave
     pick = torch.searchsorted(cdf, v.contiguous(), right=True).clamp_(max=m - 1)
@@ -253,12 +274,15 @@ class _Lockstep:
     inputs in the same tensors. The generation counter, the q0 and global-best schedules, the
     IWOA counter and schedule and the history are device tensors for the same reason: a
     generation reads its own index from the device, and the host only says "next".
-    `generation()` and `iwoa()` are the only code paths, eager or replayed.
+    `generation()` and `iwoa()` are the only code paths, eager or replayed. A generation is
+    three steps: the construction weights, the uniforms, and everything after them; with
+    `fused` the first and the last are compiled (see `generation_steps`).
     """
 
-    def __init__(self, ex, cand, fitness, cfg: AcoMergeConfig, gens: list[torch.Generator]):
+    def __init__(self, ex, cand, fitness, cfg: AcoMergeConfig, gens: list[torch.Generator], fused: bool = False):
         dev = ex.device
         self.cfg, self.fitness, self.gens = cfg, fitness, gens
+        self.before_draws, self.after_draws = generation_steps(fused)
         n_runs, (m, n_t) = ex.shape[0], cand.shape[1:]
         self.rows = torch.arange(n_runs, device=dev)
         j_ex = torch.nan_to_num(fitness(ex), nan=math.inf)  # (R, K)
@@ -303,37 +327,24 @@ class _Lockstep:
 
     def generation(self) -> None:
         """Ants, fitness, best-so-far, pheromone update and history of generation self.g; then g += 1."""
-        cfg, rows = self.cfg, self.rows
-        q0 = self.q0_dev.index_select(0, self.g)  # (1,) float64, as the reference's Python float
-        paths = construct_ants_dense(self.tau, self.eta, q0, cfg.n_ants, self.gens, cfg.alpha, cfg.beta)  # (R, P, T)
-        flats = self.cand.gather(1, paths)  # (R, P, T)
-        j = torch.nan_to_num(self.fitness(flats), nan=math.inf)  # (R, P)
-        ib = j.argmin(dim=1)
-        jb = j.gather(1, ib.unsqueeze(1)).squeeze(1)
-        ib_path = paths[rows, ib]  # (R, T)
-        better = jb < self.best_fit
-        torch.where(better, jb, self.best_fit, out=self.best_fit)
-        torch.where(better.unsqueeze(1), flats[rows, ib], self.best_flat, out=self.best_flat)
-        torch.where(better.unsqueeze(1), ib_path, self.best_path, out=self.best_path)
-        torch.where(better, self.g + 1, self.best_gen, out=self.best_gen)
-        self.has_path.logical_or_(better)
-        if self.eta is not None:
-            self.eta.copy_(_heuristic(cfg, self.cand_t, self.best_flat))
-        use_gb = self.has_path & self.gb_dev.index_select(0, self.g)
-        path = torch.where(use_gb.unsqueeze(1), self.best_path, ib_path)
-        j_dep = torch.where(use_gb, self.best_fit, jb)
-        # J >= 0, and +inf only where it was NaN (nan_to_num turns an infinite loss into the largest
-        # float): Q(1 - ρ)/J is then 0, the reference's "no deposit", without a test of its own
-        amount = (1.0 - cfg.evaporation) * cfg.deposit / j_dep
-        self.tau.mul_(cfg.evaporation)
-        self.tau.scatter_add_(2, path.unsqueeze(2), amount.view(-1, 1, 1).expand(*path.shape, 1))
-        tmin, tmax = self.bounds(self.best_fit)
-        torch.clamp(self.tau, tmin.view(-1, 1, 1), tmax.view(-1, 1, 1), out=self.tau)  # = min(max(τ, τ_min), τ_max)
-        # per generation only what is needed later; the statistics are computed once, after the run
-        now = torch.stack([self.best_fit, jb, self.tau.amin(dim=(1, 2)), self.tau.amax(dim=(1, 2))], dim=1)
-        self.scalars.index_copy_(1, self.g, now.unsqueeze(1))
-        self.hist["ants"].index_copy_(1, self.g, j.unsqueeze(1))
-        self.g.add_(1)
+        greedy, leave, cdf = self._step("before_draws", _before_draws)
+        u = uniforms(self.gens, self.tau.shape[1], self.cfg.n_ants, self.tau.device)
+        self._step("after_draws", _after_draws, u, greedy, leave, cdf)
+
+    def _step(self, name: str, plain: Callable, *args):
+        """Run a step; where its compiled form fails (no Triton, no C compiler: found on the first
+        call, before it changed anything), one warning line and the plain steps from then on."""
+        step = getattr(self, name)
+        if step is plain:
+            return plain(self, *args)
+        try:
+            return step(self, *args)
+        except Exception as e:  # torch.compile raises many types (BackendCompilerFailed, InductorError, ...)
+            first = str(e).splitlines()[0] if str(e) else type(e).__name__
+            print(f"warning: compiling the AcoMerge generation failed ({type(e).__name__}: {first}); running it "
+                  "uncompiled", file=sys.stderr)
+            self.before_draws, self.after_draws = generation_steps(False)
+            return plain(self, *args)
 
     def iwoa(self) -> None:
         """One IWOA move of every run's candidates (a and the inertia read from the schedule); c += 1."""
@@ -350,6 +361,68 @@ class _Lockstep:
         if self.eta is not None:
             self.eta.copy_(_heuristic(cfg, self.cand_t, self.best_flat))
         self.c.add_(1)
+
+
+def _before_draws(state: _Lockstep) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The ant-construction weights of generation state.g (see `ant_weights`)."""
+    q0 = state.q0_dev.index_select(0, state.g)  # (1,) float64, as the reference's Python float
+    return ant_weights(state.tau, state.eta, q0, state.cfg.alpha, state.cfg.beta)
+
+
+def _after_draws(state: _Lockstep, u: torch.Tensor, greedy: torch.Tensor, leave: torch.Tensor,
+                 cdf: torch.Tensor) -> None:
+    """Everything of a generation after its uniforms u: paths, fitness, best-so-far, pheromone update,
+    history; g += 1. State tensors are written with copy_ (in place, see _Lockstep)."""
+    cfg, rows = state.cfg, state.rows
+    paths = pick_paths(u, greedy, leave, cdf)  # (R, P, T)
+    flats = state.cand.gather(1, paths)  # (R, P, T)
+    j = torch.nan_to_num(state.fitness(flats), nan=math.inf)  # (R, P)
+    ib = j.argmin(dim=1)
+    jb = j.gather(1, ib.unsqueeze(1)).squeeze(1)
+    ib_path = paths[rows, ib]  # (R, T)
+    better = jb < state.best_fit
+    state.best_flat.copy_(torch.where(better.unsqueeze(1), flats[rows, ib], state.best_flat))
+    state.best_path.copy_(torch.where(better.unsqueeze(1), ib_path, state.best_path))
+    state.best_gen.copy_(torch.where(better, state.g + 1, state.best_gen))
+    state.best_fit.copy_(torch.where(better, jb, state.best_fit))
+    state.has_path.logical_or_(better)
+    if state.eta is not None:
+        state.eta.copy_(_heuristic(cfg, state.cand_t, state.best_flat))
+    use_gb = state.has_path & state.gb_dev.index_select(0, state.g)
+    path = torch.where(use_gb.unsqueeze(1), state.best_path, ib_path)
+    j_dep = torch.where(use_gb, state.best_fit, jb)
+    # J >= 0, and +inf only where it was NaN (nan_to_num turns an infinite loss into the largest
+    # float): Q(1 - ρ)/J is then 0, the reference's "no deposit", without a test of its own
+    amount = (1.0 - cfg.evaporation) * cfg.deposit / j_dep
+    tau = (state.tau * cfg.evaporation).scatter_add(2, path.unsqueeze(2), amount.view(-1, 1, 1).expand(*path.shape, 1))
+    tmin, tmax = state.bounds(state.best_fit)
+    state.tau.copy_(torch.clamp(tau, tmin.view(-1, 1, 1), tmax.view(-1, 1, 1)))  # = min(max(τ, τ_min), τ_max)
+    # per generation only what is needed later; the statistics are computed once, after the run
+    now = torch.stack([state.best_fit, jb, state.tau.amin(dim=(1, 2)), state.tau.amax(dim=(1, 2))], dim=1)
+    state.scalars.index_copy_(1, state.g, now.unsqueeze(1))
+    state.hist["ants"].index_copy_(1, state.g, j.unsqueeze(1))
+    state.g.add_(1)
+
+
+def generation_steps(fused: bool, backend: str = "inductor") -> tuple[Callable, Callable]:
+    """The two random-free steps of a generation, as they are or compiled by torch.compile.
+
+    Why compile: a replayed SN-S generation is about eighty small kernels (the layer norm alone is
+    eight), each a few microseconds whatever its size. Inductor fuses the element-wise and
+    reduction chains into a handful of kernels (the GEMMs stay cuBLAS's); the uniforms are drawn
+    between the two steps, eagerly, by the runs' own generators, so the random streams are those
+    of the uncompiled engine. Fused kernels round differently, like any GPU path; the compiled
+    steps are captured into the generation's CUDA graph like the plain ones. Compiled once per
+    process and shape (dynamic=False), and cached by torch across runs.
+    """
+    if not fused:
+        return _before_draws, _after_draws
+    if backend not in _COMPILED:
+        _COMPILED[backend] = tuple(torch.compile(f, dynamic=False, backend=backend) for f in (_before_draws, _after_draws))
+    return _COMPILED[backend]
+
+
+_COMPILED: dict[str, tuple[Callable, ...]] = {}
 
 
 class _Replayed:
@@ -423,6 +496,7 @@ def search_lockstep(
     progress: bool = False,
     desc: str = "AcoMerge",
     cuda_graph: bool = True,
+    compiled: bool = True,
 ) -> list[AcoMergeResult]:
     """R AcoMerge runs (MMAS + IWOA, or MMAS only) in lockstep on `device`.
 
@@ -433,7 +507,8 @@ def search_lockstep(
     `acomerge.search`. On a GPU with device-side generators (`cuda_graph`), each whole
     generation is replayed from one CUDA graph and each IWOA move from another (_Replayed);
     with host generators (--rng host) only the fitness is (GraphedFitness), since the
-    uniforms come from the CPU.
+    uniforms come from the CPU. With `compiled`, on a GPU with device-side generators the
+    generation's two random-free steps are compiled (`generation_steps`).
     """
     config.validate()
     if "mmas" not in config.phases:
@@ -448,7 +523,8 @@ def search_lockstep(
     whole = cuda_graph and config.rng == "device"
     if cuda_graph and not whole:
         fitness = graphed(fitness, torch.zeros(n_runs, config.n_ants, cand.shape[2], device=dev))
-    state = _Lockstep(ex, cand, fitness, config, gens)
+    fused = compiled and dev.type == "cuda" and config.rng == "device"
+    state = _Lockstep(ex, cand, fitness, config, gens, fused=fused)
     generation = _Replayed(state.generation, dev, gens, "generation", enabled=whole)
     iwoa = _Replayed(state.iwoa, dev, gens, "IWOA move", enabled=whole)
     bar = tqdm(range(config.generations), desc=desc, disable=not progress, leave=False, unit="gen")

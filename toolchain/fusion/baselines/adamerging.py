@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ...models.train import class_weights
+from ...models.train import adam, class_weights
 from .common import BUDGET_STEPS, as_tensor_xy, merge_base, tensor_slices, weighted_ce_many
 
 ADAMERGING_LR = 0.01
@@ -51,7 +51,7 @@ def adamerging(
     xt, yt = as_tensor_xy(x_cal, y_cal)
     w = class_weights(y_cal)
     coef = torch.full((tau.shape[0], int(index.max()) + 1), float(init), requires_grad=True)
-    opt = torch.optim.Adam([coef], lr=lr)
+    opt = adam([coef], lr, fused=True)
     for _ in range(steps):
         opt.zero_grad()
         loss = weighted_ce_many(arch, merge_with_coefficients(base, tau, coef, index).unsqueeze(0), xt, yt, w)[0]

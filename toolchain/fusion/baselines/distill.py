@@ -17,7 +17,7 @@ import torch
 from torch.nn import functional as F
 
 from ...models import SlipNet, batched_logits, build
-from ...models.train import EXPERT_BATCH, class_weights
+from ...models.train import EXPERT_BATCH, adam, class_weights
 from .common import BUDGET_STEPS, as_tensor_xy
 
 DISTILL_LR = 0.01
@@ -50,7 +50,7 @@ def distill(
     soft = teacher_distribution(arch, teachers.float(), xt, temperature)
     weights = class_weights(y_cal)
     student = build(arch, seed=seed)
-    opt = torch.optim.Adam(student.parameters(), lr=lr)
+    opt = adam(student.parameters(), lr, fused=True)
     gen = torch.Generator().manual_seed(seed)
     n, batch_size = len(yt), min(batch_size, len(yt))
     done = 0

@@ -88,7 +88,7 @@ def test_fuzzers_run_clean_on_a_layer_table_image(arch_bundle, tmp_path):
     _, bundle = arch_bundle
     need("clang")
     env = {**os.environ, "FUZZ_BUNDLE": str(bundle), "FUZZ_TARGETS": "fuzz_image_table fuzz_store"}
-    proc = subprocess.run([str(REPO / "scripts" / "fuzz.sh"), "10", str(tmp_path / "fuzz")], env=env,
+    proc = subprocess.run([str(REPO / "scripts" / "fuzz.sh"), "6", str(tmp_path / "fuzz")], env=env,
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr[-4000:]
     execs = dict(re.findall(r"^(fuzz_\w+) executions=(\d+)", proc.stdout, flags=re.M))

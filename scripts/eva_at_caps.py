@@ -20,9 +20,6 @@ import time
 from pathlib import Path
 
 CAPS = "256,256,256,256"  # SLIPEST_MAX_LAYERS x SLIPEST_MAX_WIDTH (firmware_c/include/slipest_model.h)
-# the line the control plants into (tests/test_export_arch.py plants the same one), and its replacement
-CLAMP_OF_E = "SAT(rsr_h(SAT(nh * hp_ - sum, 30), half, k2), 14)"
-NO_CLAMP = "rsr_h(SAT(nh * hp_ - sum, 30), half, k2)"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -37,7 +34,8 @@ def main(argv: list[str] | None = None) -> int:
     from fleetlab.models import build
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    from planted import planted_src  # the one way the analysers' negative controls copy the sources
+    # the one way the analysers' negative controls copy the sources, and the line this one plants into
+    from planted import LAYER_E_CLAMP, LAYER_E_UNCLAMPED, planted_src
 
     with tempfile.TemporaryDirectory() as tmp:
         bundle = args.out or Path(tmp) / "caps"
@@ -51,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
             print("  " + a)
         ok = reached and not res.alarms
         if not args.no_control:
-            src = planted_src(Path(tmp), "slipest_infer_q.c", CLAMP_OF_E, NO_CLAMP)
+            src = planted_src(Path(tmp), "slipest_infer_q.c", LAYER_E_CLAMP, LAYER_E_UNCLAMPED)
             t0 = time.perf_counter()
             (ctl,) = analysers.frama_c_eva(bundle, entries=["eva_infer_q"], src_dir=src)
             found = any("e_ * e_" in a for a in ctl.alarms)

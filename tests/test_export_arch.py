@@ -21,7 +21,7 @@ from fleetlab.export.vectors import builtin_windows, draw_inputs
 from fleetlab.models import build
 from fleetlab.models.train import train_classifier
 
-from planted import planted_src
+from planted import LAYER_E_CLAMP, LAYER_E_UNCLAMPED, planted_src
 from test_export_c import INCLUDE, build_check, need
 
 ARCHS = ["sn-d", "24,9", "256,256,256,256"]
@@ -143,7 +143,6 @@ def caps_bundle(tmp_path_factory):
     return out
 
 
-LAYER_SAT = "SAT(rsr_h(SAT(nh * hp_ - sum, 30), half, k2), 14)"
 # At the caps EVA joins the rows and units of a block (256 of them); precision 3 unrolls the short loops
 # (bit lengths, the block loop) and proves the kernel in about 30 s; the default precision 5 takes minutes
 # (scripts/eva_at_caps.py, opt-in, docs/assurance.md).
@@ -168,7 +167,7 @@ def test_frama_c_eva_finds_a_removed_saturation_in_the_layer_kernel(caps_bundle,
     need("frama-c")
     from fleetlab.assurance import analysers
 
-    src = planted_src(tmp_path, "slipest_infer_q.c", LAYER_SAT, "rsr_h(SAT(nh * hp_ - sum, 30), half, k2)")
+    src = planted_src(tmp_path, "slipest_infer_q.c", LAYER_E_CLAMP, LAYER_E_UNCLAMPED)
     (res,) = analysers.frama_c_eva(caps_bundle, entries=["eva_infer_q"], src_dir=src,
                                    options=analysers.EVA_OPTIONS + CAPS_PRECISION)
     assert any("e_ * e_" in a for a in res.alarms), "\n".join(res.alarms)

@@ -94,7 +94,9 @@ __attribute__((noinline)) static void calibration_loop(uint32_t n)
  * judged from one timed call. Why: the 24-bit SysTick wraps after 2^24 ticks (671 million
  * instructions at 40 per tick), and a soft-float SN-D inference (about 2 million instructions on
  * the Cortex-M3) times 1,024 went round it three times, which printed a fraction of the cost.
- * 0: not even one call fits (the host refuses the figure). The trace counter cannot wrap. */
+ * 0: one call takes more than half the range (the host refuses the figure); a single call longer than the
+ * whole range would itself wrap unseen (on the SysTick, over 671 million instructions). The trace counter
+ * cannot wrap. */
 static uint32_t calls_that_fit(void (*one)(uint32_t))
 {
 #if defined(SLIPEST_COUNT_BY_TRACE)

@@ -40,7 +40,8 @@ a fifth of the generations, i.e. one replay of the generation's graph), compile_
 run's extra time: torch.compile, paid once per process and shape), fitness_ms (one generation's
 fitness call alone; _cuda_graph: replayed, with cuda_graph_max_abs_diff against the call),
 full_run_s, and the same with `--batch-runs` runs in lockstep as `evaluate` runs them, uncompiled
-(batched_generation_ms for all of them, per_run_generation_ms; _compiled beside it), against the goals of issue 30 (SN-S generation ≤ 0.15 ms, SN-D run ≤ 0.5 s on an H100-class GPU).
+(batched_generation_ms for all of them, per_run_generation_ms; _compiled beside it), against the
+goals of issue 30 (SN-S generation ≤ 0.15 ms, SN-D run ≤ 0.5 s on an H100-class GPU).
 
 Calibration data: a paper-protocol draw from `--data` (the target rover's rows) or,
 without --data, a synthetic three-class set whose feature means and spreads are of

@@ -78,10 +78,10 @@ def test_fitness_buffer_reuse_keeps_every_call_independent(cal):
 
     def nan_filled(p: int, h: int):  # new buffers every call, NaN wherever the fitness would not write
         fresh._kept = None
-        a, b, act = unkept(p, h)
-        for buf in (a, b[:, :-1], act):
+        a, b, act, logits = unkept(p, h)
+        for buf in (a, b[:, :-1], act, logits):
             buf.fill_(float("nan"))
-        return a, b, act
+        return a, b, act, logits
 
     fresh._operands = nan_filled
     assert torch.equal(kept(flats), fresh(flats))

@@ -25,6 +25,16 @@ from ..models.mlp import LN_EPS, hidden_sizes, param_shapes
 from ..models.train import class_weights
 
 
+SUB_CHUNK = 25  # ants whose activations go from the first GEMM to the head together (see _snS)
+
+
+def _pieces(p: int, size: int) -> list[tuple[int, int]]:
+    """[start, end) of ceil(p / size) pieces of p ants, as equal as can be: none is a lone ant unless p is 1."""
+    count = max(1, -(-p // size))
+    bounds = [p * i // count for i in range(count + 1)]
+    return list(zip(bounds[:-1], bounds[1:]))
+
+
 class CalibrationFitness:
     """Callable: flats (P, T) float32 -> weighted CE (P,) float32, one batched computation."""
 
@@ -52,6 +62,10 @@ class CalibrationFitness:
         self.xx = (xt[:, :, None] * xt[:, None, :]).reshape(n, -1).T.contiguous()  # (169, N)
         self.fast = len(hidden_sizes(arch)) == 1  # one hidden block: the closed-form path below
         self._kept: tuple[torch.Tensor, ...] | None = None  # the SN-S path's buffers, see _operands
+        # The loss picks each row's own class out of the (P, 3·N) log-probabilities: flat index
+        # y_n·N + n, and the per-row factor −w_{y_n} (what torch's weighted NLL multiplies by).
+        self.picked = self.y * n + torch.arange(n)
+        self.neg_row_weight = -self.class_weight[self.y]
 
     def __call__(self, flats: torch.Tensor) -> torch.Tensor:
         if flats.dim() == 1:
@@ -64,10 +78,14 @@ class CalibrationFitness:
         return torch.cat(parts)
 
     def _loss(self, logits_t: torch.Tensor) -> torch.Tensor:
-        """(P, 3, N) logits -> (P,) weighted CE: torch's per-row weighted CE, summed per ant / Σ w_{y_n}."""
-        per_row = torch.nn.functional.cross_entropy(
-            logits_t, self.y.expand(logits_t.shape[0], -1), weight=self.class_weight, reduction="none")
-        return per_row.sum(dim=1).div_(self.weight_total)
+        """(P, 3, N) logits -> (P,) weighted CE: per row −w_{y_n}·log softmax(·)_{y_n}, summed per ant / Σ w_{y_n}.
+
+        The same operations as torch's cross_entropy with weights and reduction 'none' (log_softmax
+        over the classes, then the picked value times −w), so the same bits; picking with one
+        `index_select` instead of the 2-D NLL kernel takes 40 % less time (issue 30)."""
+        p = logits_t.shape[0]
+        log_p = torch.log_softmax(logits_t, dim=1).view(p, -1)
+        return log_p.index_select(1, self.picked).mul_(self.neg_row_weight).sum(dim=1).div_(self.weight_total)
 
     def _snS(self, vals: torch.Tensor) -> torch.Tensor:
         p, h = vals.shape[0], hidden_sizes(self.arch)[0]
@@ -82,20 +100,27 @@ class CalibrationFitness:
         # Scaling the (13, N) inputs per ant by 1/std costs a tenth of scaling the (H, N)
         # pre-activations, and β rides in the same GEMM as a 14th input that is always 1:
         # [γ ⊙ W̃c, β] @ [x̃ / std; 1] = γ ⊙ normalised + β in one pass.
-        a, b, act = self._operands(p, h)
+        a, b, act, logits = self._operands(p, h)
         k = self.xt_t.shape[0]
         torch.mul(wc, g.unsqueeze(-1), out=a[:, :, :k])
         a[:, :, k].copy_(beta)
         torch.mul(self.xt_t, inv_std, out=b[:, :k])
-        torch.bmm(a, b, out=act)  # (P, H, N)
-        torch.ops.aten.gelu_(act)
-        logits = torch.baddbmm(b2.unsqueeze(-1), w2, act)  # (P, 3, N)
+        b2 = b2.unsqueeze(-1)
+        # The activations of a few ants at a time, so that they stay in the L2 cache from the GEMM
+        # through the GELU to the head's GEMM (150 ants' are 3.6 MB; the three steps take 12 % less
+        # time in pieces of about 25). Each ant's numbers do not depend on the piece it is in, as long
+        # as no piece is a single ant of a larger call (a lone GEMM takes another path in MKL).
+        for i, j in _pieces(p, SUB_CHUNK):
+            piece = act[: j - i]
+            torch.bmm(a[i:j], b[i:j], out=piece)  # (piece, H, N)
+            torch.ops.aten.gelu_(piece)
+            torch.baddbmm(b2[i:j], w2[i:j], piece, out=logits[i:j])  # (piece, 3, N)
         return self._loss(logits)
 
-    def _operands(self, p: int, h: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Views (p ≤ chunk) of three buffers kept for the whole search: the first layer's weights
-        (p, H, 14), its inputs (p, 14, N) whose last row is 1 once and for all, and the activations
-        (p, H, N).
+    def _operands(self, p: int, h: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Views (p ≤ chunk) of four buffers kept for the whole search: the first layer's weights
+        (p, H, 14), its inputs (p, 14, N) whose last row is 1 once and for all, the activations of one
+        piece of ants (≤ SUB_CHUNK, H, N) and the logits (p, 3, N).
 
         Why (issue 30): `torch.baddbmm(β, ...)` allocated a fresh (chunk, H, N) result every call
         (3.6 MB for 150 ants), paid the page faults of that memory and filled it with β through a
@@ -108,8 +133,10 @@ class CalibrationFitness:
             rows = max(p, self.chunk)
             b = torch.empty(rows, k + 1, n)
             b[:, k].fill_(1.0)
-            self._kept = (torch.empty(rows, h, k + 1), b, torch.empty(rows, h, n))
-        return tuple(t[:p] for t in self._kept)
+            self._kept = (torch.empty(rows, h, k + 1), b, torch.empty(min(rows, SUB_CHUNK), h, n),
+                          torch.empty(rows, N_CLASSES, n))
+        a, b, act, logits = self._kept
+        return a[:p], b[:p], act, logits[:p]
 
     def _generic(self, vals: torch.Tensor) -> torch.Tensor:
         return self._loss(batched_logits(self.arch, vals, self.x).transpose(1, 2))

@@ -330,16 +330,49 @@ def evaluate_ants(
 ) -> torch.Tensor:
     """Fitness (P,) of the ants' `paths` (P, T), their models drawn from `cand` (M, T), in one batch.
 
-    As q0 grows, more and more ants take the greedy candidate (argmax τ) at every index,
-    i.e. rebuild one and the same model: those (`~explorer`) share one evaluation.
+    Each distinct path is evaluated once. As q0 grows, more and more ants take the greedy
+    candidate (argmax τ) at every index, i.e. rebuild one and the same model: those (`~explorer`)
+    share one evaluation. Later in a search most explorers leave the greedy path at one to three
+    indices, and about one in eight builds the same model as another ant of its generation (often
+    where the pheromone of an index is split between two candidates): those share one too. The
+    fitness gives a model the same J in any batch (`CalibrationFitness`), so sharing changes no number.
     """
     explorers = explorer.nonzero().squeeze(1)
     lazy = (~explorer).nonzero().squeeze(1)[:1]  # one representative of the greedy ants, if any
-    j_picked = _evaluate(fitness, cand.gather(0, paths.index_select(0, torch.cat([explorers, lazy]))))
+    picked = paths.index_select(0, torch.cat([explorers, lazy]))
+    first, twin = distinct_rows(picked)
+    j_picked = _evaluate(fitness, cand.gather(0, picked.index_select(0, first)))[twin]
     j = torch.empty(paths.shape[0])
     j[explorer] = j_picked[: explorers.numel()]
     j[~explorer] = j_picked[explorers.numel():]  # empty, or the greedy model's J for all of them
     return j
+
+
+_ROW_KEYS: dict[int, np.ndarray] = {}
+
+
+def distinct_rows(rows: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(first, twin) for integer rows (P, T): `first` the indices of the distinct rows (each one's first
+    occurrence, in order), `twin` (P,) the position in `first` of every row's equal.
+
+    A row's key is its dot product with fixed random weights (one small GEMV; numpy, whose calls cost
+    a few microseconds where torch's cost ten: this runs every generation); rows with equal keys are
+    then compared whole, so a collision of keys (never seen) only costs the sharing, never a wrong J.
+    """
+    n, t = rows.shape
+    order = np.arange(n)
+    if n > 1:
+        if t not in _ROW_KEYS:
+            _ROW_KEYS[t] = np.random.default_rng(t).random(t)
+        a = rows.numpy()
+        _, first, inverse = np.unique(a @ _ROW_KEYS[t], return_index=True, return_inverse=True)
+        if first.size < n:
+            owner = first[inverse]  # the first row with the same key
+            shared = np.flatnonzero(owner != order)
+            if np.array_equal(a[shared], a[owner[shared]]):  # else a collision of keys: every row on its own
+                first.sort()
+                return torch.from_numpy(first), torch.from_numpy(np.searchsorted(first, owner))
+    return torch.from_numpy(order), torch.from_numpy(order)
 
 
 def _schedule(c: int, n: int) -> tuple[float, float]:

@@ -70,11 +70,15 @@ class CalibrationFitness:
     def __call__(self, flats: torch.Tensor) -> torch.Tensor:
         if flats.dim() == 1:
             flats = flats.unsqueeze(0)
+        p = flats.shape[0]
+        # A model's J must not depend on which others share its call (AcoMerge evaluates each distinct
+        # ant once, in calls of any size). MKL multiplies a lone matrix another way than a batch of
+        # them, and the last bit can differ: so a single model is evaluated as a batch of two copies,
+        # and the chunks are as equal as can be, none of them a lone model.
+        if p == 1:
+            return self(flats.expand(2, -1))[:1]
         with torch.no_grad():
-            parts = [
-                self._snS(flats[i : i + self.chunk]) if self.fast else self._generic(flats[i : i + self.chunk])
-                for i in range(0, flats.shape[0], self.chunk)
-            ]
+            parts = [self._snS(flats[i:j]) if self.fast else self._generic(flats[i:j]) for i, j in _pieces(p, self.chunk)]
         return torch.cat(parts)
 
     def _loss(self, logits_t: torch.Tensor) -> torch.Tensor:

@@ -36,7 +36,10 @@ def _pieces(p: int, size: int) -> list[tuple[int, int]]:
 
 
 class CalibrationFitness:
-    """Callable: flats (P, T) float32 -> weighted CE (P,) float32, one batched computation."""
+    """Callable: flats (P, T) float32 -> weighted CE (P,) float32, one batched computation.
+
+    `chunk` bounds the models per forward pass of the generic (deeper) path; the SN-S path takes
+    any number at once and bounds its activations itself (SUB_CHUNK)."""
 
     def __init__(self, arch: str, x: np.ndarray, y: np.ndarray, chunk: int = 100):
         x = np.asarray(x, dtype=np.float32)
@@ -78,8 +81,9 @@ class CalibrationFitness:
         if p == 1:
             return self(flats.expand(2, -1))[:1]
         with torch.no_grad():
-            parts = [self._snS(flats[i:j]) if self.fast else self._generic(flats[i:j]) for i, j in _pieces(p, self.chunk)]
-        return torch.cat(parts)
+            if self.fast:  # one call: its activations are made in pieces of SUB_CHUNK ants anyway (_snS)
+                return self._snS(flats)
+            return torch.cat([self._generic(flats[i:j]) for i, j in _pieces(p, self.chunk)])
 
     def _loss(self, logits_t: torch.Tensor) -> torch.Tensor:
         """(P, 3, N) logits -> (P,) weighted CE: per row −w_{y_n}·log softmax(·)_{y_n}, summed per ant / Σ w_{y_n}.
@@ -122,7 +126,7 @@ class CalibrationFitness:
         return self._loss(logits)
 
     def _operands(self, p: int, h: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Views (p ≤ chunk) of four buffers kept for the whole search: the first layer's weights
+        """Views (p models) of four buffers kept for the whole search (grown to the largest call): the first layer's weights
         (p, H, 14), its inputs (p, 14, N) whose last row is 1 once and for all, the activations of one
         piece of ants (≤ SUB_CHUNK, H, N) and the logits (p, 3, N).
 
@@ -134,7 +138,7 @@ class CalibrationFitness:
         """
         k, n = self.xt_t.shape
         if self._kept is None or self._kept[0].shape[0] < p:
-            rows = max(p, self.chunk)
+            rows = max(p, self._kept[0].shape[0] if self._kept is not None else 0)
             b = torch.empty(rows, k + 1, n)
             b[:, k].fill_(1.0)
             self._kept = (torch.empty(rows, h, k + 1), b, torch.empty(min(rows, SUB_CHUNK), h, n),

@@ -218,6 +218,42 @@ def test_greedy_ants_share_one_evaluation():
     assert calls == [int(explorer.sum()) + 1]  # one batch: the explorers and one greedy representative
 
 
+def test_ants_with_the_same_path_share_one_evaluation():
+    """Explorers that built the same model are evaluated once (issue 30) and each gets that model's J."""
+    gen = torch.Generator().manual_seed(4)
+    cand = torch.randn(6, 10, generator=gen)
+    paths = torch.zeros(12, 10, dtype=torch.int32)
+    paths[1:4, 2] = 3  # three explorers with one path
+    paths[4:6, 7] = 5  # two with another
+    paths[6, 2], paths[6, 7] = 3, 5  # one with both departures
+    explorer = torch.zeros(12, dtype=torch.bool)
+    explorer[1:7] = True
+    calls = []
+
+    def fitness(flats):
+        calls.append(flats.shape[0])
+        return flats.sum(dim=1) ** 2
+
+    j = evaluate_ants(paths, explorer, cand, fitness)
+    torch.testing.assert_close(j, cand.gather(0, paths).sum(dim=1) ** 2)
+    assert calls == [4]  # three distinct explorer paths and the greedy one
+
+
+def test_fitness_of_a_model_does_not_depend_on_its_batch(cal):
+    """What sharing needs: a model's J is the same bits alone, in a small batch and in a large one (a
+    lone model is evaluated as a batch of two, since MKL multiplies a lone matrix another way)."""
+    x, y = cal
+    gen = torch.Generator().manual_seed(2)
+    flats = torch.stack([flatten(build("sn-s", seed=s)) for s in range(3)]).repeat(80, 1)[:230]
+    flats = flats + 0.3 * torch.randn(flats.shape, generator=gen)
+    fitness = CalibrationFitness("sn-s", x, y)
+    whole = fitness(flats)
+    for i in (0, 1, 57, 228):
+        assert torch.equal(fitness(flats[i]), whole[i : i + 1])
+        assert torch.equal(fitness(flats[i : i + 2]), whole[i : i + 2])
+    assert torch.equal(fitness(flats[100:203]), whole[100:203])
+
+
 def _toy(n_idx=20, m=8, seed=0):
     """Separable objective with a known optimum: candidate `best[z]` of index z is the target."""
     gen = torch.Generator().manual_seed(seed)

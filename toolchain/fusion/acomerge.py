@@ -122,7 +122,7 @@ class AcoMergeConfig:
     spiral_b: float = 1.0  # b, the logarithmic-spiral shape constant
     clip: float | None = None  # optional |value| bound on IWOA positions (paper: none)
     # execution
-    chunk: int = 150  # ants per batched forward chunk of a deeper net (bounds its activations' memory; SN-S bounds its own)
+    chunk: int = 150  # ants per forward chunk of a deeper net (bounds its activations' memory; SN-S bounds its own)
     # torch intra-op threads during the run (0: chosen at its start from the cores free then, see
     # default_threads); the result is deterministic for a seed and a thread count
     threads: int = 1

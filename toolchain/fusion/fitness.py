@@ -126,9 +126,9 @@ class CalibrationFitness:
         return self._loss(logits)
 
     def _operands(self, p: int, h: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Views (p models) of four buffers kept for the whole search (grown to the largest call): the first layer's weights
-        (p, H, 14), its inputs (p, 14, N) whose last row is 1 once and for all, the activations of one
-        piece of ants (≤ SUB_CHUNK, H, N) and the logits (p, 3, N).
+        """Views (p models) of four buffers kept for the whole search, grown to the largest call: the
+        first layer's weights (p, H, 14), its inputs (p, 14, N) whose last row is 1 once and for all,
+        the activations of one piece of ants (≤ SUB_CHUNK, H, N) and the logits (p, 3, N).
 
         Why (issue 30): `torch.baddbmm(β, ...)` allocated a fresh (chunk, H, N) result every call
         (3.6 MB for 150 ants), paid the page faults of that memory and filled it with β through a

@@ -12,7 +12,10 @@ Ways, each a median over `--steps` steps after a warm-up:
 - cuda-graph: the whole step (Adam with capturable=True) captured once and replayed: the best a GPU
   can do for so small a step, as the AcoMerge engine does for its generation.
 Prints one JSON object: ms per step per way, and the GPU's best against cpu-1 (a ratio above 1 means
-the GPU step is faster). Run on a GPU machine after scripts/gpu_check.sh's shim (gpu_check.sh runs it),
+the GPU step is faster). With the GPU, also `training`: fleetlab's own `train_classifier` on the GPU
+(what the source models use under `--device cuda`) against one CPU thread, a few epochs on synthetic
+rows (2,000, so every epoch ends with a shorter batch and both of its graphs run): seconds each, the
+same bits when trained twice on the GPU, and how often the GPU- and CPU-trained models agree. Run on a GPU machine after scripts/gpu_check.sh's shim (gpu_check.sh runs it),
 or anywhere with fleetlab installed (`--devices cpu` on a machine without a GPU).
 """
 
@@ -28,7 +31,9 @@ import torch
 
 from fleetlab.data.contracts import N_CLASSES, N_FEATURES
 from fleetlab.models import build
-from fleetlab.models.train import EXPERT_LR, weighted_ce
+from fleetlab.fusion.bench import synthetic_calibration
+from fleetlab.models import flatten
+from fleetlab.models.train import EXPERT_LR, predict, train_classifier, weighted_ce
 
 
 def _synchronise(device: str) -> None:
@@ -90,6 +95,33 @@ def _time_cuda_graph(arch: str, batch: int, device: str, steps: int) -> float:
     return statistics.median(times) * 1e3
 
 
+def training_check(arch: str, epochs: int = 3) -> dict:
+    """train_classifier on one CPU thread and on the GPU (twice) from the same init and batches."""
+    x, y = synthetic_calibration(2000, seed=1)
+    x_test, y_test = synthetic_calibration(2000, seed=2)
+    out: dict = {"arch": arch, "epochs": epochs, "rows": len(y)}
+    models = {}
+    for name, device in (("cpu-1", "cpu"), ("cuda", "cuda"), ("cuda_again", "cuda")):
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            _synchronise(device)
+            t0 = time.perf_counter()
+            models[name] = train_classifier(build(arch, seed=0), x, y, epochs=epochs, seed=3, device=device)
+            _synchronise(device)
+            out[f"{name}_s"] = round(time.perf_counter() - t0, 3)
+        finally:
+            torch.set_num_threads(threads)
+    flat = {k: flatten(m) for k, m in models.items()}
+    out["cuda_same_bits_twice"] = bool(torch.equal(flat["cuda"], flat["cuda_again"]))
+    out["max_abs_param_diff_cuda_vs_cpu"] = float((flat["cuda"] - flat["cpu-1"]).abs().max())
+    pred = {k: predict(m, x_test) for k, m in models.items()}
+    out["test_accuracy_cpu"] = round(float((pred["cpu-1"] == y_test).mean()), 4)
+    out["test_accuracy_cuda"] = round(float((pred["cuda"] == y_test).mean()), 4)
+    out["prediction_agreement_cuda_vs_cpu"] = round(float((pred["cuda"] == pred["cpu-1"]).mean()), 4)
+    return out
+
+
 def probe(archs: list[str], batches: list[int], devices: list[str], steps: int) -> dict:
     threads = torch.get_num_threads()
     rows = []
@@ -109,9 +141,11 @@ def probe(archs: list[str], batches: list[int], devices: list[str], steps: int) 
                 row["gpu_best_vs_cpu-1"] = round(row["cpu-1_ms"] / best, 3)
             rows.append(row)
     info = {"torch": torch.__version__, "cpu_threads": threads, "steps_timed": steps}
+    out = {"info": info, "step_ms": rows}
     if "cuda" in devices:
         info["gpu"] = torch.cuda.get_device_name(0)
-    return {"info": info, "step_ms": rows}
+        out["training"] = [training_check(arch) for arch in archs]
+    return out
 
 
 def main() -> int:

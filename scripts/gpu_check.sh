@@ -17,8 +17,8 @@
 # (generation ms compiled and not, full run s, 30 runs batched), the SN-D paper table's wall time
 # on the GPU (30 runs x 2 budgets, every method), and the 30-run SN-S table's scores on the GPU
 # with `--rng host` (the GPU draws the CPU reference's random numbers, so the difference is float
-# rounding only: the criterion, |difference| <= 0.01 per method) against the CPU's. Each step
-# says how long it took.
+# rounding only: the criterion, |difference| <= 0.01 per method) against the CPU's, and one training
+# step on the CPU against the GPU (scripts/gpu_training_probe.py). Each step says how long it took.
 #
 # GPU_CHECK_QUICK=1: only the SN-S benchmark and the SN-S GPU-vs-CPU comparison.
 # GPU_CHECK_EXTRA=1: also the SN-S table with the default `--rng device` (another random stream:
@@ -87,6 +87,8 @@ if [ -n "$DATA" ]; then
 fi
 step "bench fusion --device cuda --arch sn-s" 150 "${TO_FILE[@]}" "$OUT_DIR/bench_gpu_sn-s.json" \
   "${FL[@]}" bench fusion --device cuda --arch sn-s --full-runs 3 --repeats 50 --json
+[ "$QUICK" = 1 ] || step "training step, CPU against GPU (is the GPU faster for the gradient methods?)" 60 \
+  "${TO_FILE[@]}" "$OUT_DIR/training_probe.json" "$PY" "$ROOT/scripts/gpu_training_probe.py"
 [ "$QUICK" = 1 ] || step "bench fusion --device cuda --arch sn-d" 150 "${TO_FILE[@]}" "$OUT_DIR/bench_gpu_sn-d.json" \
   "${FL[@]}" bench fusion --device cuda --arch sn-d --full-runs 2 --repeats 20 --json
 if [ -z "$DATA" ]; then

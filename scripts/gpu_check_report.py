@@ -48,6 +48,18 @@ def main(folder: Path) -> int:
     if c["sn-d"]:
         print(f"CPU on this host: SN-D run {c['sn-d']['full_run_s']:.3f} s ({c['sn-d']['threads']} threads), generation "
               f"{c['sn-d']['full_generation_ms']:.3f} ms")
+    probe = load(folder, "training_probe.json")
+    if probe:
+        print("one training step (zero_grad, forward, CE, backward, Adam), ms: cpu-1 = one thread, as an evaluate "
+              "job trains; the GPU's best of eager and CUDA graph against it")
+        for r in probe["step_ms"]:
+            ways = ", ".join(f"{k[:-3]} {v:.3f}" for k, v in r.items() if k.endswith("_ms"))
+            print(f"  {r['arch']} batch {r['batch']:3d}: {ways}; GPU best vs cpu-1 x{r.get('gpu_best_vs_cpu-1')}")
+        for t in probe.get("training", []):
+            print(f"  train_classifier {t['arch']}, {t['epochs']} epochs of {t['rows']} rows: cpu-1 {t['cpu-1_s']} s, "
+                  f"GPU {t['cuda_s']} s / {t['cuda_again_s']} s (same bits twice: {t['cuda_same_bits_twice']}); "
+                  f"test accuracy CPU {t['test_accuracy_cpu']} GPU {t['test_accuracy_cuda']}, predictions agree "
+                  f"{t['prediction_agreement_cuda_vs_cpu']}")
     cpu = load(folder, "table_sn-s_cpu.json")
     for name, what in (("table_sn-s_gpu_host_rng.json", "--rng host, the CPU's random numbers: the criterion"),
                        ("table_sn-s_gpu.json", "--rng device, another random stream: information only")):

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+from pathlib import Path
 
 import pytest
 import torch
@@ -335,3 +336,28 @@ def test_bench_fusion_runs_without_the_can_stack():
     link = subprocess.run([sys.executable, "-c", code, "bench", "link"], capture_output=True, text=True, timeout=120)
     assert link.returncode == 1 and link.stderr.strip().splitlines() == [
         "fleetlab bench: error: benchmark 'link' needs the Python package 'cantools', which is not installed here"]
+
+
+def test_training_probe_runs_on_the_cpu_and_reports(tmp_path):
+    """scripts/gpu_training_probe.py (a gpu_check step: is a training step faster on the GPU?) on a
+    machine without a GPU: the CPU ways are timed, gpu_check_report.py prints them, and asking for
+    the GPU here is one line."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    probe = [sys.executable, str(root / "scripts/gpu_training_probe.py")]
+    done = subprocess.run([*probe, "--devices", "cpu", "--arch", "sn-d", "--batch", "32", "--steps", "3"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    rows = json.loads(done.stdout)["step_ms"]
+    assert [(r["arch"], r["batch"]) for r in rows] == [("sn-d", 32)]
+    assert rows[0]["cpu-1_ms"] > 0 and "cuda_ms" not in rows[0]
+    (tmp_path / "training_probe.json").write_text(done.stdout)
+    report = subprocess.run([sys.executable, str(root / "scripts/gpu_check_report.py"), str(tmp_path)],
+                            capture_output=True, text=True, timeout=60)
+    assert report.returncode == 0 and "sn-d batch  32: cpu-1 " in report.stdout, report.stderr
+    if not torch.cuda.is_available():
+        gpu = subprocess.run([*probe, "--steps", "1"], capture_output=True, text=True, timeout=120)
+        assert gpu.returncode == 2 and gpu.stderr.strip().splitlines() == [
+            "gpu_training_probe: torch sees no CUDA GPU here (use --devices cpu)"]

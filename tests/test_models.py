@@ -56,3 +56,24 @@ def test_save_load_roundtrip_and_refusals(tmp_path):
     torch.save({"weights": 1}, tmp_path / "other.pt")
     with pytest.raises(ValueError, match="not a fleetlab model file"):
         load_model(tmp_path / "other.pt")
+
+
+def test_training_batches_are_epoch_permutations_cut_to_the_step_budget():
+    """The batch order both step engines (CPU loop, captured GPU steps) share: a fresh permutation
+    per epoch, an epoch's last batch shorter, exactly `total` batches."""
+    from fleetlab.models.train import _batches
+
+    gen = torch.Generator().manual_seed(0)
+    batches = list(_batches(10, 4, 7, gen))
+    assert [len(b) for b in batches] == [4, 4, 2, 4, 4, 2, 4]
+    for epoch in (batches[0:3], batches[3:6]):
+        assert sorted(torch.cat(epoch).tolist()) == list(range(10))
+    assert not torch.equal(torch.cat(batches[0:3]), torch.cat(batches[3:6]))
+
+
+def test_sources_train_on_the_gpu_except_when_following_the_cpu_reference():
+    from fleetlab.fusion.pipeline import source_device
+
+    assert source_device("cpu", "device") == "cpu"
+    assert source_device("cuda:1", "device") == "cuda:1"
+    assert source_device("cuda", "host") == "cpu"  # --rng host: the CPU's sources, bit for bit

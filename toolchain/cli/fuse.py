@@ -21,7 +21,7 @@ from ..fusion.acomerge import run_threads
 from ..fusion.baselines import model_from_flat
 from ..fusion.finetune import FINETUNE_STEPS, finetune
 from ..fusion.fitness import CalibrationFitness
-from ..fusion.pipeline import fuse, needs_joint, prepare_sources
+from ..fusion.pipeline import fuse, needs_joint, prepare_sources, source_device
 from ..fusion.registry import Budget
 from ..models import flatten
 from . import options
@@ -78,7 +78,8 @@ def _fuse(args: argparse.Namespace) -> int:
     cal = calibration_set(dataset, args.protocol, args.cal_size, args.seed, args.calibration)  # bad input fails early
 
     t0 = time.perf_counter()
-    src = prepare_sources(dataset, args.arch, args.seed, args.epochs, joint=needs_joint([args.method]), progress=progress)
+    src = prepare_sources(dataset, args.arch, args.seed, args.epochs, joint=needs_joint([args.method]), progress=progress,
+                          device=source_device(device, args.rng))
     seconds["experts"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

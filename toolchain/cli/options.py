@@ -73,12 +73,14 @@ def threads(p: argparse.ArgumentParser) -> None:
 
 def device(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="cpu", metavar="cpu|cuda|auto",
-                   help="where AcoMerge searches: cpu (the reference, default), cuda or cuda:N (a GPU; results differ "
-                        "from the CPU's in float rounding and random stream), auto (cuda when one is present)")
+                   help="where AcoMerge searches and the source models train: cpu (the reference, default), cuda or "
+                        "cuda:N (a GPU; results differ from the CPU's in float rounding and random stream), auto "
+                        "(cuda when one is present)")
     p.add_argument("--rng", default="device", choices=("device", "host"),
                    help="where a GPU search draws its random numbers: device (fast, the default; another stream "
                         "than the CPU's) or host (the CPU reference's generators, uploaded each generation: the "
-                        "GPU then differs from --device cpu by float rounding only; slower). No effect on the CPU")
+                        "GPU then differs from --device cpu by float rounding only, and the source models train on the "
+                        "CPU; slower). No effect on the CPU")
 
 
 def resolved_device(args: argparse.Namespace) -> str:

@@ -52,7 +52,8 @@ from ..data.dataset import TARGET, Dataset
 from ..data.splits import PROTOCOLS, make_split
 from ..models import batched_logits, canonical_arch
 from ..fusion import registry
-from ..fusion.pipeline import Sources, align_sources, fuse_many, needs_joint, train_expert_flats, train_joint_flat
+from ..fusion.pipeline import (Sources, align_sources, fuse_many, needs_joint, source_device, train_expert_flats,
+                               train_joint_flat)
 from ..fusion.registry import Budget
 from ..models.train import EXPERT_EPOCHS
 from .methods import UNRANKED_GROUPS, buffer_methods, fleet_methods, selectable, table_groups
@@ -126,17 +127,18 @@ def single_threaded_torch():
         torch.set_num_threads(before)
 
 
-def _train_experts_job(dataset: Dataset, settings: EvalSettings, progress: bool) -> tuple[list[str], np.ndarray, dict]:
+def _train_experts_job(dataset: Dataset, settings: EvalSettings, progress: bool,
+                       device: str) -> tuple[list[str], np.ndarray, dict]:
     with single_threaded_torch():
         t0, c0 = time.perf_counter(), time.process_time()
-        roles, experts = train_expert_flats(dataset, settings.arch, settings.seed, settings.epochs, progress)
+        roles, experts = train_expert_flats(dataset, settings.arch, settings.seed, settings.epochs, progress, device)
         return roles, experts, {"experts": time.perf_counter() - t0, "experts_cpu": time.process_time() - c0}
 
 
-def _train_joint_job(dataset: Dataset, settings: EvalSettings, progress: bool) -> tuple[np.ndarray, dict]:
+def _train_joint_job(dataset: Dataset, settings: EvalSettings, progress: bool, device: str) -> tuple[np.ndarray, dict]:
     with single_threaded_torch():
         t0, c0 = time.perf_counter(), time.process_time()
-        joint = train_joint_flat(dataset, settings.arch, settings.seed, settings.epochs, progress)
+        joint = train_joint_flat(dataset, settings.arch, settings.seed, settings.epochs, progress, device)
         return joint, {"joint": time.perf_counter() - t0, "joint_cpu": time.process_time() - c0}
 
 
@@ -145,10 +147,13 @@ def prepare_sources(
     scheduler: str | None = None, progress: bool = True,
 ) -> Sources:
     """Train the experts and (if a method needs it) the joint model — two independent jobs,
-    run in parallel when workers allow — then align the experts to the Earth expert."""
-    tasks = [joblib.delayed(_train_experts_job)(dataset, settings, progress)]
+    run in parallel when workers allow, on a local GPU where the search runs on one
+    (`pipeline.source_device`) — then align the experts to the Earth expert."""
+    # on the GPU this process uses (loky's workers are on this machine), never on Dask's workers
+    device = "cpu" if backend == "dask" else source_device(settings.budget.device, settings.budget.rng)
+    tasks = [joblib.delayed(_train_experts_job)(dataset, settings, progress, device)]
     if needs_joint(settings.all_methods):
-        tasks.append(joblib.delayed(_train_joint_job)(dataset, settings, progress))
+        tasks.append(joblib.delayed(_train_joint_job)(dataset, settings, progress, device))
     done = execute(tasks, n_jobs, backend, scheduler, progress=False, ordered=True)
     roles, experts, seconds = done[0]
     joint = None

@@ -23,12 +23,13 @@ def expert_roles(dataset: Dataset) -> list[str]:
 
 
 def train_experts(
-    dataset: Dataset, arch: str, seed: int, epochs: int = EXPERT_EPOCHS, progress: bool = True
+    dataset: Dataset, arch: str, seed: int, epochs: int = EXPERT_EPOCHS, progress: bool = True, device: str = "cpu"
 ) -> dict[str, SlipNet]:
     """Train one expert per source role with class-weighted CE and Adam (lr 0.0035, batch 32).
 
     Returns {role: model in eval mode}, ordered `earth`, then `fleet_*`. The shuffling
     seed of expert i is `seed + i`, so the same seed always gives the same experts.
+    `device`: where they train (`train_classifier`).
     """
     if epochs < 1:
         raise ValueError(f"epochs must be at least 1, got {epochs}")
@@ -38,5 +39,5 @@ def train_experts(
         x, y = dataset.xy(role)
         model = copy.deepcopy(init)
         desc = f"expert {role}" if progress else None
-        experts[role] = train_classifier(model, x, y, epochs=epochs, seed=seed + i, desc=desc)
+        experts[role] = train_classifier(model, x, y, epochs=epochs, seed=seed + i, desc=desc, device=device)
     return experts

@@ -32,21 +32,28 @@ class Sources:
     seconds: dict[str, float]
 
 
+def source_device(device: str, rng: str) -> str:
+    """Where the source models train: on the search's GPU (each step one replayed CUDA graph, 5-12x
+    a CPU thread's speed), except with rng='host', whose point is to follow the CPU reference run:
+    its sources must then be the CPU's, bit for bit."""
+    return device if device != "cpu" and rng == "device" else "cpu"
+
+
 def train_expert_flats(dataset: Dataset, arch: str, seed: int, epochs: int = EXPERT_EPOCHS,
-                       progress: bool = True) -> tuple[list[str], np.ndarray]:
+                       progress: bool = True, device: str = "cpu") -> tuple[list[str], np.ndarray]:
     """(roles, (K, T) flat experts), one expert per source role, Earth first."""
     from .experts import train_experts
 
-    experts = train_experts(dataset, arch, seed=seed, epochs=epochs, progress=progress)
+    experts = train_experts(dataset, arch, seed=seed, epochs=epochs, progress=progress, device=device)
     return list(experts), torch.stack([flatten(m) for m in experts.values()]).numpy()
 
 
 def train_joint_flat(dataset: Dataset, arch: str, seed: int, epochs: int = EXPERT_EPOCHS,
-                     progress: bool = True) -> np.ndarray:
+                     progress: bool = True, device: str = "cpu") -> np.ndarray:
     """The joint model (trained on Earth and every fleet rover pooled), flat."""
     from .baselines import train_joint
 
-    return flatten(train_joint(dataset, arch, seed=seed, epochs=epochs, progress=progress)).numpy()
+    return flatten(train_joint(dataset, arch, seed=seed, epochs=epochs, progress=progress, device=device)).numpy()
 
 
 def align_sources(arch: str, roles: list[str], experts: np.ndarray, joint: np.ndarray | None,
@@ -64,15 +71,15 @@ def align_sources(arch: str, roles: list[str], experts: np.ndarray, joint: np.nd
 
 
 def prepare_sources(dataset: Dataset, arch: str, seed: int, epochs: int = EXPERT_EPOCHS, joint: bool = False,
-                    progress: bool = True) -> Sources:
-    """Train the experts (and the joint model if asked), then align them: one process, in turn."""
+                    progress: bool = True, device: str = "cpu") -> Sources:
+    """Train the experts (and the joint model if asked) on `device`, then align them: one process, in turn."""
     t0 = time.perf_counter()
-    roles, experts = train_expert_flats(dataset, arch, seed, epochs, progress)
+    roles, experts = train_expert_flats(dataset, arch, seed, epochs, progress, device)
     seconds = {"experts": time.perf_counter() - t0}
     joint_flat = None
     if joint:
         t0 = time.perf_counter()
-        joint_flat = train_joint_flat(dataset, arch, seed, epochs, progress)
+        joint_flat = train_joint_flat(dataset, arch, seed, epochs, progress, device)
         seconds["joint"] = time.perf_counter() - t0
     return align_sources(arch, roles, experts, joint_flat, seconds)
 

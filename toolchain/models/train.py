@@ -54,10 +54,15 @@ def train_classifier(
     weights: torch.Tensor | None = None,
     desc: str | None = None,
     fused_adam: bool = False,
+    device: str = "cpu",
 ) -> torch.nn.Module:
     """Adam on weighted CE. Give `epochs` (full passes) or `steps` (optimiser updates); `fused_adam`: see `adam`.
 
-    Seeded: the same seed, data and initial model give the same result.
+    Seeded: the same seed, data and initial model give the same result. `device`: 'cpu' (the
+    reference) or a CUDA device, where each step is one replayed CUDA graph (`_CapturedSteps`); the
+    batches are the same, the dropout masks come from the GPU's generator and the GPU rounds
+    differently, so a GPU-trained model is another (equally good) model, not the CPU's bit for bit.
+    The model is returned on the CPU, in eval mode.
     """
     gen = torch.Generator().manual_seed(seed)
     xt = torch.as_tensor(np.asarray(x, dtype=np.float32))
@@ -67,27 +72,95 @@ def train_classifier(
     batch_size = min(batch_size, n)
     per_epoch = (n + batch_size - 1) // batch_size
     total = steps if steps is not None else epochs * per_epoch
-    opt = adam(model.parameters(), lr, fused=fused_adam)
     model.train()
-    done = 0
-    with torch.random.fork_rng():
+    gpu = None if device == "cpu" else torch.device(device)
+    forked = None if gpu is None else [gpu.index if gpu.index is not None else torch.cuda.current_device()]
+    with torch.random.fork_rng(devices=forked):
         torch.manual_seed(seed)  # dropout masks
         bar = tqdm(total=total, desc=desc, leave=False, disable=desc is None)
-        while done < total:
-            order = torch.randperm(n, generator=gen)
-            for i in range(0, n, batch_size):
-                idx = order[i : i + batch_size]
+        if gpu is None:
+            opt = adam(model.parameters(), lr, fused=fused_adam)
+            for idx in _batches(n, batch_size, total, gen):
                 opt.zero_grad()
                 loss = weighted_ce(model(xt[idx]), yt[idx], w)
                 loss.backward()
                 opt.step()
-                done += 1
                 bar.update(1)
-                if done >= total:
-                    break
+        else:
+            steps_on = _CapturedSteps(model.to(gpu), xt.to(gpu), yt.to(gpu), w.to(gpu), lr)
+            for idx in _batches(n, batch_size, total, gen):
+                steps_on.step(idx)
+                bar.update(1)
+            model.to("cpu")
         bar.close()
     model.eval()
     return model
+
+
+def _batches(n: int, batch_size: int, total: int, gen: torch.Generator):
+    """The row indices of `total` optimiser steps: a fresh permutation of the n rows per epoch,
+    cut into batches (an epoch's last batch is shorter when batch_size does not divide n)."""
+    done = 0
+    while done < total:
+        order = torch.randperm(n, generator=gen)
+        for i in range(0, n, batch_size):
+            yield order[i : i + batch_size]
+            done += 1
+            if done >= total:
+                return
+
+
+class _CapturedSteps:
+    """Training steps on a CUDA device, each one replay of a CUDA graph.
+
+    Why: a step of these small models is some hundred tiny kernels; launched one by one from
+    Python the GPU is slower than one CPU thread, captured and replayed it is 5-12x faster
+    (scripts/gpu_training_probe.py, docs/scaling.md). The graph holds forward, loss, backward and
+    Adam's update (capturable=True: its step count lives on the GPU) for a fixed batch size, with
+    the batch's row indices as its one input; an epoch's shorter last batch gets a graph of its own.
+    The first steps run eagerly on a side stream, as real training steps: they allocate Adam's
+    state and warm cuBLAS up before any capture, as CUDA graphs require.
+    """
+
+    WARM_UP_STEPS = 3
+
+    def __init__(self, model: torch.nn.Module, xt: torch.Tensor, yt: torch.Tensor, w: torch.Tensor, lr: float):
+        self.model, self.xt, self.yt, self.w = model, xt, yt, w
+        self.opt = torch.optim.Adam(model.parameters(), lr=lr, capturable=True)
+        self.graphs: dict[int, tuple[torch.cuda.CUDAGraph, torch.Tensor]] = {}
+        self.eager_left = self.WARM_UP_STEPS
+
+    def _loss(self, idx: torch.Tensor) -> torch.Tensor:
+        return weighted_ce(self.model(self.xt[idx]), self.yt[idx], self.w)
+
+    def step(self, idx: torch.Tensor) -> None:
+        idx = idx.to(self.xt.device)
+        if self.eager_left > 0:
+            self.eager_left -= 1
+            side = torch.cuda.Stream(self.xt.device)
+            side.wait_stream(torch.cuda.current_stream(self.xt.device))
+            with torch.cuda.stream(side):
+                self.opt.zero_grad(set_to_none=True)
+                self._loss(idx).backward()
+                self.opt.step()
+            torch.cuda.current_stream(self.xt.device).wait_stream(side)
+            return
+        if len(idx) not in self.graphs:
+            self.graphs[len(idx)] = self._capture(len(idx))
+        graph, static_idx = self.graphs[len(idx)]
+        static_idx.copy_(idx)
+        graph.replay()
+
+    def _capture(self, size: int) -> tuple[torch.cuda.CUDAGraph, torch.Tensor]:
+        """Record (not run) one step for batches of `size` rows; the gradients are the graph's own
+        tensors, written (not accumulated) by every replay."""
+        static_idx = torch.zeros(size, dtype=torch.int64, device=self.xt.device)
+        graph = torch.cuda.CUDAGraph()
+        self.opt.zero_grad(set_to_none=True)
+        with torch.cuda.graph(graph):
+            self._loss(static_idx).backward()
+            self.opt.step()
+        return graph, static_idx
 
 
 @torch.no_grad()

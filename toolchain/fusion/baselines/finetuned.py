@@ -43,14 +43,15 @@ def joint_sources(dataset: Dataset) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
 
-def train_joint(dataset: Dataset, arch: str, seed: int, epochs: int = EXPERT_EPOCHS, progress: bool = True) -> SlipNet:
+def train_joint(dataset: Dataset, arch: str, seed: int, epochs: int = EXPERT_EPOCHS, progress: bool = True,
+                device: str = "cpu") -> SlipNet:
     """One model trained on the pooled source data with the experts' recipe and init seed.
 
     It does not depend on the calibration draw, so an evaluation trains it once per seed.
     """
     x, y = joint_sources(dataset)
     desc = "joint model" if progress else None
-    return train_classifier(build(arch, seed=seed), x, y, epochs=epochs, seed=seed, desc=desc)
+    return train_classifier(build(arch, seed=seed), x, y, epochs=epochs, seed=seed, desc=desc, device=device)
 
 
 def joint_finetune(

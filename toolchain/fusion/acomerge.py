@@ -21,8 +21,9 @@ Phase 1, MMAS (every generation, `n_ants` ants):
   few decisions per thousand depart. Ties in the argmax go to the lowest candidate index.
 - Fitness J(θ) = class-weighted cross-entropy on D_Cal (`fitness.py`), lower is
   better; `AcoMergeResult.best_fitness` is this J. All ants of a generation are
-  evaluated in one batched computation; the ants that never left the greedy path
-  (more of them as ρ0 grows) share one evaluation.
+  evaluated in one batched computation; ants that built the same model (those that never
+  left the greedy path, more of them as ρ0 grows, and explorers with the same departures)
+  share one evaluation.
 - Pheromone update (paper eq. pheromone_update): τ ← ρ_evap·τ + (1 − ρ_evap)·Δτ with
   Δτ = Q / J(best) on the nodes of the iteration-best ant and 0 elsewhere. Every
   `gb_every`-th generation the global-best solution deposits instead of the

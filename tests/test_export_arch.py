@@ -230,8 +230,25 @@ def _runnable_targets() -> list[str]:
 
 @pytest.fixture(scope="module")
 def irregular_bundle(tmp_path_factory):
+    """24,9 with a few units whose LayerNorm output leaves int16 on some inputs (gamma ~ 2, beta ~ +-7.3): the
+    saturation count of every vector is compared too (the DSP cores count from the Q flag and recount)."""
+    from fleetlab.export import bundle as bundle_mod
+
+    quantize_net = bundle_mod.quantize_net
+
+    def saturating(fn, *args, **kwargs):
+        qn = quantize_net(fn, *args, **kwargs)
+        for blk, sign, n in zip(qn.blocks, (1, -1), (3, 2)):
+            blk.g[:n] = 32767
+            blk.bb[:n] = sign * (30000 << (blk.fy - 12))
+        return qn
+
     out = tmp_path_factory.mktemp("irr") / "bundle"
-    export_bundle(quick_model("24,9"), out, inputs=draw_inputs(1000, None, seed=3))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(bundle_mod, "quantize_net", saturating)
+        export_bundle(quick_model("24,9"), out, inputs=draw_inputs(1000, None, seed=3))
+    sats = np.load(out / "vectors.npz")["q_saturations"]
+    assert sats.sum() > 1000
     return out
 
 

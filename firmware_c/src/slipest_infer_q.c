@@ -438,30 +438,38 @@ HOT int32_t dot16(const int16_t *w, const int16_t *x, unsigned n, int32_t acc)
 }
 
 #if SLIPEST_DUAL_MAC
-/* h[r] = b[r] + sum_j w[r n + j] x[j] for the four rows r = 0..3 of a row-major block of n columns,
- * n a positive multiple of 4, w and x word-aligned (so is every row: LDRD needs it). Each four inputs
- * are loaded once for the four rows in one LDRD (several rows per pass, as CMSIS-NN does for its int16
- * matrix-vector products), and each row's four weights in one LDRD: 13 instructions per 16
- * multiply-accumulates on the M4. The body is written out four times (16 inputs per pass, so the loop's
- * compare and branch come once per 64 products); a first, partial pass enters it at the quarter that
- * leaves (n / 4) mod 4 quarters, and the weight and input pointers advance with each load, so every
- * entry runs the same code. Written out because GCC neither keeps the 14 registers the loop needs nor
- * pairs the loads. The sums are exact, so the order of the products does not change them; every
- * partial sum is inside the row's bound (any subset of its terms). */
+/* The four-row groups of a row-major block of n columns, rows 0 .. 4 groups - 1 (groups >= 1): h[r] = b[r] +
+ * sum_j w[r n + j] x[j], and the running maximum and minimum of the h[r] in mm[0], mm[1]. n is a positive
+ * multiple of 4, w and x word-aligned (so is every row: LDRD needs it). Each four inputs are loaded once for
+ * the four rows in one LDRD (several rows per pass, as CMSIS-NN does for its int16 matrix-vector products),
+ * and each row's four weights in one LDRD: 13 instructions per 16 multiply-accumulates on the M4. The body is
+ * written out four times (16 inputs per pass, so the loop's compare and branch come once per 64 products);
+ * a first, partial pass enters it (TBB) at the quarter that leaves (n / 4) mod 4 quarters, and the weight and
+ * input pointers advance with each load, so every entry runs the same code. The group loop is in the same
+ * block: GCC neither keeps the 14 registers the product loop needs nor pairs the loads, and a call per group
+ * cost about 20 instructions. The group's state (bias and output pointers, n, the extremes) lives in eight
+ * words the block pushes below the stack pointer and removes before it ends. The sums are exact, so the order
+ * of the products does not change them; every partial sum is inside the row's bound (any subset of its
+ * terms). */
 #if defined(__GNUC__)
-__attribute__((noinline)) /* a call of its own: the caller keeps its registers instead of spilling them
-                             around the 14 this loop needs */
+__attribute__((noinline))
 #endif
-static void dot16_rows4(const int16_t *w, unsigned n, const int16_t *x, const int32_t b[4], int32_t h[4])
+static void rows4_block(const int16_t *w, unsigned n, unsigned groups, const int16_t *x, const int32_t *b,
+                        int32_t *h, int32_t mm[2])
 {
-    const int16_t *w0 = w;
-    const int16_t *w1 = w0 + n;
-    const int16_t *w2 = w1 + n;
-    const int16_t *w3 = w2 + n;
-    const int16_t *const xe = x + n;
-    int32_t a0 = b[0], a1 = b[1], a2 = b[2], a3 = b[3];
-    uint32_t xa, xb, t1;
-    uint32_t t0 = (n >> 2) & 3u; /* quarters in the first pass (0: a whole pass) */
+    /* every operand is read-write: the registers are shared out by hand between the set-up values and the
+     * loop's uses (a0..a3 arrive holding the state that goes to the stack) */
+    uintptr_t a0 = (uintptr_t)b;
+    uintptr_t a1 = (uintptr_t)h;
+    uintptr_t a2 = (uintptr_t)&h[4u * groups];
+    uintptr_t a3 = (uintptr_t)n * 2u;            /* bytes per row */
+    uintptr_t xa = (uintptr_t)(uint32_t)mm[0];
+    uintptr_t xb = (uintptr_t)(uint32_t)mm[1];
+    uintptr_t t0 = (uintptr_t)((n >> 2) & 3u);    /* quarters in the first pass (0: a whole pass) */
+    uintptr_t t1 = 0u;
+    uintptr_t w0 = (uintptr_t)w, w1 = 0u, w2 = 0u, w3 = 0u;
+    uintptr_t xp = (uintptr_t)x;
+    uintptr_t xe = (uintptr_t)&x[n];
 
     /* one quarter of a pass: four inputs, four rows (the immediate as an operand: #8) */
 #define SLIPEST_ROWS4_QUARTER                                                                                  \
@@ -478,26 +486,70 @@ static void dot16_rows4(const int16_t *w, unsigned n, const int16_t *x, const in
     "ldrd %[t0], %[t1], [%[w3]], %[step]\n\t"                                                                  \
     "smlad %[a3], %[t0], %[xa], %[a3]\n\t"                                                                     \
     "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
-    __asm__("cmp %[t0], #2\n\t" /* 0: quarter 0; 1: quarter 3; 2: quarter 2; 3: quarter 1 */
-            "beq 2f\n\t"
-            "bhi 1f\n\t"
-            "cmp %[t0], #0\n\t"
-            "bne 3f\n\t"
-            "0:\n\t" SLIPEST_ROWS4_QUARTER
-            "1:\n\t" SLIPEST_ROWS4_QUARTER
-            "2:\n\t" SLIPEST_ROWS4_QUARTER
-            "3:\n\t" SLIPEST_ROWS4_QUARTER
-            "cmp %[x], %[xe]\n\t"
-            "bne 0b"
-            : [a0] "+r"(a0), [a1] "+r"(a1), [a2] "+r"(a2), [a3] "+r"(a3), [w0] "+r"(w0), [w1] "+r"(w1),
-              [w2] "+r"(w2), [w3] "+r"(w3), [x] "+r"(x), [xa] "=&r"(xa), [xb] "=&r"(xb), [t0] "+&r"(t0),
-              [t1] "=&r"(t1)
-            : [xe] "r"(xe), [step] "I"(8) /* bytes per load: the immediate as an operand, printed as #8 */
-            : "cc", "memory");
-    h[0] = a0;
-    h[1] = a1;
-    h[2] = a2;
-    h[3] = a3;
+    /* the running extremes (xa, xb) with one accumulator */
+#define SLIPEST_ROWS4_EXTREMES(A)                                                                              \
+    "cmp " A ", %[xa]\n\t"                                                                                     \
+    "it gt\n\t"                                                                                                \
+    "movgt %[xa], " A "\n\t"                                                                                   \
+    "cmp " A ", %[xb]\n\t"                                                                                     \
+    "it lt\n\t"                                                                                                \
+    "movlt %[xb], " A "\n\t"
+    __asm__ volatile(
+        /* the state, [sp]: bias pointer, +4 output pointer, +8 output end, +12 bytes per row,
+         * +16 maximum, +20 minimum, +24 first inputs, +28 quarters of the first pass */
+        "str %[a0], [sp, #-32]!\n\t"
+        "str %[a1], [sp, #4]\n\t"
+        "str %[a2], [sp, #8]\n\t"
+        "str %[a3], [sp, #12]\n\t"
+        "str %[xa], [sp, #16]\n\t"
+        "str %[xb], [sp, #20]\n\t"
+        "str %[x], [sp, #24]\n\t"
+        "str %[t0], [sp, #28]\n\t"
+        "mov %[w3], %[w0]\n\t"
+        "5:\n\t" /* a group: rows from w3 on */
+        "ldr %[t1], [sp, #12]\n\t"
+        "mov %[w0], %[w3]\n\t"
+        "add %[w1], %[w0], %[t1]\n\t"
+        "add %[w2], %[w1], %[t1]\n\t"
+        "add %[w3], %[w2], %[t1]\n\t"
+        "ldr %[t0], [sp]\n\t"
+        "ldrd %[a0], %[a1], [%[t0]], #8\n\t"
+        "ldrd %[a2], %[a3], [%[t0]], #8\n\t"
+        "str %[t0], [sp]\n\t"
+        "ldr %[x], [sp, #24]\n\t"
+        "ldr %[t0], [sp, #28]\n\t"
+        "tbb [pc, %[t0]]\n\t" /* 0: quarter 0; 1: quarter 3; 2: quarter 2; 3: quarter 1 */
+        "6:\n\t"
+        ".byte (0f - 6b) / 2, (3f - 6b) / 2, (2f - 6b) / 2, (1f - 6b) / 2\n\t"
+        "0:\n\t" SLIPEST_ROWS4_QUARTER
+        "1:\n\t" SLIPEST_ROWS4_QUARTER
+        "2:\n\t" SLIPEST_ROWS4_QUARTER
+        "3:\n\t" SLIPEST_ROWS4_QUARTER
+        "cmp %[x], %[xe]\n\t"
+        "bne 0b\n\t"
+        "ldr %[t0], [sp, #4]\n\t"
+        "strd %[a0], %[a1], [%[t0]], #8\n\t"
+        "strd %[a2], %[a3], [%[t0]], #8\n\t"
+        "str %[t0], [sp, #4]\n\t"
+        "ldrd %[xa], %[xb], [sp, #16]\n\t"
+        SLIPEST_ROWS4_EXTREMES("%[a0]")
+        SLIPEST_ROWS4_EXTREMES("%[a1]")
+        SLIPEST_ROWS4_EXTREMES("%[a2]")
+        SLIPEST_ROWS4_EXTREMES("%[a3]")
+        "strd %[xa], %[xb], [sp, #16]\n\t"
+        "ldr %[t1], [sp, #8]\n\t"
+        "cmp %[t0], %[t1]\n\t"
+        "bne 5b\n\t"
+        "add sp, sp, #32"
+        : [a0] "+r"(a0), [a1] "+r"(a1), [a2] "+r"(a2), [a3] "+r"(a3), [w0] "+r"(w0), [w1] "+r"(w1),
+          [w2] "+r"(w2), [w3] "+r"(w3), [x] "+r"(xp), [xa] "+r"(xa), [xb] "+r"(xb), [t0] "+r"(t0),
+          [t1] "+r"(t1), [xe] "+r"(xe)
+        : [step] "I"(8) /* bytes per load: the immediate as an operand, printed as #8 */
+        : "cc", "memory");
+#undef SLIPEST_ROWS4_QUARTER
+#undef SLIPEST_ROWS4_EXTREMES
+    mm[0] = (int32_t)(uint32_t)xa;
+    mm[1] = (int32_t)(uint32_t)xb;
 }
 #endif
 
@@ -724,9 +776,6 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     unsigned i, nb, k1, k2, u_shift, to_q15;
     /* the accumulator bound of the block's rows (h_bits >= 1, checked: the shift is at most 31) */
     const int32_t row_lim = (int32_t)((uint32_t)INT32_MAX - (UINT32_C(1) << (32u - l->h_bits)));
-#if SLIPEST_DUAL_MAC
-    unsigned r4;
-#endif
 
     i = 0u;
 #if SLIPEST_DUAL_MAC
@@ -736,13 +785,11 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
         ((((uintptr_t)(const void *)x) & 3u) == 0u)) {
         i = n & ~3u;
     }
-    for (r4 = 0u; r4 < i; r4 += 4u) {
-        unsigned r;
-        dot16_rows4(&l->w[r4 * n_in], n_in, x, &l->b[r4], &h[r4]);
-        for (r = r4; r < r4 + 4u; ++r) {
-            hmax = h[r] > hmax ? h[r] : hmax;
-            hmin = h[r] < hmin ? h[r] : hmin;
-        }
+    if (i != 0u) {
+        int32_t mm[2] = {INT32_MIN, INT32_MAX};
+        rows4_block(l->w, n_in, i / 4u, x, l->b, h, mm);
+        hmax = mm[0];
+        hmin = mm[1];
     }
 #endif
     for (; i < n; ++i) {

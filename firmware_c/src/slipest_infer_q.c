@@ -594,12 +594,62 @@ static uint32_t shifted_sum(const int32_t *h, unsigned n, unsigned k1)
         ++p;                                                                                                  \
     }
 
+/* ARMv7-M and later in Thumb-2 (SSAT, MLA, LDRD): CENTRE_LOOP written out for an even width, two units per
+ * pass, 11 instructions per unit against 14 from the compiler (which keeps neither the pairs of loads nor
+ * H h' - sum as one MLA with -sum). The same operations in the same order: h' = SSAT((h + half1) >> k1),
+ * d = SSAT(H h' + (-sum), 31 bits), e = SSAT((d + half) >> k2, 15 bits), s += e e, e stored; -sum is exact as
+ * |sum| <= 2^30, and H h' + (-sum) is H h' - sum modulo 2^32. Frama-C analyses CENTRE_LOOP. */
+#if SLIPEST_HAS_SSAT && defined(__thumb2__) && defined(__ARMEL__)
+#define SLIPEST_CENTRE_ASM 1
+#else
+#define SLIPEST_CENTRE_ASM 0
+#endif
+
+#if SLIPEST_CENTRE_ASM
+/* one unit in register H (the clamp of h' to HB + 1 bits: SSAT to HB + 2) */
+#define CENTRE_UNIT_ASM(H)                                                                                     \
+    "add " H ", " H ", %[half1]\n\t"                                                                           \
+    "asr " H ", " H ", %[k1]\n\t"                                                                              \
+    "ssat " H ", %[hb], " H "\n\t"                                                                             \
+    "mla " H ", " H ", %[nh], %[nsum]\n\t"                                                                     \
+    "ssat " H ", #31, " H "\n\t"                                                                               \
+    "add " H ", " H ", %[half]\n\t"                                                                            \
+    "asr " H ", " H ", %[k2]\n\t"                                                                              \
+    "ssat " H ", #15, " H "\n\t"                                                                               \
+    "mla %[s], " H ", " H ", %[s]\n\t"
+#define CENTRE_PAIRS(HB)                                                                                       \
+    {                                                                                                         \
+        uint32_t h0_, h1_;                                                                                    \
+        __asm__ volatile("0:\n\t"                                                                             \
+                         "ldrd %[h0], %[h1], [%[p]]\n\t" CENTRE_UNIT_ASM("%[h0]") CENTRE_UNIT_ASM("%[h1]")   \
+                         "strd %[h0], %[h1], [%[p]], #8\n\t"                                                  \
+                         "cmp %[p], %[end]\n\t"                                                               \
+                         "bne 0b"                                                                             \
+                         : [p] "+r"(p), [s] "+r"(s), [h0] "=&r"(h0_), [h1] "=&r"(h1_)                        \
+                         : [end] "r"(h_end), [half1] "r"(half1), [k1] "r"(k1), [nh] "r"(nh),                  \
+                           [nsum] "r"(-sum), [half] "r"(half), [k2] "r"(k2), [hb] "I"((HB) + 2u)              \
+                         : "cc", "memory");                                                                   \
+    }
+#endif
+
 #if SLIPEST_HAS_SSAT
-/* The loop for blocks with h_bits = HB (a constant: one SSAT for the clamp of h' to HB + 1 bits). */
+/* The loop for blocks with h_bits = HB (a constant: one SSAT for the clamp of h' to HB + 1 bits); an even,
+ * non-zero width in pairs where the core has Thumb-2. */
+#if SLIPEST_CENTRE_ASM
+#define CENTRE_CASE(HB)                                                                                        \
+    case (HB):                                                                                                \
+        if ((n != 0u) && ((n & 1u) == 0u)) {                                                                  \
+            CENTRE_PAIRS(HB)                                                                                  \
+        } else {                                                                                              \
+            CENTRE_LOOP(SAT(hr_, (HB) + 1u))                                                                  \
+        }                                                                                                     \
+        break;
+#else
 #define CENTRE_CASE(HB)                                                                                        \
     case (HB):                                                                                                \
         CENTRE_LOOP(SAT(hr_, (HB) + 1u))                                                                      \
         break;
+#endif
 #endif
 
 /* LayerNorm's second pass: e_i in place, over the accumulators; returns S = sum e^2 (<= H 4^e_bits <=

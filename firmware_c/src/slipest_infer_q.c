@@ -553,6 +553,122 @@ static void rows4_block(const int16_t *w, unsigned n, unsigned groups, const int
 }
 #endif
 
+#if SLIPEST_DUAL_MAC && defined(__GNUC__) && defined(__thumb2__)
+#define SLIPEST_ROWS2X8 1
+#else
+#define SLIPEST_ROWS2X8 0
+#endif
+
+#if SLIPEST_ROWS2X8
+/* The pairs of rows of a row-major block whose n columns are a positive multiple of 8 (every block after the
+ * first of an exported SN-D): h[r] = b[r] + sum_j w[r n + j] x[j] and the running extremes, like rows4_block,
+ * but eight inputs and each row's eight weights come in one LDM each (four registers), so a pass of eight
+ * inputs over two rows is 11 instructions per 16 multiply-accumulates against 13. LDM needs its registers in
+ * ascending order, which operands chosen by the compiler cannot promise: the function is naked, its
+ * registers allocated here (r0-r3 the inputs, r4-r7 the weights, r8/r9 the two rows, r10/r11 the sums, r12
+ * the input pointer, lr the inputs' end) and its one argument the job below, whose address stays at [sp].
+ * The body is written out four times (32 inputs per pass); a partial first pass enters (TBB) at the quarter
+ * that leaves (n / 8) mod 4 quarters. Exact sums, as in rows4_block. */
+#define ROWS2_W 0       /* first row */
+#define ROWS2_XE 1      /* end of the inputs */
+#define ROWS2_STRIDE 2  /* bytes per row (2 n) */
+#define ROWS2_B 3       /* next biases */
+#define ROWS2_H 4       /* next outputs */
+#define ROWS2_H_END 5   /* end of the outputs */
+#define ROWS2_MAX 6     /* running maximum, then minimum (LDRD/STRD: an even word) */
+#define ROWS2_MIN 7
+#define ROWS2_ENTRY 8   /* quarters of the first pass, (n / 8) mod 4 */
+#define ROWS2_JOB_N 9
+#define ROWS2_STR_(x) #x
+#define ROWS2_STR(x) ROWS2_STR_(x)
+#define ROWS2_AT(k) "[r0, #" ROWS2_STR(4 * (k)) "]"
+
+/* one quarter of a pass: eight inputs, two rows */
+#define ROWS2_QUARTER                                                                                          \
+    "ldmia r12!, {r0, r1, r2, r3}\n\t"                                                                         \
+    "ldmia r8!, {r4, r5, r6, r7}\n\t"                                                                          \
+    "smlad r10, r4, r0, r10\n\t"                                                                               \
+    "smlad r10, r5, r1, r10\n\t"                                                                               \
+    "smlad r10, r6, r2, r10\n\t"                                                                               \
+    "smlad r10, r7, r3, r10\n\t"                                                                               \
+    "ldmia r9!, {r4, r5, r6, r7}\n\t"                                                                          \
+    "smlad r11, r4, r0, r11\n\t"                                                                               \
+    "smlad r11, r5, r1, r11\n\t"                                                                               \
+    "smlad r11, r6, r2, r11\n\t"                                                                               \
+    "smlad r11, r7, r3, r11\n\t"
+
+__attribute__((naked, noinline)) static void rows2x8_run(uint32_t *job)
+{
+    (void)job;
+    __asm__ volatile(
+        "push {r0, r4, r5, r6, r7, r8, r9, r10, r11, lr}\n\t" /* the job's address at [sp] */
+        "ldr r9, " ROWS2_AT(ROWS2_W) "\n\t"
+        "ldr lr, " ROWS2_AT(ROWS2_XE) "\n\t"
+        "5:\n\t" /* a pair of rows from r9 on */
+        "ldr r0, [sp]\n\t"
+        "ldr r1, " ROWS2_AT(ROWS2_STRIDE) "\n\t"
+        "mov r8, r9\n\t"
+        "add r9, r8, r1\n\t"
+        "sub r12, lr, r1\n\t" /* the first input (the row length is the input length) */
+        "ldr r2, " ROWS2_AT(ROWS2_B) "\n\t"
+        "ldrd r10, r11, [r2], #8\n\t"
+        "str r2, " ROWS2_AT(ROWS2_B) "\n\t"
+        "ldr r2, " ROWS2_AT(ROWS2_ENTRY) "\n\t"
+        "tbb [pc, r2]\n\t" /* 0: quarter 0; 1: quarter 3; 2: quarter 2; 3: quarter 1 */
+        "6:\n\t"
+        ".byte (0f - 6b) / 2, (3f - 6b) / 2, (2f - 6b) / 2, (1f - 6b) / 2\n\t"
+        "0:\n\t" ROWS2_QUARTER
+        "1:\n\t" ROWS2_QUARTER
+        "2:\n\t" ROWS2_QUARTER
+        "3:\n\t" ROWS2_QUARTER
+        "cmp r12, lr\n\t"
+        "bne 0b\n\t"
+        "ldr r0, [sp]\n\t"
+        "ldr r1, " ROWS2_AT(ROWS2_H) "\n\t"
+        "strd r10, r11, [r1], #8\n\t"
+        "str r1, " ROWS2_AT(ROWS2_H) "\n\t"
+        "ldrd r2, r3, " ROWS2_AT(ROWS2_MAX) "\n\t"
+        "cmp r10, r2\n\t"
+        "it gt\n\t"
+        "movgt r2, r10\n\t"
+        "cmp r10, r3\n\t"
+        "it lt\n\t"
+        "movlt r3, r10\n\t"
+        "cmp r11, r2\n\t"
+        "it gt\n\t"
+        "movgt r2, r11\n\t"
+        "cmp r11, r3\n\t"
+        "it lt\n\t"
+        "movlt r3, r11\n\t"
+        "strd r2, r3, " ROWS2_AT(ROWS2_MAX) "\n\t"
+        "ldr r2, " ROWS2_AT(ROWS2_H_END) "\n\t"
+        "cmp r1, r2\n\t"
+        "bne 5b\n\t"
+        "pop {r0, r4, r5, r6, r7, r8, r9, r10, r11, pc}");
+}
+
+/* rows2x8_run over the first 2 pairs rows (pairs >= 1) of the block: the job from the arguments, the
+ * extremes in mm[0], mm[1] (in and out). */
+static void rows2x8_block(const int16_t *w, unsigned n, unsigned pairs, const int16_t *x, const int32_t *b,
+                          int32_t *h, int32_t mm[2])
+{
+    uint32_t job[ROWS2_JOB_N];
+
+    job[ROWS2_W] = (uint32_t)(uintptr_t)w;
+    job[ROWS2_XE] = (uint32_t)(uintptr_t)&x[n];
+    job[ROWS2_STRIDE] = 2u * n;
+    job[ROWS2_B] = (uint32_t)(uintptr_t)b;
+    job[ROWS2_H] = (uint32_t)(uintptr_t)h;
+    job[ROWS2_H_END] = (uint32_t)(uintptr_t)&h[2u * pairs];
+    job[ROWS2_MAX] = (uint32_t)mm[0];
+    job[ROWS2_MIN] = (uint32_t)mm[1];
+    job[ROWS2_ENTRY] = (n >> 3) & 3u;
+    rows2x8_run(job);
+    mm[0] = s32_of_u32(job[ROWS2_MAX]);
+    mm[1] = s32_of_u32(job[ROWS2_MIN]);
+}
+#endif
+
 /* LayerNorm's first pass over the block's n accumulators: the wrapped sum of h'_i = rsr(h_i, k1) (exact,
  * see block_q). It only reads: centre_pass computes each h' again from its accumulator (two instructions)
  * rather than this pass storing it, so no element holds values of two kinds, which an analysis that joins
@@ -837,7 +953,16 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     }
     if (i != 0u) {
         int32_t mm[2] = {INT32_MIN, INT32_MAX};
+#if SLIPEST_ROWS2X8
+        if ((n_in & 7u) == 0u) { /* pairs of rows, eight inputs per load; an odd last row one by one */
+            i = n & ~1u;
+            rows2x8_block(l->w, n_in, i / 2u, x, l->b, h, mm);
+        } else {
+            rows4_block(l->w, n_in, i / 4u, x, l->b, h, mm);
+        }
+#else
         rows4_block(l->w, n_in, i / 4u, x, l->b, h, mm);
+#endif
         hmax = mm[0];
         hmin = mm[1];
     }

@@ -553,6 +553,87 @@ static void rows4_block(const int16_t *w, unsigned n, unsigned groups, const int
 }
 #endif
 
+#if SLIPEST_DUAL_MAC && defined(__thumb2__)
+/* The four-row groups of a first block (its inputs the 12 features, SLIPEST_N_FEATURES: every architecture's
+ * first block), rows 0 .. 4 groups - 1: the 12 inputs stay in six registers for the whole block and the rows,
+ * which follow each other in memory, are read by one pointer, three LDRD of four weights per row: 9
+ * instructions per row of 12 products and about 36 per group for the biases, the stores, the extremes and the
+ * loop, against about 86 per group in rows4_block. The state (bias and output pointers, the extremes) is in
+ * four words below the stack pointer, as in rows4_block. x word-aligned, w too. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, const int32_t *b, int32_t *h,
+                           int32_t mm[2])
+{
+    uintptr_t a0 = (uintptr_t)b;
+    uintptr_t a1 = (uintptr_t)h;
+    uintptr_t a2 = (uintptr_t)(uint32_t)mm[0];
+    uintptr_t a3 = (uintptr_t)(uint32_t)mm[1];
+    uintptr_t x0 = (uintptr_t)x, x1 = 0u, x2 = 0u, x3 = 0u, x4 = 0u, x5 = 0u;
+    uintptr_t t0 = 0u, t1 = 0u;
+    uintptr_t wp = (uintptr_t)w;
+    uintptr_t cnt = groups;
+
+    /* one row of 12 products into A */
+#define ROWS4X12_ROW(A)                                                                                        \
+    "ldrd %[t0], %[t1], [%[w]], #8\n\t"                                                                        \
+    "smlad " A ", %[t0], %[x0], " A "\n\t"                                                                     \
+    "smlad " A ", %[t1], %[x1], " A "\n\t"                                                                     \
+    "ldrd %[t0], %[t1], [%[w]], #8\n\t"                                                                        \
+    "smlad " A ", %[t0], %[x2], " A "\n\t"                                                                     \
+    "smlad " A ", %[t1], %[x3], " A "\n\t"                                                                     \
+    "ldrd %[t0], %[t1], [%[w]], #8\n\t"                                                                        \
+    "smlad " A ", %[t0], %[x4], " A "\n\t"                                                                     \
+    "smlad " A ", %[t1], %[x5], " A "\n\t"
+#define ROWS4X12_EXTREMES(A)                                                                                   \
+    "cmp " A ", %[t0]\n\t"                                                                                     \
+    "it gt\n\t"                                                                                                \
+    "movgt %[t0], " A "\n\t"                                                                                   \
+    "cmp " A ", %[t1]\n\t"                                                                                     \
+    "it lt\n\t"                                                                                                \
+    "movlt %[t1], " A "\n\t"
+    __asm__ volatile(
+        /* the state, [sp]: bias pointer, +4 output pointer, +8 maximum, +12 minimum */
+        "strd %[a0], %[a1], [sp, #-16]!\n\t"
+        "strd %[a2], %[a3], [sp, #8]\n\t"
+        "ldrd %[x4], %[x5], [%[x0], #16]\n\t"
+        "ldrd %[x2], %[x3], [%[x0], #8]\n\t"
+        "ldrd %[x0], %[x1], [%[x0]]\n\t"
+        "5:\n\t"
+        "ldr %[t0], [sp]\n\t"
+        "ldrd %[a0], %[a1], [%[t0]], #8\n\t"
+        "ldrd %[a2], %[a3], [%[t0]], #8\n\t"
+        "str %[t0], [sp]\n\t"
+        ROWS4X12_ROW("%[a0]")
+        ROWS4X12_ROW("%[a1]")
+        ROWS4X12_ROW("%[a2]")
+        ROWS4X12_ROW("%[a3]")
+        "ldr %[t0], [sp, #4]\n\t"
+        "strd %[a0], %[a1], [%[t0]], #8\n\t"
+        "strd %[a2], %[a3], [%[t0]], #8\n\t"
+        "str %[t0], [sp, #4]\n\t"
+        "ldrd %[t0], %[t1], [sp, #8]\n\t"
+        ROWS4X12_EXTREMES("%[a0]")
+        ROWS4X12_EXTREMES("%[a1]")
+        ROWS4X12_EXTREMES("%[a2]")
+        ROWS4X12_EXTREMES("%[a3]")
+        "strd %[t0], %[t1], [sp, #8]\n\t"
+        "subs %[n], %[n], #1\n\t"
+        "bne 5b\n\t"
+        "add sp, sp, #16"
+        : [a0] "+r"(a0), [a1] "+r"(a1), [a2] "+r"(a2), [a3] "+r"(a3), [x0] "+r"(x0), [x1] "+r"(x1),
+          [x2] "+r"(x2), [x3] "+r"(x3), [x4] "+r"(x4), [x5] "+r"(x5), [t0] "+r"(t0), [t1] "+r"(t1),
+          [w] "+r"(wp), [n] "+r"(cnt)
+        :
+        : "cc", "memory");
+#undef ROWS4X12_ROW
+#undef ROWS4X12_EXTREMES
+    mm[0] = (int32_t)(uint32_t)t0;
+    mm[1] = (int32_t)(uint32_t)t1;
+}
+#endif
+
 #if SLIPEST_DUAL_MAC && defined(__GNUC__) && defined(__thumb2__)
 #define SLIPEST_ROWS2X8 1
 #else
@@ -953,6 +1034,11 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     }
     if (i != 0u) {
         int32_t mm[2] = {INT32_MIN, INT32_MAX};
+#if SLIPEST_DUAL_MAC && defined(__thumb2__)
+        if (n_in == (unsigned)SLIPEST_N_FEATURES) { /* the first block: the inputs held in registers */
+            rows4x12_block(l->w, i / 4u, x, l->b, h, mm);
+        } else
+#endif
 #if SLIPEST_ROWS2X8
         if ((n_in & 7u) == 0u) { /* pairs of rows, eight inputs per load; an odd last row one by one */
             i = n & ~1u;

@@ -830,62 +830,31 @@ static uint32_t shifted_sum(const int32_t *h, unsigned n, unsigned k1)
         ++p;                                                                                                  \
     }
 
-/* ARMv7-M and later in Thumb-2 (SSAT, MLA, LDRD): CENTRE_LOOP written out for an even width, two units per
- * pass, 11 instructions per unit against 14 from the compiler (which keeps neither the pairs of loads nor
- * H h' - sum as one MLA with -sum). The same operations in the same order: h' = SSAT((h + half1) >> k1),
- * d = SSAT(H h' + (-sum), 31 bits), e = SSAT((d + half) >> k2, 15 bits), s += e e, e stored; -sum is exact as
- * |sum| <= 2^30, and H h' + (-sum) is H h' - sum modulo 2^32. Frama-C analyses CENTRE_LOOP. */
-#if SLIPEST_HAS_SSAT && defined(__thumb2__) && defined(__ARMEL__)
-#define SLIPEST_CENTRE_ASM 1
-#else
-#define SLIPEST_CENTRE_ASM 0
-#endif
+/* Thumb-2 (MLA, LDRD): CENTRE_LOOP written out for an even width, two units per pass, 8 instructions per unit
+ * against 14 from the compiler (which keeps neither the pairs of loads nor H h' - sum as one MLA with -sum):
+ * h' = (h + half1) >> k1, d = H h' + (-sum), e = (d + half) >> k2, s += e e, e stored. -sum is exact as |sum| <=
+ * 2^30, and H h' + (-sum) is H h' - sum modulo 2^32. The loop leaves out the three clamps of CENTRE_LOOP,
+ * which never act (the bounds above) and are there for the analyser, which analyses CENTRE_LOOP: as the
+ * product loops leave out the row clamp. */
+#define SLIPEST_CENTRE_ASM SLIPEST_T2_ASM
 
 #if SLIPEST_CENTRE_ASM
-/* one unit in register H (the clamp of h' to HB + 1 bits: SSAT to HB + 2) */
+/* one unit in register H */
 #define CENTRE_UNIT_ASM(H)                                                                                     \
     "add " H ", " H ", %[half1]\n\t"                                                                           \
     "asr " H ", " H ", %[k1]\n\t"                                                                              \
-    "ssat " H ", %[hb], " H "\n\t"                                                                             \
     "mla " H ", " H ", %[nh], %[nsum]\n\t"                                                                     \
-    "ssat " H ", #31, " H "\n\t"                                                                               \
     "add " H ", " H ", %[half]\n\t"                                                                            \
     "asr " H ", " H ", %[k2]\n\t"                                                                              \
-    "ssat " H ", #15, " H "\n\t"                                                                               \
     "mla %[s], " H ", " H ", %[s]\n\t"
-#define CENTRE_PAIRS(HB)                                                                                       \
-    {                                                                                                         \
-        uint32_t h0_, h1_;                                                                                    \
-        __asm__ volatile("0:\n\t"                                                                             \
-                         "ldrd %[h0], %[h1], [%[p]]\n\t" CENTRE_UNIT_ASM("%[h0]") CENTRE_UNIT_ASM("%[h1]")   \
-                         "strd %[h0], %[h1], [%[p]], #8\n\t"                                                  \
-                         "cmp %[p], %[end]\n\t"                                                               \
-                         "bne 0b"                                                                             \
-                         : [p] "+r"(p), [s] "+r"(s), [h0] "=&r"(h0_), [h1] "=&r"(h1_)                        \
-                         : [end] "r"(h_end), [half1] "r"(half1), [k1] "r"(k1), [nh] "r"(nh),                  \
-                           [nsum] "r"(-sum), [half] "r"(half), [k2] "r"(k2), [hb] "I"((HB) + 2u)              \
-                         : "cc", "memory");                                                                   \
-    }
 #endif
 
 #if SLIPEST_HAS_SSAT
-/* The loop for blocks with h_bits = HB (a constant: one SSAT for the clamp of h' to HB + 1 bits); an even,
- * non-zero width in pairs where the core has Thumb-2. */
-#if SLIPEST_CENTRE_ASM
-#define CENTRE_CASE(HB)                                                                                        \
-    case (HB):                                                                                                \
-        if ((n != 0u) && ((n & 1u) == 0u)) {                                                                  \
-            CENTRE_PAIRS(HB)                                                                                  \
-        } else {                                                                                              \
-            CENTRE_LOOP(SAT(hr_, (HB) + 1u))                                                                  \
-        }                                                                                                     \
-        break;
-#else
+/* The loop for blocks with h_bits = HB (a constant: one SSAT for the clamp of h' to HB + 1 bits). */
 #define CENTRE_CASE(HB)                                                                                        \
     case (HB):                                                                                                \
         CENTRE_LOOP(SAT(hr_, (HB) + 1u))                                                                      \
         break;
-#endif
 #endif
 
 /* LayerNorm's second pass: e_i in place, over the accumulators; returns S = sum e^2 (<= H 4^e_bits <=
@@ -904,6 +873,21 @@ static uint32_t centre_pass(int32_t *h, unsigned n, unsigned h_bits, unsigned k1
     const int32_t half = (int32_t)((UINT32_C(1) << k2) >> 1); /* rounding constant (0 for k2 = 0) */
     uint32_t s = 0u;
 
+#if SLIPEST_CENTRE_ASM
+    if ((n != 0u) && ((n & 1u) == 0u)) {
+        uint32_t h0_, h1_;
+        __asm__ volatile("0:\n\t"
+                         "ldrd %[h0], %[h1], [%[p]]\n\t" CENTRE_UNIT_ASM("%[h0]") CENTRE_UNIT_ASM("%[h1]")
+                         "strd %[h0], %[h1], [%[p]], #8\n\t"
+                         "cmp %[p], %[end]\n\t"
+                         "bne 0b"
+                         : [p] "+r"(p), [s] "+r"(s), [h0] "=&r"(h0_), [h1] "=&r"(h1_)
+                         : [end] "r"(h_end), [half1] "r"(half1), [k1] "r"(k1), [nh] "r"(nh), [nsum] "r"(-sum),
+                           [half] "r"(half), [k2] "r"(k2)
+                         : "cc", "memory");
+        return s;
+    }
+#endif
 #if SLIPEST_HAS_SSAT
     switch (h_bits) {
         CENTRE_CASE(21u)
@@ -921,7 +905,7 @@ static uint32_t centre_pass(int32_t *h, unsigned n, unsigned h_bits, unsigned k1
 }
 
 /* Cores with the DSP extension (SMMULR, SSAT, the sticky Q flag): hidden_pass's loop is written out
- * (hidden_loop_dsp), 25.5 instructions per unit against 33 from the compiler, which spills two of the 14
+ * (hidden_loop_dsp), 24.5 instructions per unit against 33 from the compiler, which spills two of the 14
  * registers it needs. Its saturations set the Q flag instead of being compared one by one: the flag is
  * cleared before the loop and read once after it. The flag only says that some SSAT of the pass acted, so
  * when it is set (never in normal operation) the units are counted again one by one, the portable way,
@@ -950,8 +934,9 @@ static uint32_t count_saturated(const slipest_layer_q_t *l, const int32_t *e, in
     return ns;
 }
 
-/* hidden_out over e .. e_end (e != e_end) into out, as hidden_out computes it step by step: z = SAT(SMMULR(e
- * 2^16, M), 15), u = ((gamma z + U_HALF) >> U_SHIFT) + beta, SSAT to int16, then gelu_q: w = |u| << to_q15,
+/* hidden_out over e .. e_end (e != e_end) into out, as hidden_out computes it step by step: z = SMMULR(e 2^16,
+ * M) (the clamp of z to 2^15 never acts, |z| < 22500, and is left out like the other analyser's clamps in the
+ * asm loops), u = ((gamma z + U_HALF) >> U_SHIFT) + beta, SSAT to int16, then gelu_q: w = |u| << to_q15,
  * and below (GELU_N - 1) 2^15 (k = w >> 15 <= 127, f = w mod 2^15) max(u, 0) + T[k] + rsr((T[k+1] - T[k]) f, 15).
  * T[k] and T[k+1] come in one (unaligned, little-endian) word p; SMLSD with f in both halves gives
  * X = T[k] f - T[k+1] f + (2^14 - 1) = -(T[k+1] - T[k]) f + 2^14 - 1, and rsr(D f, 15) = floor((D f + 2^14) / 2^15)
@@ -969,8 +954,7 @@ static uint32_t hidden_loop_dsp(const int32_t *e, const int32_t *e_end, const in
     "ldr %[t1], [%[e]], #4\n\t"                                                                                \
     "ldrsh %[t2], [%[g]], #2\n\t"                                                                              \
     "lsl %[t1], %[t1], #16\n\t"                                                                                \
-    "smmulr %[t1], %[t1], %[mult]\n\t" /* z */                                                                 \
-    "ssat %[t1], #16, %[t1]\n\t"                                                                               \
+    "smmulr %[t1], %[t1], %[mult]\n\t" /* z (its clamp to 2^15 never acts, |z| < 22500: left out) */         \
     "mla %[t1], %[t2], %[t1], %[uh]\n\t"                                                                       \
     "ldr %[t2], [%[b]], #4\n\t"                                                                                \
     "asr %[t1], %[t1], %[ush]\n\t"                                                                             \

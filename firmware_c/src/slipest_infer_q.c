@@ -657,19 +657,20 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
  * the input pointer, lr the inputs' end) and its one argument the job below, whose address stays at [sp].
  * The body is written out four times (32 inputs per pass); a partial first pass enters (TBB) at the quarter
  * that leaves (n / 8) mod 4 quarters. Exact sums, as in rows4_block. */
-#define ROWS2_W 0       /* first row */
-#define ROWS2_XE 1      /* end of the inputs */
-#define ROWS2_STRIDE 2  /* bytes per row (2 n) */
-#define ROWS2_B 3       /* next biases */
-#define ROWS2_H 4       /* next outputs */
-#define ROWS2_H_END 5   /* end of the outputs */
-#define ROWS2_MAX 6     /* running maximum, then minimum (LDRD/STRD: an even word) */
-#define ROWS2_MIN 7
-#define ROWS2_ENTRY 8   /* quarters of the first pass, (n / 8) mod 4 */
+/* the job's words, in the order the loop loads them (LDM: ascending registers from ascending addresses) */
+#define ROWS2_STRIDE 0  /* bytes per row (2 n) */
+#define ROWS2_B 1       /* next biases */
+#define ROWS2_ENTRY 2   /* quarters of the first pass, (n / 8) mod 4 */
+#define ROWS2_H 3       /* next outputs */
+#define ROWS2_MAX 4     /* running maximum, then minimum */
+#define ROWS2_MIN 5
+#define ROWS2_H_END 6   /* end of the outputs */
+#define ROWS2_W 7       /* first row */
+#define ROWS2_XE 8      /* end of the inputs */
 #define ROWS2_JOB_N 9
 #define ROWS2_STR_(x) #x
 #define ROWS2_STR(x) ROWS2_STR_(x)
-#define ROWS2_AT(k) "[r0, #" ROWS2_STR(4 * (k)) "]"
+#define ROWS2_OFF(k) "#" ROWS2_STR(4 * (k))
 
 /* one quarter of a pass: eight inputs, two rows */
 #define ROWS2_QUARTER                                                                                          \
@@ -685,24 +686,25 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
     "smlad r11, r6, r2, r11\n\t"                                                                               \
     "smlad r11, r7, r3, r11\n\t"
 
+/* The job is copied onto the stack first ([sp] the copy, the job's address above it), so that the group
+ * loop reads and writes its state with LDM/STM from sp without a base register. */
 __attribute__((naked, noinline)) static void rows2x8_run(uint32_t *job)
 {
     (void)job;
     __asm__ volatile(
-        "push {r0, r4, r5, r6, r7, r8, r9, r10, r11, lr}\n\t" /* the job's address at [sp] */
-        "ldr r9, " ROWS2_AT(ROWS2_W) "\n\t"
-        "ldr lr, " ROWS2_AT(ROWS2_XE) "\n\t"
-        "5:\n\t" /* a pair of rows from r9 on */
-        "ldr r0, [sp]\n\t"
-        "ldr r1, " ROWS2_AT(ROWS2_STRIDE) "\n\t"
+        "push {r0, r4, r5, r6, r7, r8, r9, r10, r11, lr}\n\t"
+        "ldmia r0, {r1, r2, r3, r4, r5, r6, r7, r8, r9}\n\t"
+        "push {r1, r2, r3, r4, r5, r6, r7, r8, r9}\n\t" /* the copy: word k at [sp, #4k] */
+        "mov lr, r9\n\t"                                  /* the inputs' end */
+        "mov r9, r8\n\t"                                  /* the next pair's first row */
+        "5:\n\t"
+        "ldmia sp, {r1, r2, r3}\n\t" /* stride, biases, entry */
         "mov r8, r9\n\t"
         "add r9, r8, r1\n\t"
         "sub r12, lr, r1\n\t" /* the first input (the row length is the input length) */
-        "ldr r2, " ROWS2_AT(ROWS2_B) "\n\t"
         "ldrd r10, r11, [r2], #8\n\t"
-        "str r2, " ROWS2_AT(ROWS2_B) "\n\t"
-        "ldr r2, " ROWS2_AT(ROWS2_ENTRY) "\n\t"
-        "tbb [pc, r2]\n\t" /* 0: quarter 0; 1: quarter 3; 2: quarter 2; 3: quarter 1 */
+        "str r2, [sp, " ROWS2_OFF(ROWS2_B) "]\n\t"
+        "tbb [pc, r3]\n\t" /* 0: quarter 0; 1: quarter 3; 2: quarter 2; 3: quarter 1 */
         "6:\n\t"
         ".byte (0f - 6b) / 2, (3f - 6b) / 2, (2f - 6b) / 2, (1f - 6b) / 2\n\t"
         "0:\n\t" ROWS2_QUARTER
@@ -711,11 +713,9 @@ __attribute__((naked, noinline)) static void rows2x8_run(uint32_t *job)
         "3:\n\t" ROWS2_QUARTER
         "cmp r12, lr\n\t"
         "bne 0b\n\t"
-        "ldr r0, [sp]\n\t"
-        "ldr r1, " ROWS2_AT(ROWS2_H) "\n\t"
+        "add r0, sp, " ROWS2_OFF(ROWS2_H) "\n\t"
+        "ldmia r0, {r1, r2, r3, r4}\n\t" /* outputs, maximum, minimum, end */
         "strd r10, r11, [r1], #8\n\t"
-        "str r1, " ROWS2_AT(ROWS2_H) "\n\t"
-        "ldrd r2, r3, " ROWS2_AT(ROWS2_MAX) "\n\t"
         "cmp r10, r2\n\t"
         "it gt\n\t"
         "movgt r2, r10\n\t"
@@ -728,10 +728,12 @@ __attribute__((naked, noinline)) static void rows2x8_run(uint32_t *job)
         "cmp r11, r3\n\t"
         "it lt\n\t"
         "movlt r3, r11\n\t"
-        "strd r2, r3, " ROWS2_AT(ROWS2_MAX) "\n\t"
-        "ldr r2, " ROWS2_AT(ROWS2_H_END) "\n\t"
-        "cmp r1, r2\n\t"
+        "stmia r0, {r1, r2, r3}\n\t"
+        "cmp r1, r4\n\t"
         "bne 5b\n\t"
+        "ldr r0, [sp, " ROWS2_OFF(ROWS2_JOB_N) "]\n\t" /* the extremes back to the caller's job */
+        "strd r2, r3, [r0, " ROWS2_OFF(ROWS2_MAX) "]\n\t"
+        "add sp, sp, " ROWS2_OFF(ROWS2_JOB_N) "\n\t"
         "pop {r0, r4, r5, r6, r7, r8, r9, r10, r11, pc}");
 }
 

@@ -254,10 +254,10 @@ def irregular_bundle(tmp_path_factory):
 
 # SN-D on every target with an emulator; an irregular shape on the DSP core and the integer-only ARMv6-M. It
 # takes the paths of the M4's kernel that SN-D does not: a block of 20 inputs (the four-row product loop
-# entered at its last quarter), one of 24 inputs (row pairs entered at the last quarter, an odd last row), an
-# odd width (the C centring loop, the hidden loop entered at its second unit) and a width of 11 (a pair of the
-# shifted sum left over)
-IRREGULAR = "20,24,11"
+# entered at its last quarter), one of 24 inputs and 11 rows (row pairs entered at an eighth, an odd last
+# row), one of 11 inputs (rows one by one), an odd width (the C centring loop, the hidden loop entered at its
+# second unit) and widths of 2 mod 4 (centring entered at its second pair, a pair of the shifted sum left over)
+IRREGULAR = "20,24,11,10"
 CASES = [("sn-d", name) for name in _runnable_targets()] + [(IRREGULAR, "cortex-m4"), (IRREGULAR, "cortex-m0")]
 
 

@@ -654,13 +654,14 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
  * inputs over two rows is 11 instructions per 16 multiply-accumulates against 13. LDM needs its registers in
  * ascending order, which operands chosen by the compiler cannot promise: the function is naked, its
  * registers allocated here (r0-r3 the inputs, r4-r7 the weights, r8/r9 the two rows, r10/r11 the sums, r12
- * the input pointer, lr the inputs' end) and its one argument the job below, whose address stays at [sp].
- * The body is written out four times (32 inputs per pass); a partial first pass enters (TBB) at the quarter
- * that leaves (n / 8) mod 4 quarters. Exact sums, as in rows4_block. */
+ * the input pointer, lr the inputs' end) and its one argument the job below, copied onto its stack.
+ * The body is written out eight times (64 inputs per pass: SN-D's 128 and 64 take two passes and one); a
+ * partial first pass enters (TBB) at the eighth that leaves (n / 8) mod 8 eighths. Exact sums, as in
+ * rows4_block. */
 /* the job's words, in the order the loop loads them (LDM: ascending registers from ascending addresses) */
 #define ROWS2_STRIDE 0  /* bytes per row (2 n) */
 #define ROWS2_B 1       /* next biases */
-#define ROWS2_ENTRY 2   /* quarters of the first pass, (n / 8) mod 4 */
+#define ROWS2_ENTRY 2   /* eighths of the first pass, (n / 8) mod 8 */
 #define ROWS2_H 3       /* next outputs */
 #define ROWS2_MAX 4     /* running maximum, then minimum */
 #define ROWS2_MIN 5
@@ -672,8 +673,8 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
 #define ROWS2_STR(x) ROWS2_STR_(x)
 #define ROWS2_OFF(k) "#" ROWS2_STR(4 * (k))
 
-/* one quarter of a pass: eight inputs, two rows */
-#define ROWS2_QUARTER                                                                                          \
+/* one eighth of a pass: eight inputs, two rows */
+#define ROWS2_EIGHTH                                                                                          \
     "ldmia r12!, {r0, r1, r2, r3}\n\t"                                                                         \
     "ldmia r8!, {r4, r5, r6, r7}\n\t"                                                                          \
     "smlad r10, r4, r0, r10\n\t"                                                                               \
@@ -704,13 +705,18 @@ __attribute__((naked, noinline)) static void rows2x8_run(uint32_t *job)
         "sub r12, lr, r1\n\t" /* the first input (the row length is the input length) */
         "ldrd r10, r11, [r2], #8\n\t"
         "str r2, [sp, " ROWS2_OFF(ROWS2_B) "]\n\t"
-        "tbb [pc, r3]\n\t" /* 0: quarter 0; 1: quarter 3; 2: quarter 2; 3: quarter 1 */
+        "tbb [pc, r3]\n\t" /* k in 1..7: the pass entered at its eighth 8 - k (0: a whole pass) */
         "6:\n\t"
-        ".byte (0f - 6b) / 2, (3f - 6b) / 2, (2f - 6b) / 2, (1f - 6b) / 2\n\t"
-        "0:\n\t" ROWS2_QUARTER
-        "1:\n\t" ROWS2_QUARTER
-        "2:\n\t" ROWS2_QUARTER
-        "3:\n\t" ROWS2_QUARTER
+        ".byte (0f - 6b) / 2, (17f - 6b) / 2, (16f - 6b) / 2, (15f - 6b) / 2\n\t"
+        ".byte (14f - 6b) / 2, (13f - 6b) / 2, (12f - 6b) / 2, (11f - 6b) / 2\n\t"
+        "0:\n\t" ROWS2_EIGHTH
+        "11:\n\t" ROWS2_EIGHTH
+        "12:\n\t" ROWS2_EIGHTH
+        "13:\n\t" ROWS2_EIGHTH
+        "14:\n\t" ROWS2_EIGHTH
+        "15:\n\t" ROWS2_EIGHTH
+        "16:\n\t" ROWS2_EIGHTH
+        "17:\n\t" ROWS2_EIGHTH
         "cmp r12, lr\n\t"
         "bne 0b\n\t"
         "add r0, sp, " ROWS2_OFF(ROWS2_H) "\n\t"
@@ -752,7 +758,7 @@ static void rows2x8_block(const int16_t *w, unsigned n, unsigned pairs, const in
     job[ROWS2_H_END] = (uint32_t)(uintptr_t)&h[2u * pairs];
     job[ROWS2_MAX] = (uint32_t)mm[0];
     job[ROWS2_MIN] = (uint32_t)mm[1];
-    job[ROWS2_ENTRY] = (n >> 3) & 3u;
+    job[ROWS2_ENTRY] = (n >> 3) & 7u;
     rows2x8_run(job);
     mm[0] = s32_of_u32(job[ROWS2_MAX]);
     mm[1] = s32_of_u32(job[ROWS2_MIN]);
@@ -832,8 +838,8 @@ static uint32_t shifted_sum(const int32_t *h, unsigned n, unsigned k1)
         ++p;                                                                                                  \
     }
 
-/* Thumb-2 (MLA, LDRD): CENTRE_LOOP written out for an even width, two units per pass, 8 instructions per unit
- * against 14 from the compiler (which keeps neither the pairs of loads nor H h' - sum as one MLA with -sum):
+/* Thumb-2 (MLA, LDRD): CENTRE_LOOP written out for an even width, four units per pass (2 mod 4 enter at the
+ * second pair), 7.5 instructions per unit against 14 from the compiler (which keeps neither the pairs of loads nor H h' - sum as one MLA with -sum):
  * h' = (h + half1) >> k1, d = H h' + (-sum), e = (d + half) >> k2, s += e e, e stored. -sum is exact as |sum| <=
  * 2^30, and H h' + (-sum) is H h' - sum modulo 2^32. The loop leaves out the three clamps of CENTRE_LOOP,
  * which never act (the bounds above) and are there for the analyser, which analyses CENTRE_LOOP: as the
@@ -878,7 +884,13 @@ static uint32_t centre_pass(int32_t *h, unsigned n, unsigned h_bits, unsigned k1
 #if SLIPEST_CENTRE_ASM
     if ((n != 0u) && ((n & 1u) == 0u)) {
         uint32_t h0_, h1_;
-        __asm__ volatile("0:\n\t"
+        __asm__ volatile("sub %[h0], %[end], %[p]\n\t" /* 2 mod 4 units: enter at the second pair */
+                         "tst %[h0], #8\n\t"
+                         "bne 1f\n\t"
+                         "0:\n\t"
+                         "ldrd %[h0], %[h1], [%[p]]\n\t" CENTRE_UNIT_ASM("%[h0]") CENTRE_UNIT_ASM("%[h1]")
+                         "strd %[h0], %[h1], [%[p]], #8\n\t"
+                         "1:\n\t"
                          "ldrd %[h0], %[h1], [%[p]]\n\t" CENTRE_UNIT_ASM("%[h0]") CENTRE_UNIT_ASM("%[h1]")
                          "strd %[h0], %[h1], [%[p]], #8\n\t"
                          "cmp %[p], %[end]\n\t"

@@ -665,10 +665,11 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
 #define ROWS2_H 3       /* next outputs */
 #define ROWS2_MAX 4     /* running maximum, then minimum */
 #define ROWS2_MIN 5
-#define ROWS2_H_END 6   /* end of the outputs */
-#define ROWS2_W 7       /* first row */
-#define ROWS2_XE 8      /* end of the inputs */
-#define ROWS2_JOB_N 9
+#define ROWS2_RANGE 6   /* maximum - minimum (mod 2^32; 0 before any row) */
+#define ROWS2_H_END 7   /* end of the outputs */
+#define ROWS2_W 8       /* first row */
+#define ROWS2_XE 9      /* end of the inputs */
+#define ROWS2_JOB_N 10
 #define ROWS2_STR_(x) #x
 #define ROWS2_STR(x) ROWS2_STR_(x)
 #define ROWS2_OFF(k) "#" ROWS2_STR(4 * (k))
@@ -687,6 +688,19 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
     "smlad r11, r6, r2, r11\n\t"                                                                               \
     "smlad r11, r7, r3, r11\n\t"
 
+/* A new extreme from register A (rare after the first rows): maximum, minimum and range updated in r2-r4
+ * and in the copy of the job (r0 at its outputs word) */
+#define ROWS2_EXTREME(A)                                                                                       \
+    "cmp " A ", r2\n\t"                                                                                        \
+    "it gt\n\t"                                                                                                \
+    "movgt r2, " A "\n\t"                                                                                      \
+    "cmp " A ", r3\n\t"                                                                                        \
+    "it lt\n\t"                                                                                                \
+    "movlt r3, " A "\n\t"                                                                                      \
+    "sub r4, r2, r3\n\t"                                                                                       \
+    "strd r2, r3, [r0, #4]\n\t"                                                                                \
+    "str r4, [r0, #12]\n\t"
+
 /* The job is copied onto the stack first ([sp] the copy, the job's address above it), so that the group
  * loop reads and writes its state with LDM/STM from sp without a base register. */
 __attribute__((naked, noinline)) static void rows2x8_run(uint32_t *job)
@@ -694,10 +708,9 @@ __attribute__((naked, noinline)) static void rows2x8_run(uint32_t *job)
     (void)job;
     __asm__ volatile(
         "push {r0, r4, r5, r6, r7, r8, r9, r10, r11, lr}\n\t"
-        "ldmia r0, {r1, r2, r3, r4, r5, r6, r7, r8, r9}\n\t"
-        "push {r1, r2, r3, r4, r5, r6, r7, r8, r9}\n\t" /* the copy: word k at [sp, #4k] */
-        "mov lr, r9\n\t"                                  /* the inputs' end */
-        "mov r9, r8\n\t"                                  /* the next pair's first row */
+        "ldmia r0, {r1, r2, r3, r4, r5, r6, r7, r8, r9, r10}\n\t"
+        "push {r1, r2, r3, r4, r5, r6, r7, r8, r9, r10}\n\t" /* the copy: word k at [sp, #4k] */
+        "mov lr, r10\n\t" /* the inputs' end; r9 the next pair's first row */
         "5:\n\t"
         "ldmia sp, {r1, r2, r3}\n\t" /* stride, biases, entry */
         "mov r8, r9\n\t"
@@ -720,23 +733,23 @@ __attribute__((naked, noinline)) static void rows2x8_run(uint32_t *job)
         "cmp r12, lr\n\t"
         "bne 0b\n\t"
         "add r0, sp, " ROWS2_OFF(ROWS2_H) "\n\t"
-        "ldmia r0, {r1, r2, r3, r4}\n\t" /* outputs, maximum, minimum, end */
+        "ldmia r0, {r1, r2, r3, r4, r5}\n\t" /* outputs, maximum, minimum, range, end */
         "strd r10, r11, [r1], #8\n\t"
-        "cmp r10, r2\n\t"
-        "it gt\n\t"
-        "movgt r2, r10\n\t"
-        "cmp r10, r3\n\t"
-        "it lt\n\t"
-        "movlt r3, r10\n\t"
-        "cmp r11, r2\n\t"
-        "it gt\n\t"
-        "movgt r2, r11\n\t"
-        "cmp r11, r3\n\t"
-        "it lt\n\t"
-        "movlt r3, r11\n\t"
-        "stmia r0, {r1, r2, r3}\n\t"
-        "cmp r1, r4\n\t"
+        "sub r6, r10, r3\n\t" /* outside [minimum, maximum]: (unsigned) h - minimum > range */
+        "cmp r6, r4\n\t"
+        "bhi 7f\n\t"
+        "8:\n\t"
+        "sub r6, r11, r3\n\t"
+        "cmp r6, r4\n\t"
+        "bhi 9f\n\t"
+        "10:\n\t"
+        "str r1, [r0]\n\t"
+        "cmp r1, r5\n\t"
         "bne 5b\n\t"
+        "b 4f\n\t"
+        "7:\n\t" ROWS2_EXTREME("r10") "b 8b\n\t"
+        "9:\n\t" ROWS2_EXTREME("r11") "b 10b\n\t"
+        "4:\n\t"
         "ldr r0, [sp, " ROWS2_OFF(ROWS2_JOB_N) "]\n\t" /* the extremes back to the caller's job */
         "strd r2, r3, [r0, " ROWS2_OFF(ROWS2_MAX) "]\n\t"
         "add sp, sp, " ROWS2_OFF(ROWS2_JOB_N) "\n\t"
@@ -758,6 +771,9 @@ static void rows2x8_block(const int16_t *w, unsigned n, unsigned pairs, const in
     job[ROWS2_H_END] = (uint32_t)(uintptr_t)&h[2u * pairs];
     job[ROWS2_MAX] = (uint32_t)mm[0];
     job[ROWS2_MIN] = (uint32_t)mm[1];
+    /* before any row the range is 0 and the minimum INT32_MAX: every row is outside it, as the row bound keeps
+     * each sum below INT32_MAX */
+    job[ROWS2_RANGE] = (mm[0] >= mm[1]) ? (uint32_t)mm[0] - (uint32_t)mm[1] : 0u;
     job[ROWS2_ENTRY] = (n >> 3) & 7u;
     rows2x8_run(job);
     mm[0] = s32_of_u32(job[ROWS2_MAX]);

@@ -553,8 +553,6 @@ static void rows4_block(const int16_t *w, unsigned n, unsigned groups, const int
           [t1] "+r"(t1), [xe] "+r"(xe)
         : [step] "I"(8) /* bytes per load: the immediate as an operand, printed as #8 */
         : "cc", "memory");
-#undef SLIPEST_ROWS4_QUARTER
-#undef SLIPEST_ROWS4_EXTREMES
     mm[0] = (int32_t)(uint32_t)xa;
     mm[1] = (int32_t)(uint32_t)xb;
 }
@@ -634,8 +632,6 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
           [w] "+r"(wp), [n] "+r"(cnt)
         :
         : "cc", "memory");
-#undef ROWS4X12_ROW
-#undef ROWS4X12_EXTREMES
     mm[0] = (int32_t)(uint32_t)t0;
     mm[1] = (int32_t)(uint32_t)t1;
 }
@@ -1023,7 +1019,6 @@ static uint32_t hidden_loop_dsp(const int32_t *e, const int32_t *e_end, const in
         : [ee] "r"(e_end), [tab] "r"(table), [mult] "r"(mult), [uh] "r"(u_half), [ush] "r"(u_shift),
           [toq] "r"(to_q15), [lim] "I"((SLIPEST_Q_GELU_N - 1) << 15)
         : "cc", "memory");
-#undef SLIPEST_HIDDEN_UNIT
     return t1 & UINT32_C(0x08000000);
 }
 #endif
@@ -1141,13 +1136,13 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
 /* the activations hold the features too (a build may cap the width below 12) */
 #define ACT_N ((SLIPEST_MAX_WIDTH > SLIPEST_N_FEATURES) ? SLIPEST_MAX_WIDTH : SLIPEST_N_FEATURES)
 
-/* memset(p, 0, bytes) of word-aligned scratch; on Thumb-2 32 bytes per pass with four STRD (about 6
- * instructions per 32 bytes against 20 in the C library's memset), the rest with memset. */
-static void zero_scratch(void *p, size_t bytes)
-{
-    size_t done = 0u;
 #if SLIPEST_T2_ASM
-    done = bytes & ~(size_t)31u;
+/* Zeroes the first bytes & ~31 bytes of word-aligned scratch, 32 bytes per pass with four STRD (about 6
+ * instructions per 32 bytes against 20 in the C library's memset), and returns how many: the caller zeroes
+ * the rest with memset. */
+static size_t zero_scratch_t2(void *p, size_t bytes)
+{
+    const size_t done = bytes & ~(size_t)31u;
     if (done != 0u) {
         uintptr_t q = (uintptr_t)p;
         const uintptr_t q_end = q + done;
@@ -1163,11 +1158,9 @@ static void zero_scratch(void *p, size_t bytes)
                          : [e] "r"(q_end), [z0] "r"(z0), [z1] "r"(z1)
                          : "cc", "memory");
     }
-#endif
-    if (done != bytes) {
-        (void)memset((uint8_t *)p + done, 0, bytes - done);
-    }
+    return done;
 }
+#endif
 
 /* The head: logits[c] = b2[c] + sum_i w2[c n + i] g[i] for the three classes. Where the core has SMLAD and the
  * rows suit it (n a multiple of 4, w2 and g word-aligned) the three rows share each load of four inputs
@@ -1209,7 +1202,7 @@ static void head_q(const slipest_model_q_t *m, const int16_t *g, unsigned n, int
         return;
     }
 #endif
-    for (c = 0u; c < SLIPEST_N_CLASSES; ++c) {
+    for (c = 0u; c < (unsigned)SLIPEST_N_CLASSES; ++c) {
         /* |g| < 2^15: every partial sum of row c <= 2^15 sum_i |w_ci| + |b_c| <= INT32_MAX (checked) */
         logits[c] = dot16(&m->w2[c * n], g, n, m->b2[c]);
     }
@@ -1228,6 +1221,9 @@ static int infer_layers(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST
     int16_t act[ACT_N] SLIPEST_WORD_ALIGNED;
     const int16_t *x = act;
     unsigned k, c, n_in = SLIPEST_N_FEATURES, wmax = 0u;
+#if SLIPEST_T2_ASM
+    size_t z;
+#endif
     uint32_t sat = 0u;
     int best = 0;
 
@@ -1241,8 +1237,15 @@ static int infer_layers(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST
         wmax = (m->layers[k].width > wmax) ? m->layers[k].width : wmax; /* <= SLIPEST_MAX_WIDTH (checked) */
     }
     wmax = (wmax < (unsigned)SLIPEST_MAX_WIDTH) ? wmax : (unsigned)SLIPEST_MAX_WIDTH;
-    zero_scratch(h, sizeof(int32_t) * (size_t)wmax);
-    zero_scratch(act, sizeof(int16_t) * (size_t)wmax);
+#if SLIPEST_T2_ASM
+    z = zero_scratch_t2(h, sizeof(int32_t) * (size_t)wmax); /* a multiple of 32 bytes */
+    (void)memset(&h[z / sizeof(int32_t)], 0, (sizeof(int32_t) * (size_t)wmax) - z);
+    z = zero_scratch_t2(act, sizeof(int16_t) * (size_t)wmax);
+    (void)memset(&act[z / sizeof(int16_t)], 0, (sizeof(int16_t) * (size_t)wmax) - z);
+#else
+    (void)memset(h, 0, sizeof(int32_t) * (size_t)wmax);
+    (void)memset(act, 0, sizeof(int16_t) * (size_t)wmax);
+#endif
     (void)memcpy(act, feat_q, sizeof(int16_t) * (size_t)SLIPEST_N_FEATURES);
     for (k = 0u; k < m->n_layers && k < (unsigned)SLIPEST_MAX_LAYERS; ++k) {
         block_q(m, &m->layers[k], x, n_in, h, act, &sat);
@@ -1250,7 +1253,7 @@ static int infer_layers(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST
         n_in = m->layers[k].width;
     }
     head_q(m, x, n_in, logits);
-    for (c = 1u; c < SLIPEST_N_CLASSES; ++c) {
+    for (c = 1u; c < (unsigned)SLIPEST_N_CLASSES; ++c) {
         if (logits[c] > logits[best]) {
             best = (int)c;
         }

@@ -444,7 +444,38 @@ HOT int32_t dot16(const int16_t *w, const int16_t *x, unsigned n, int32_t acc)
     return s32_of_u32(uacc);
 }
 
-#if SLIPEST_DUAL_MAC
+#if SLIPEST_DUAL_MAC && SLIPEST_T2_ASM
+/* In an asm template: the running maximum MX and minimum MN updated with the register A. */
+#define SLIPEST_ASM_EXTREMES(A, MX, MN)                                                                        \
+    "cmp " A ", " MX "\n\t"                                                                                    \
+    "it gt\n\t"                                                                                                \
+    "movgt " MX ", " A "\n\t"                                                                                  \
+    "cmp " A ", " MN "\n\t"                                                                                    \
+    "it lt\n\t"                                                                                                \
+    "movlt " MN ", " A "\n\t"
+/* The four-row loops (rows4_block, rows4x12_block) keep the bias pointer at [sp] and the output pointer at
+ * [sp, #4]: the four sums %[a0]..%[a3] from the next biases, ... */
+#define SLIPEST_ASM_BIAS4                                                                                      \
+    "ldr %[t0], [sp]\n\t"                                                                                      \
+    "ldrd %[a0], %[a1], [%[t0]], #8\n\t"                                                                       \
+    "ldrd %[a2], %[a3], [%[t0]], #8\n\t"                                                                       \
+    "str %[t0], [sp]\n\t"
+/* ... and to the next outputs, with the running extremes MX, MN (at [sp, MM]) updated (%[t0] is free after
+ * the stores, so it may be MX) */
+#define SLIPEST_ASM_STORE4(MX, MN, MM)                                                                         \
+    "ldr %[t0], [sp, #4]\n\t"                                                                                  \
+    "strd %[a0], %[a1], [%[t0]], #8\n\t"                                                                       \
+    "strd %[a2], %[a3], [%[t0]], #8\n\t"                                                                       \
+    "str %[t0], [sp, #4]\n\t"                                                                                  \
+    "ldrd " MX ", " MN ", [sp, " MM "]\n\t"                                                                     \
+    SLIPEST_ASM_EXTREMES("%[a0]", MX, MN)                                                                      \
+    SLIPEST_ASM_EXTREMES("%[a1]", MX, MN)                                                                      \
+    SLIPEST_ASM_EXTREMES("%[a2]", MX, MN)                                                                      \
+    SLIPEST_ASM_EXTREMES("%[a3]", MX, MN)                                                                      \
+    "strd " MX ", " MN ", [sp, " MM "]\n\t"
+#endif
+
+#if SLIPEST_DUAL_MAC && SLIPEST_T2_ASM
 /* The four-row groups of a row-major block of n columns, rows 0 .. 4 groups - 1 (groups >= 1): h[r] = b[r] +
  * sum_j w[r n + j] x[j], and the running maximum and minimum of the h[r] in mm[0], mm[1]. n is a positive
  * multiple of 4, w and x word-aligned (so is every row: LDRD needs it). Each four inputs are loaded once for
@@ -493,14 +524,6 @@ static void rows4_block(const int16_t *w, unsigned n, unsigned groups, const int
     "ldrd %[t0], %[t1], [%[w3]], %[step]\n\t"                                                                  \
     "smlad %[a3], %[t0], %[xa], %[a3]\n\t"                                                                     \
     "smlad %[a3], %[t1], %[xb], %[a3]\n\t"
-    /* the running extremes (xa, xb) with one accumulator */
-#define SLIPEST_ROWS4_EXTREMES(A)                                                                              \
-    "cmp " A ", %[xa]\n\t"                                                                                     \
-    "it gt\n\t"                                                                                                \
-    "movgt %[xa], " A "\n\t"                                                                                   \
-    "cmp " A ", %[xb]\n\t"                                                                                     \
-    "it lt\n\t"                                                                                                \
-    "movlt %[xb], " A "\n\t"
     __asm__ volatile(
         /* the state, [sp]: bias pointer, +4 output pointer, +8 output end, +12 bytes per row,
          * +16 maximum, +20 minimum, +24 first inputs, +28 quarters of the first pass */
@@ -519,10 +542,7 @@ static void rows4_block(const int16_t *w, unsigned n, unsigned groups, const int
         "add %[w1], %[w0], %[t1]\n\t"
         "add %[w2], %[w1], %[t1]\n\t"
         "add %[w3], %[w2], %[t1]\n\t"
-        "ldr %[t0], [sp]\n\t"
-        "ldrd %[a0], %[a1], [%[t0]], #8\n\t"
-        "ldrd %[a2], %[a3], [%[t0]], #8\n\t"
-        "str %[t0], [sp]\n\t"
+        SLIPEST_ASM_BIAS4
         "ldr %[x], [sp, #24]\n\t"
         "ldr %[t0], [sp, #28]\n\t"
         "tbb [pc, %[t0]]\n\t" /* 0: quarter 0; 1: quarter 3; 2: quarter 2; 3: quarter 1 */
@@ -534,16 +554,7 @@ static void rows4_block(const int16_t *w, unsigned n, unsigned groups, const int
         "3:\n\t" SLIPEST_ROWS4_QUARTER
         "cmp %[x], %[xe]\n\t"
         "bne 0b\n\t"
-        "ldr %[t0], [sp, #4]\n\t"
-        "strd %[a0], %[a1], [%[t0]], #8\n\t"
-        "strd %[a2], %[a3], [%[t0]], #8\n\t"
-        "str %[t0], [sp, #4]\n\t"
-        "ldrd %[xa], %[xb], [sp, #16]\n\t"
-        SLIPEST_ROWS4_EXTREMES("%[a0]")
-        SLIPEST_ROWS4_EXTREMES("%[a1]")
-        SLIPEST_ROWS4_EXTREMES("%[a2]")
-        SLIPEST_ROWS4_EXTREMES("%[a3]")
-        "strd %[xa], %[xb], [sp, #16]\n\t"
+        SLIPEST_ASM_STORE4("%[xa]", "%[xb]", "#16")
         "ldr %[t1], [sp, #8]\n\t"
         "cmp %[t0], %[t1]\n\t"
         "bne 5b\n\t"
@@ -558,7 +569,7 @@ static void rows4_block(const int16_t *w, unsigned n, unsigned groups, const int
 }
 #endif
 
-#if SLIPEST_DUAL_MAC && defined(__thumb2__)
+#if SLIPEST_DUAL_MAC && SLIPEST_T2_ASM
 /* The four-row groups of a first block (its inputs the 12 features, SLIPEST_N_FEATURES: every architecture's
  * first block), rows 0 .. 4 groups - 1: the 12 inputs stay in six registers for the whole block and the rows,
  * which follow each other in memory, are read by one pointer, three LDRD of four weights per row: 9
@@ -591,13 +602,6 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
     "ldrd %[t0], %[t1], [%[w]], #8\n\t"                                                                        \
     "smlad " A ", %[t0], %[x4], " A "\n\t"                                                                     \
     "smlad " A ", %[t1], %[x5], " A "\n\t"
-#define ROWS4X12_EXTREMES(A)                                                                                   \
-    "cmp " A ", %[t0]\n\t"                                                                                     \
-    "it gt\n\t"                                                                                                \
-    "movgt %[t0], " A "\n\t"                                                                                   \
-    "cmp " A ", %[t1]\n\t"                                                                                     \
-    "it lt\n\t"                                                                                                \
-    "movlt %[t1], " A "\n\t"
     __asm__ volatile(
         /* the state, [sp]: bias pointer, +4 output pointer, +8 maximum, +12 minimum */
         "strd %[a0], %[a1], [sp, #-16]!\n\t"
@@ -606,24 +610,12 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
         "ldrd %[x2], %[x3], [%[x0], #8]\n\t"
         "ldrd %[x0], %[x1], [%[x0]]\n\t"
         "5:\n\t"
-        "ldr %[t0], [sp]\n\t"
-        "ldrd %[a0], %[a1], [%[t0]], #8\n\t"
-        "ldrd %[a2], %[a3], [%[t0]], #8\n\t"
-        "str %[t0], [sp]\n\t"
+        SLIPEST_ASM_BIAS4
         ROWS4X12_ROW("%[a0]")
         ROWS4X12_ROW("%[a1]")
         ROWS4X12_ROW("%[a2]")
         ROWS4X12_ROW("%[a3]")
-        "ldr %[t0], [sp, #4]\n\t"
-        "strd %[a0], %[a1], [%[t0]], #8\n\t"
-        "strd %[a2], %[a3], [%[t0]], #8\n\t"
-        "str %[t0], [sp, #4]\n\t"
-        "ldrd %[t0], %[t1], [sp, #8]\n\t"
-        ROWS4X12_EXTREMES("%[a0]")
-        ROWS4X12_EXTREMES("%[a1]")
-        ROWS4X12_EXTREMES("%[a2]")
-        ROWS4X12_EXTREMES("%[a3]")
-        "strd %[t0], %[t1], [sp, #8]\n\t"
+        SLIPEST_ASM_STORE4("%[t0]", "%[t1]", "#8")
         "subs %[n], %[n], #1\n\t"
         "bne 5b\n\t"
         "add sp, sp, #16"
@@ -637,13 +629,7 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
 }
 #endif
 
-#if SLIPEST_DUAL_MAC && defined(__GNUC__) && defined(__thumb2__)
-#define SLIPEST_ROWS2X8 1
-#else
-#define SLIPEST_ROWS2X8 0
-#endif
-
-#if SLIPEST_ROWS2X8
+#if SLIPEST_DUAL_MAC && SLIPEST_T2_ASM
 /* The pairs of rows of a row-major block whose n columns are a positive multiple of 8 (every block after the
  * first of an exported SN-D): h[r] = b[r] + sum_j w[r n + j] x[j] and the running extremes, like rows4_block,
  * but eight inputs and each row's eight weights come in one LDM each (four registers), so a pass of eight
@@ -687,12 +673,7 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
 /* A new extreme from register A (rare after the first rows): maximum, minimum and range updated in r2-r4
  * and in the copy of the job (r0 at its outputs word) */
 #define ROWS2_EXTREME(A)                                                                                       \
-    "cmp " A ", r2\n\t"                                                                                        \
-    "it gt\n\t"                                                                                                \
-    "movgt r2, " A "\n\t"                                                                                      \
-    "cmp " A ", r3\n\t"                                                                                        \
-    "it lt\n\t"                                                                                                \
-    "movlt r3, " A "\n\t"                                                                                      \
+    SLIPEST_ASM_EXTREMES(A, "r2", "r3")                                                                        \
     "sub r4, r2, r3\n\t"                                                                                       \
     "strd r2, r3, [r0, #4]\n\t"                                                                                \
     "str r4, [r0, #12]\n\t"
@@ -1073,30 +1054,24 @@ static void block_q(const slipest_model_q_t *m, const slipest_layer_q_t *l, cons
     const int32_t row_lim = (int32_t)((uint32_t)INT32_MAX - (UINT32_C(1) << (32u - l->h_bits)));
 
     i = 0u;
-#if SLIPEST_DUAL_MAC
-    /* four rows per pass where the rows suit dot16_rows4 (n_in a positive multiple of 4, weights on a word
-     * boundary: true of every exported SN-D), the rest one by one below */
+#if SLIPEST_DUAL_MAC && SLIPEST_T2_ASM
+    /* the grouped product loops where the rows suit them (n_in a positive multiple of 4, weights and inputs on
+     * a word boundary: true of every exported SN-D), the rest one by one below: the first block's rows four
+     * at a time with the inputs in registers, a multiple of 8 inputs in row pairs, else four rows per group */
     if ((n_in != 0u) && ((n_in & 3u) == 0u) && ((((uintptr_t)(const void *)l->w) & 3u) == 0u) &&
         ((((uintptr_t)(const void *)x) & 3u) == 0u)) {
         i = n & ~3u;
     }
     if (i != 0u) {
         int32_t mm[2] = {INT32_MIN, INT32_MAX};
-#if SLIPEST_DUAL_MAC && defined(__thumb2__)
-        if (n_in == (unsigned)SLIPEST_N_FEATURES) { /* the first block: the inputs held in registers */
+        if (n_in == (unsigned)SLIPEST_N_FEATURES) {
             rows4x12_block(l->w, i / 4u, x, l->b, h, mm);
-        } else
-#endif
-#if SLIPEST_ROWS2X8
-        if ((n_in & 7u) == 0u) { /* pairs of rows, eight inputs per load; an odd last row one by one */
+        } else if ((n_in & 7u) == 0u) { /* an odd last row one by one */
             i = n & ~1u;
             rows2x8_block(l->w, n_in, i / 2u, x, l->b, h, mm);
         } else {
             rows4_block(l->w, n_in, i / 4u, x, l->b, h, mm);
         }
-#else
-        rows4_block(l->w, n_in, i / 4u, x, l->b, h, mm);
-#endif
         hmax = mm[0];
         hmin = mm[1];
     }

@@ -489,6 +489,7 @@ HOT int32_t dot16(const int16_t *w, const int16_t *x, unsigned n, int32_t acc)
  * words the block pushes below the stack pointer and removes before it ends. The sums are exact, so the order
  * of the products does not change them; every partial sum is inside the row's bound (any subset of its
  * terms). */
+/* asm-stack(rows4_block): 32 bytes (the group state below sp; fleetlab assure stack adds it) */
 #if defined(__GNUC__)
 __attribute__((noinline))
 #endif
@@ -576,6 +577,7 @@ static void rows4_block(const int16_t *w, unsigned n, unsigned groups, const int
  * instructions per row of 12 products and about 36 per group for the biases, the stores, the extremes and the
  * loop, against about 86 per group in rows4_block. The state (bias and output pointers, the extremes) is in
  * four words below the stack pointer, as in rows4_block. x word-aligned, w too. */
+/* asm-stack(rows4x12_block): 16 bytes (the group state below sp; fleetlab assure stack adds it) */
 #if defined(__GNUC__)
 __attribute__((noinline))
 #endif
@@ -680,6 +682,8 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
 
 /* The job is copied onto the stack first ([sp] the copy, the job's address above it), so that the group
  * loop reads and writes its state with LDM/STM from sp without a base register. */
+/* asm-stack(rows2x8_run): 80 bytes (ten saved registers and the job's copy: a naked function has no frame
+ * that -fstack-usage sees; fleetlab assure stack adds it) */
 __attribute__((naked, noinline)) static void rows2x8_run(uint32_t *job)
 {
     (void)job;

@@ -1218,9 +1218,13 @@ static int infer_layers(const slipest_model_q_t *m, const int16_t feat_q[SLIPEST
     wmax = (wmax < (unsigned)SLIPEST_MAX_WIDTH) ? wmax : (unsigned)SLIPEST_MAX_WIDTH;
 #if SLIPEST_T2_ASM
     z = zero_scratch_t2(h, sizeof(int32_t) * (size_t)wmax); /* a multiple of 32 bytes */
-    (void)memset(&h[z / sizeof(int32_t)], 0, (sizeof(int32_t) * (size_t)wmax) - z);
+    if (z != (sizeof(int32_t) * (size_t)wmax)) {
+        (void)memset(&h[z / sizeof(int32_t)], 0, (sizeof(int32_t) * (size_t)wmax) - z);
+    }
     z = zero_scratch_t2(act, sizeof(int16_t) * (size_t)wmax);
-    (void)memset(&act[z / sizeof(int16_t)], 0, (sizeof(int16_t) * (size_t)wmax) - z);
+    if (z != (sizeof(int16_t) * (size_t)wmax)) {
+        (void)memset(&act[z / sizeof(int16_t)], 0, (sizeof(int16_t) * (size_t)wmax) - z);
+    }
 #else
     (void)memset(h, 0, sizeof(int32_t) * (size_t)wmax);
     (void)memset(act, 0, sizeof(int16_t) * (size_t)wmax);

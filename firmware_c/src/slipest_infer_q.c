@@ -460,13 +460,15 @@ HOT int32_t dot16(const int16_t *w, const int16_t *x, unsigned n, int32_t acc)
     "ldrd %[a0], %[a1], [%[t0]], #8\n\t"                                                                       \
     "ldrd %[a2], %[a3], [%[t0]], #8\n\t"                                                                       \
     "str %[t0], [sp]\n\t"
-/* ... and to the next outputs, with the running extremes MX, MN (at [sp, MM]) updated (%[t0] is free after
- * the stores, so it may be MX) */
-#define SLIPEST_ASM_STORE4(MX, MN, MM)                                                                         \
+/* ... and to the next outputs, then (STORE4_EXTREMES) the running extremes MX, MN (at [sp, MM]) updated
+ * (%[t0] is free after the stores, so it may be MX) */
+#define SLIPEST_ASM_STORE4                                                                                     \
     "ldr %[t0], [sp, #4]\n\t"                                                                                  \
     "strd %[a0], %[a1], [%[t0]], #8\n\t"                                                                       \
     "strd %[a2], %[a3], [%[t0]], #8\n\t"                                                                       \
-    "str %[t0], [sp, #4]\n\t"                                                                                  \
+    "str %[t0], [sp, #4]\n\t"
+#define SLIPEST_ASM_STORE4_EXTREMES(MX, MN, MM)                                                                \
+    SLIPEST_ASM_STORE4                                                                                         \
     "ldrd " MX ", " MN ", [sp, " MM "]\n\t"                                                                     \
     SLIPEST_ASM_EXTREMES("%[a0]", MX, MN)                                                                      \
     SLIPEST_ASM_EXTREMES("%[a1]", MX, MN)                                                                      \
@@ -555,7 +557,7 @@ static void rows4_block(const int16_t *w, unsigned n, unsigned groups, const int
         "3:\n\t" SLIPEST_ROWS4_QUARTER
         "cmp %[x], %[xe]\n\t"
         "bne 0b\n\t"
-        SLIPEST_ASM_STORE4("%[xa]", "%[xb]", "#16")
+        SLIPEST_ASM_STORE4_EXTREMES("%[xa]", "%[xb]", "#16")
         "ldr %[t1], [sp, #8]\n\t"
         "cmp %[t0], %[t1]\n\t"
         "bne 5b\n\t"
@@ -577,7 +579,7 @@ static void rows4_block(const int16_t *w, unsigned n, unsigned groups, const int
  * instructions per row of 12 products and about 36 per group for the biases, the stores, the extremes and the
  * loop, against about 86 per group in rows4_block. The state (bias and output pointers, the extremes) is in
  * four words below the stack pointer, as in rows4_block. x word-aligned, w too. */
-/* asm-stack(rows4x12_block): 16 bytes (the group state below sp; fleetlab assure stack adds it) */
+/* asm-stack(rows4x12_block): 24 bytes (the group state below sp; fleetlab assure stack adds it) */
 #if defined(__GNUC__)
 __attribute__((noinline))
 #endif
@@ -589,7 +591,10 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
     uintptr_t a2 = (uintptr_t)(uint32_t)mm[0];
     uintptr_t a3 = (uintptr_t)(uint32_t)mm[1];
     uintptr_t x0 = (uintptr_t)x, x1 = 0u, x2 = 0u, x3 = 0u, x4 = 0u, x5 = 0u;
-    uintptr_t t0 = 0u, t1 = 0u;
+    /* the range before any row is 0 with the minimum INT32_MAX: every row is outside it (the row bound keeps
+     * each sum below INT32_MAX) */
+    uintptr_t t0 = (mm[0] >= mm[1]) ? (uintptr_t)((uint32_t)mm[0] - (uint32_t)mm[1]) : 0u;
+    uintptr_t t1 = 0u;
     uintptr_t wp = (uintptr_t)w;
     uintptr_t cnt = groups;
 
@@ -604,10 +609,30 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
     "ldrd %[t0], %[t1], [%[w]], #8\n\t"                                                                        \
     "smlad " A ", %[t0], %[x4], " A "\n\t"                                                                     \
     "smlad " A ", %[t1], %[x5], " A "\n\t"
+    /* a sum outside [minimum, maximum] ((unsigned) h - minimum > range, minimum in t0, range in t1; A is
+     * stored already, so it may change): N, the label of the update below */
+#define ROWS4X12_TEST(A, N)                                                                                    \
+    "sub " A ", " A ", %[t0]\n\t"                                                                              \
+    "cmp " A ", %[t1]\n\t"                                                                                     \
+    "bhi 7" N "f\n\t"                                                                                          \
+    "8" N ":\n\t"
+    /* the update (rare after the first rows): A back to the sum, the extremes and the range in the state and
+     * in t0/t1 (t1, the range, is free until the end) */
+#define ROWS4X12_UPDATE(A, N)                                                                                  \
+    "7" N ":\n\t"                                                                                              \
+    "add " A ", " A ", %[t0]\n\t"                                                                              \
+    "ldr %[t1], [sp, #8]\n\t"                                                                                  \
+    SLIPEST_ASM_EXTREMES(A, "%[t1]", "%[t0]")                                                                  \
+    "strd %[t1], %[t0], [sp, #8]\n\t"                                                                          \
+    "sub %[t1], %[t1], %[t0]\n\t"                                                                              \
+    "str %[t1], [sp, #16]\n\t"                                                                                 \
+    "b 8" N "b\n\t"
     __asm__ volatile(
-        /* the state, [sp]: bias pointer, +4 output pointer, +8 maximum, +12 minimum */
-        "strd %[a0], %[a1], [sp, #-16]!\n\t"
+        /* the state, [sp]: bias pointer, +4 output pointer, +8 maximum, +12 minimum, +16 maximum - minimum
+         * (mod 2^32), +20 unused */
+        "strd %[a0], %[a1], [sp, #-24]!\n\t"
         "strd %[a2], %[a3], [sp, #8]\n\t"
+        "str %[t0], [sp, #16]\n\t"
         "ldrd %[x4], %[x5], [%[x0], #16]\n\t"
         "ldrd %[x2], %[x3], [%[x0], #8]\n\t"
         "ldrd %[x0], %[x1], [%[x0]]\n\t"
@@ -617,10 +642,22 @@ static void rows4x12_block(const int16_t *w, unsigned groups, const int16_t *x, 
         ROWS4X12_ROW("%[a1]")
         ROWS4X12_ROW("%[a2]")
         ROWS4X12_ROW("%[a3]")
-        SLIPEST_ASM_STORE4("%[t0]", "%[t1]", "#8")
+        SLIPEST_ASM_STORE4
+        "ldrd %[t0], %[t1], [sp, #12]\n\t"
+        ROWS4X12_TEST("%[a0]", "1")
+        ROWS4X12_TEST("%[a1]", "2")
+        ROWS4X12_TEST("%[a2]", "3")
+        ROWS4X12_TEST("%[a3]", "4")
         "subs %[n], %[n], #1\n\t"
         "bne 5b\n\t"
-        "add sp, sp, #16"
+        "b 9f\n\t"
+        ROWS4X12_UPDATE("%[a0]", "1")
+        ROWS4X12_UPDATE("%[a1]", "2")
+        ROWS4X12_UPDATE("%[a2]", "3")
+        ROWS4X12_UPDATE("%[a3]", "4")
+        "9:\n\t"
+        "ldrd %[t0], %[t1], [sp, #8]\n\t"
+        "add sp, sp, #24"
         : [a0] "+r"(a0), [a1] "+r"(a1), [a2] "+r"(a2), [a3] "+r"(a3), [x0] "+r"(x0), [x1] "+r"(x1),
           [x2] "+r"(x2), [x3] "+r"(x3), [x4] "+r"(x4), [x5] "+r"(x5), [t0] "+r"(t0), [t1] "+r"(t1),
           [w] "+r"(wp), [n] "+r"(cnt)

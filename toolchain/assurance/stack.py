@@ -26,6 +26,9 @@ KERNELS = ("slipest_infer_q.c", "slipest_infer_f32.c", "slipest_features_f32.c")
 _NODE = re.compile(r'node: \{ title: "(?P<title>[^"]+)" label: "(?P<label>[^"]*)"')
 _EDGE = re.compile(r'edge: \{ sourcename: "(?P<src>[^"]+)" targetname: "(?P<dst>[^"]+)"')
 _SIZE = re.compile(r"\\n(\d+) bytes \(([a-z,]+)\)$")
+# stack an `asm` statement takes below sp, which -fstack-usage does not see; the C source states it next to
+# the function, in a comment "asm-stack(FUNCTION): N bytes", and it is added to the function's frame
+_ASM_STACK = re.compile(r"asm-stack\((\w+)\): (\d+) bytes")
 
 
 @dataclass
@@ -128,6 +131,10 @@ def compile_graph(bundle: Path | None = None, q_only: bool = True, with_bench: b
                     graph.owner[m["title"]] = src.name
             for m in _EDGE.finditer(text):
                 graph.calls.setdefault(m["src"], set()).add(m["dst"])
+            for m in _ASM_STACK.finditer(Path(src).read_text()):
+                for title in graph.frame:
+                    if graph.owner.get(title) == src.name and (title == m[1] or title.endswith(":" + m[1])):
+                        graph.frame[title] += int(m[2])
     return graph
 
 

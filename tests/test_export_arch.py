@@ -258,7 +258,26 @@ def irregular_bundle(tmp_path_factory):
 # row), one of 11 inputs (rows one by one), an odd width (the C centring loop, the hidden loop entered at its
 # second unit) and widths of 2 mod 4 (centring entered at its second pair, a pair of the shifted sum left over)
 IRREGULAR = "20,24,11,10"
-CASES = [("sn-d", name) for name in _runnable_targets()] + [(IRREGULAR, "cortex-m4"), (IRREGULAR, "cortex-m0")]
+# The M4's written-out product loops are entered part-way through their first pass: the row pairs (a multiple
+# of 8 inputs) at (n_in / 8) mod 8 eighths, the four-row groups (n_in = 4 mod 8, not the 12 features) at
+# (n_in / 4) mod 4 quarters. SN-D (128, 64 inputs) and IRREGULAR (20, 24) take eighths 0 and 3 and quarter 1;
+# these shapes' hidden blocks take the others (see test_the_m4_cases_enter_every_product_loop_entry).
+ENTRY_SHAPES = ["40,48,28,8", "8,16,56,32", "32,9"]
+CASES = ([("sn-d", name) for name in _runnable_targets()] + [(IRREGULAR, "cortex-m4"), (IRREGULAR, "cortex-m0")]
+         + [(shape, "cortex-m4") for shape in ENTRY_SHAPES])
+
+
+def _block_inputs(arch: str) -> list[int]:
+    """The input counts of the hidden blocks after the first (the first block's 12 features have their own loop)."""
+    widths = [128, 64, 32] if arch == "sn-d" else [int(w) for w in arch.split(",")]
+    return widths[:-1]
+
+
+def test_the_m4_cases_enter_every_product_loop_entry():
+    m4 = [arch for arch, name in CASES if name == "cortex-m4"]
+    eighths = {(n // 8) % 8 for arch in m4 for n in _block_inputs(arch) if n % 8 == 0}
+    quarters = {(n // 4) % 4 for arch in m4 for n in _block_inputs(arch) if n % 8 == 4 and n != 12}
+    assert eighths == set(range(8)) and quarters == {1, 3}  # n = 4 mod 8 leaves an odd n / 4: quarters 1, 3
 
 
 @pytest.mark.parametrize("arch,name", CASES)
@@ -267,7 +286,13 @@ def test_bit_exact_under_qemu(snd_bundle, irregular_bundle, tmp_path, arch, name
 
     from fleetlab.host_tools.firmware import build, targets
 
-    bundle = snd_bundle if arch == "sn-d" else irregular_bundle
+    if arch == "sn-d":
+        bundle = snd_bundle
+    elif arch == IRREGULAR:
+        bundle = irregular_bundle
+    else:
+        bundle = tmp_path / "bundle"
+        export_bundle(quick_model(arch), bundle, inputs=draw_inputs(300, None, seed=5))
     t = targets.get(name)
     missing = [tool for tool in t.tools if shutil.which(tool) is None]
     if missing:

@@ -72,7 +72,15 @@ def test_edited_layer_table_header_is_refused(arch_bundle, tmp_path):
 def test_c_kernels_match_the_vectors_sanitized(arch_bundle, tmp_path):
     """The layer-table kernel and the float path on the bundle's vectors (edge rows at the int16 rails
     included), gcc with ASan + UBSan: every logit and saturation count equal, floats within 1e-5."""
-    _, out = arch_bundle
+    _sanitized_check(arch_bundle[1], tmp_path)
+
+
+def test_irregular_shape_c_kernels_sanitized(irregular_bundle, tmp_path):
+    """IRREGULAR, the shape every QEMU target runs too (test_bit_exact_under_qemu), on the host the same way."""
+    _sanitized_check(irregular_bundle, tmp_path)
+
+
+def _sanitized_check(out: Path, tmp_path: Path) -> None:
     exe = build_check(out, tmp_path, need("gcc"), ["-fsanitize=undefined,address", "-fno-sanitize-recover=all"])
     res = subprocess.run([str(exe), str(out / "vectors.bin")], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stdout + res.stderr
@@ -252,7 +260,7 @@ def irregular_bundle(tmp_path_factory):
     return out
 
 
-# SN-D on every target with an emulator; an irregular shape on the DSP core and the integer-only ARMv6-M. It
+# SN-D and an irregular shape on every target with an emulator. The irregular shape
 # takes the paths of the M4's kernel that SN-D does not: a block of 20 inputs (the four-row product loop
 # entered at its last quarter), one of 24 inputs and 11 rows (row pairs entered at an eighth, an odd last
 # row), one of 11 inputs (rows one by one), an odd width (the C centring loop, the hidden loop entered at its
@@ -263,7 +271,7 @@ IRREGULAR = "20,24,11,10"
 # (n_in / 4) mod 4 quarters. SN-D (128, 64 inputs) and IRREGULAR (20, 24) take eighths 0 and 3 and quarter 1;
 # these shapes' hidden blocks take the others (see test_the_m4_cases_enter_every_product_loop_entry).
 ENTRY_SHAPES = ["40,48,28,8", "8,16,56,32", "32,9"]
-CASES = ([("sn-d", name) for name in _runnable_targets()] + [(IRREGULAR, "cortex-m4"), (IRREGULAR, "cortex-m0")]
+CASES = ([(arch, name) for arch in ("sn-d", IRREGULAR) for name in _runnable_targets()]
          + [(shape, "cortex-m4") for shape in ENTRY_SHAPES])
 
 

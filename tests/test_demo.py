@@ -21,6 +21,7 @@ def test_demo_quick_end_to_end(tmp_path):
     # the assurance stage's own summary table, for the bundle this run exported
     assert "## Assurance evidence" in report and "MISRA C:2012 (cppcheck addon)" in report
     assert (out / "assurance" / "assurance.html").exists()
+    assert "Frama-C EVA skipped (--no-eva)" in (out / "assurance" / "assurance.md").read_text()  # quick: no EVA
     # the report's figures are the run's own files
     manifest = json.loads((out / "bundle" / "manifest.json").read_text())
     assert manifest["content_hash"] in report

@@ -39,12 +39,13 @@ class Profile:
     emulate_scale: float  # simulator scale of the emulation source
     cortex_m4: bool  # cross build + QEMU run when the tools are present
     bench_iterations: int  # onnxruntime/torch inferences per timing round of `bench c`
+    eva: bool  # Frama-C EVA in the assurance stage (the quick demo is a smoke test: test_assurance runs EVA)
 
 
 FULL = Profile(scale=1.0, epochs=EXPERT_EPOCHS, generations=_ACO.generations, ants=_ACO.n_ants, runs=10, emulate_scale=0.5, cortex_m4=True,
-               bench_iterations=2000)
+               bench_iterations=2000, eva=True)
 QUICK = Profile(scale=0.3, epochs=12, generations=25, ants=80, runs=2, emulate_scale=0.1, cortex_m4=True,
-                bench_iterations=200)
+                bench_iterations=200, eva=False)
 
 
 @dataclass
@@ -67,7 +68,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder (default: demo_out)")
     p.add_argument("--seed", type=int, default=1, help="seed of every stage (default: 1)")
-    p.add_argument("--quick", action="store_true", help="small budgets for a smoke test (about 2 minutes)")
+    p.add_argument("--quick", action="store_true", help="small budgets for a smoke test (about 2 minutes; the assurance stage without Frama-C EVA)")
     p.add_argument("--no-cortex-m", action="store_true", help="skip the CPU target cross build and QEMU run")
 
 
@@ -137,7 +138,8 @@ def plan(out: Path, seed: int, prof: Profile, cortex_m: bool) -> list[Stage]:
                                        "--iterations", prof.bench_iterations, "--compare", bundle_d, "--json")]))
     # flight-software evidence for the exported bundle (cross builds are the stages above)
     stages.append(Stage("assure", "Assurance evidence: MISRA, analysers, stack bounds, coverage",
-                        [_fleetlab("assure", "--bundle", bundle, "--out", out / "assurance", "--no-target")]))
+                        [_fleetlab("assure", "--bundle", bundle, "--out", out / "assurance", "--no-target",
+                                   *([] if prof.eva else ["--no-eva"]))]))
     return stages
 
 

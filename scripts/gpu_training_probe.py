@@ -9,8 +9,9 @@ Ways, each a median over `--steps` steps after a warm-up:
 - cpu-1: one CPU thread, how an `evaluate` job trains (mccv.py pins one thread per job);
 - cpu-N: all of torch's CPU threads;
 - cuda: eager on the GPU;
-- cuda-graph: the whole step (Adam with capturable=True) captured once and replayed: the best a GPU
-  can do for so small a step, as the AcoMerge engine does for its generation.
+- cuda-graph: fleetlab's captured step (models/train.py `_CapturedSteps`: forward, loss, backward and
+  Adam with capturable=True in one CUDA graph, replayed per step with the batch's indices uploaded),
+  what the source models train with under `--device cuda`.
 Prints one JSON object: ms per step per way, and the GPU's best against cpu-1 (a ratio above 1 means
 the GPU step is faster). With the GPU, also `training`: fleetlab's own `train_classifier` on the GPU
 (what the source models use under `--device cuda`) against one CPU thread, a few epochs on synthetic
@@ -33,7 +34,7 @@ from fleetlab.data.contracts import N_CLASSES, N_FEATURES
 from fleetlab.models import build
 from fleetlab.fusion.bench import synthetic_calibration
 from fleetlab.models import flatten
-from fleetlab.models.train import EXPERT_LR, predict, train_classifier, weighted_ce
+from fleetlab.models.train import EXPERT_LR, _CapturedSteps, predict, train_classifier, weighted_ce
 
 
 def _synchronise(device: str) -> None:
@@ -68,29 +69,18 @@ def _time_eager(arch: str, batch: int, device: str, steps: int) -> float:
 
 
 def _time_cuda_graph(arch: str, batch: int, device: str, steps: int) -> float:
-    """torch's whole-network capture: static inputs, warm-up on a side stream, then replay."""
+    """fleetlab's own captured step (`_CapturedSteps`, what the source models train with on a GPU): its
+    first steps run eagerly, then each step is the batch's indices uploaded and one graph replayed."""
     model, x, y, w = _problem(arch, batch, device)
-    opt = torch.optim.Adam(model.parameters(), lr=EXPERT_LR, capturable=True)
-    side = torch.cuda.Stream()
-    side.wait_stream(torch.cuda.current_stream())
-    with torch.cuda.stream(side):
-        for _ in range(3):
-            opt.zero_grad(set_to_none=True)
-            weighted_ce(model(x), y, w).backward()
-            opt.step()
-    torch.cuda.current_stream().wait_stream(side)
-    graph = torch.cuda.CUDAGraph()
-    opt.zero_grad(set_to_none=True)
-    with torch.cuda.graph(graph):
-        weighted_ce(model(x), y, w).backward()
-        opt.step()
+    engine = _CapturedSteps(model, x, y, w, EXPERT_LR)
+    idx = torch.arange(batch)
     times = []
     for i in range(steps + 10):
         torch.cuda.synchronize()
         t0 = time.perf_counter()
-        graph.replay()
+        engine.step(idx)
         torch.cuda.synchronize()
-        if i >= 10:
+        if i >= 10:  # warm-up: the eager steps and the capture
             times.append(time.perf_counter() - t0)
     return statistics.median(times) * 1e3
 

@@ -138,7 +138,7 @@ class CalibrationFitness:
         """
         k, n = self.xt_t.shape
         if self._kept is None or self._kept[0].shape[0] < p:
-            rows = max(p, self._kept[0].shape[0] if self._kept is not None else 0)
+            rows = p  # the largest call so far: the buffers only grow
             b = torch.empty(rows, k + 1, n)
             b[:, k].fill_(1.0)
             self._kept = (torch.empty(rows, h, k + 1), b, torch.empty(min(rows, SUB_CHUNK), h, n),

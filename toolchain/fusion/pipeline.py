@@ -33,7 +33,7 @@ class Sources:
 
 
 def source_device(device: str, rng: str) -> str:
-    """Where the source models train: on the search's GPU (each step one replayed CUDA graph, 5-12x
+    """Where the source models train: on the search's GPU (each step one replayed CUDA graph, 4-10x
     a CPU thread's speed), except with rng='host', whose point is to follow the CPU reference run:
     its sources must then be the CPU's, bit for bit."""
     return device if device != "cpu" and rng == "device" else "cpu"

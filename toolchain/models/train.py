@@ -114,7 +114,7 @@ class _CapturedSteps:
     """Training steps on a CUDA device, each one replay of a CUDA graph.
 
     Why: a step of these small models is some hundred tiny kernels; launched one by one from
-    Python the GPU is slower than one CPU thread, captured and replayed it is 5-12x faster
+    Python the GPU is slower than one CPU thread, captured and replayed it is 4-10x faster
     (scripts/gpu_training_probe.py, docs/scaling.md). The graph holds forward, loss, backward and
     Adam's update (capturable=True: its step count lives on the GPU) for a fixed batch size, with
     the batch's row indices as its one input; an epoch's shorter last batch gets a graph of its own.

@@ -958,8 +958,7 @@ static uint32_t centre_pass(int32_t *h, unsigned n, unsigned h_bits, unsigned k1
  * cleared before the loop and read once after it. The flag only says that some SSAT of the pass acted, so
  * when it is set (never in normal operation) the units are counted again one by one, the portable way,
  * and the count is the portable count. Frama-C analyses the portable loop (__FRAMAC__ turns this off). */
-#if SLIPEST_HAS_SMMULR && SLIPEST_HAS_SSAT && defined(__ARM_FEATURE_QBIT) && defined(__thumb2__) && \
-    defined(__ARMEL__)
+#if SLIPEST_T2_ASM && SLIPEST_HAS_SMMULR && SLIPEST_HAS_SSAT && defined(__ARM_FEATURE_QBIT)
 #define SLIPEST_HIDDEN_ASM 1
 #else
 #define SLIPEST_HIDDEN_ASM 0

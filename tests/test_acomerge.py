@@ -12,8 +12,10 @@ from torch.nn import functional as F
 
 from fleetlab.fusion.acomerge import (
     AcoMergeConfig,
+    Ants,
     acomerge,
     construct_ants,
+    construct_departures,
     evaluate_ants,
     mmas_bounds,
     search,
@@ -209,10 +211,18 @@ def test_greedy_ants_share_one_evaluation():
     assert explorer.any() and not explorer.all()
     distinct_explorers = len({tuple(p.tolist()) for p in paths[explorer]})
     # one batch: the (distinct) explorers and one greedy representative
-    assert _evaluation_sizes(paths, explorer, cand) == [distinct_explorers + 1]
+    assert _evaluation_sizes(paths, explorer, cand, tau.argmax(dim=1)) == [distinct_explorers + 1]
 
 
-def _evaluation_sizes(paths: torch.Tensor, explorer: torch.Tensor, cand: torch.Tensor) -> list[int]:
+def _ants_of_paths(paths: torch.Tensor, greedy: torch.Tensor) -> Ants:
+    """Dense paths (P, T) as departures from `greedy` (T,), in (index, ant) order."""
+    p, g = paths.numpy().astype(np.int64), greedy.numpy().astype(np.int64)
+    ant, t = np.nonzero(p != g)
+    order = np.lexsort((ant, t))
+    return Ants(g, t[order], ant[order], p[ant[order], t[order]], p.shape[0])
+
+
+def _evaluation_sizes(paths: torch.Tensor, explorer: torch.Tensor, cand: torch.Tensor, greedy: torch.Tensor) -> list[int]:
     """evaluate_ants with a toy fitness: checks every ant's J, returns the sizes of the fitness calls."""
     calls = []
 
@@ -220,7 +230,9 @@ def _evaluation_sizes(paths: torch.Tensor, explorer: torch.Tensor, cand: torch.T
         calls.append(flats.shape[0])
         return flats.sum(dim=1) ** 2
 
-    j = evaluate_ants(paths, explorer, cand, fitness)
+    ants = _ants_of_paths(paths, greedy)
+    assert np.array_equal(ants.explorer(), explorer.numpy()) and torch.equal(ants.dense(), paths.to(torch.int32))
+    j = evaluate_ants(ants, cand, fitness)
     torch.testing.assert_close(j, cand.gather(0, paths).sum(dim=1) ** 2)
     return calls
 
@@ -235,7 +247,34 @@ def test_ants_with_the_same_path_share_one_evaluation():
     paths[6, 2], paths[6, 7] = 3, 5  # one with both departures
     explorer = torch.zeros(12, dtype=torch.bool)
     explorer[1:7] = True
-    assert _evaluation_sizes(paths, explorer, cand) == [4]  # three distinct explorer paths and the greedy one
+    greedy = torch.zeros(10, dtype=torch.long)
+    assert _evaluation_sizes(paths, explorer, cand, greedy) == [4]  # three distinct explorer paths and the greedy one
+
+
+def test_a_collision_of_keys_costs_only_the_sharing(monkeypatch):
+    """Ants whose keys are equal but whose departures differ are each evaluated on their own, with
+    their own J: here every cell has the same key, so all one-departure ants collide."""
+    import fleetlab.fusion.acomerge as aco
+
+    gen = torch.Generator().manual_seed(4)
+    cand = torch.randn(6, 10, generator=gen)
+    paths = torch.zeros(5, 10, dtype=torch.int32)
+    paths[1, 2], paths[2, 7], paths[3, 2] = 3, 5, 3  # ants 1 and 3 build one model, ant 2 another
+    explorer = torch.tensor([False, True, True, True, False])
+    greedy = torch.zeros(10, dtype=torch.long)
+    assert _evaluation_sizes(paths, explorer, cand, greedy) == [3]
+    monkeypatch.setitem(aco._CELL_KEYS, 60, np.ones(60))
+    assert _evaluation_sizes(paths, explorer, cand, greedy) == [4]
+
+
+def test_an_ants_path_is_its_row_of_the_dense_paths():
+    tau = torch.rand(30, 7, generator=torch.Generator().manual_seed(8)) + 0.5
+    ants = construct_departures(tau, None, 0.6, 25, torch.Generator().manual_seed(9))
+    dense = ants.dense()
+    assert ants.t.size and np.all(np.diff(ants.t * 25 + ants.ant) > 0)  # (index, ant) order
+    for a in range(25):
+        assert torch.equal(ants.path(a), dense[a].long())
+    assert np.array_equal(ants.explorer(), (dense != tau.argmax(dim=1)).any(dim=1).numpy())
 
 
 def test_fitness_of_a_model_does_not_depend_on_its_batch(cal):

@@ -182,14 +182,59 @@ def mmas_bounds(best_j: float, deposit: float, n_choices: int, n_decisions: int,
     return tau_max * (1.0 - p_dec) / ((n_choices - 1) * p_dec), tau_max
 
 
+@dataclass(frozen=True)
+class Ants:
+    """One generation's ants as the greedy path and the places they leave it.
+
+    Ant a follows `greedy` (T,) except at index t[d] for every departure d with ant[d] == a, where it
+    takes candidate pick[d]. The departures are in (index, ant) order. Late in a search an ant leaves
+    the greedy path at a few of the T indices, so this is a few hundred numbers where the dense paths
+    (P, T) are 163,000: building, comparing and gathering the ants' models from it costs a fraction
+    (issue 30; `dense` gives the (P, T) paths where a caller wants them).
+    """
+
+    greedy: np.ndarray  # (T,) int64, argmax τ of every index
+    t: np.ndarray  # (D,) int64 index of each departure
+    ant: np.ndarray  # (D,) int64 ant of each departure
+    pick: np.ndarray  # (D,) int64 candidate taken there
+    n_ants: int
+
+    def explorer(self) -> np.ndarray:
+        """(P,) bool: which ants left the greedy path somewhere."""
+        ex = np.zeros(self.n_ants, dtype=bool)
+        ex[self.ant] = True
+        return ex
+
+    def path(self, a: int) -> torch.Tensor:
+        """Ant a's path (T,), int64."""
+        path = self.greedy.copy()
+        mine = self.ant == a
+        path[self.t[mine]] = self.pick[mine]
+        return torch.from_numpy(path)
+
+    def dense(self) -> torch.Tensor:
+        """Every ant's path (P, T), int32."""
+        n_idx = self.greedy.size
+        paths = np.broadcast_to(self.greedy.astype(np.int32), (self.n_ants, n_idx)).copy()
+        paths.reshape(-1)[self.ant * n_idx + self.t] = self.pick
+        return torch.from_numpy(paths)
+
+
 def construct_ants(
     tau: torch.Tensor, eta: torch.Tensor | None, q0: float, n_ants: int, gen: torch.Generator,
     alpha: float = 1.0, beta: float = 1.0,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Pseudo-random-proportional paths of `n_ants` ants over a (T, M) pheromone.
+    """`construct_departures` as dense paths (n_ants, T), int32 candidate indices, and which ants
+    left the greedy path somewhere (n_ants,), bool."""
+    ants = construct_departures(tau, eta, q0, n_ants, gen, alpha, beta)
+    return ants.dense(), torch.from_numpy(ants.explorer())
 
-    Returns the paths (n_ants, T), int32 candidate indices, and which ants left the greedy
-    path somewhere (n_ants,), bool.
+
+def construct_departures(
+    tau: torch.Tensor, eta: torch.Tensor | None, q0: float, n_ants: int, gen: torch.Generator,
+    alpha: float = 1.0, beta: float = 1.0,
+) -> Ants:
+    """Pseudo-random-proportional paths of `n_ants` ants over a (T, M) pheromone, as `Ants`.
 
     The rule "draw ρ ~ U(0, 1); ρ ≤ q0: argmax τ (ties: lowest index); else roulette on
     w = τ^α·η^β" leaves the greedy candidate g of index t with probability
@@ -216,20 +261,18 @@ def construct_ants(
     u = torch.rand(n_idx, n_ants, generator=gen)
     # The departures' flat positions in (index, ant) order: numpy's flatnonzero finds them in a
     # third of the time of torch's nonzero (an early generation has ~80,000 of 163,000 decisions),
-    # and one flat position serves as the index into u and into paths without 2-D gathers.
+    # and one flat position serves as the index into u without 2-D gathers.
     # (numpy's comparison too: a third of torch's time for the broadcast (T, 1) against (T, P))
-    where = torch.from_numpy(np.flatnonzero(np.less(u.numpy(), leave.numpy())))
-    paths = greedy.to(torch.int32).expand(n_ants, n_idx).clone()  # int32: half the memory traffic of int64
-    explorer = torch.zeros(n_ants, dtype=torch.bool)
-    if where.numel():
-        t, ant = where.div(n_ants, rounding_mode="floor"), where.remainder(n_ants)
+    where = np.flatnonzero(np.less(u.numpy(), leave.numpy()))
+    t, ant = np.divmod(where, n_ants)
+    pick = np.empty(0, dtype=np.int64)
+    if where.size:
         # one sorted sequence for all rows (row t spans [2t, 2t + 1]): one search serves every departure
         flat = cdf.add_(2.0 * rows.unsqueeze(1)).reshape(-1)
-        v = u.view(-1)[where].to(torch.float64) / leave.view(-1)[t]
-        pick = (torch.searchsorted(flat, 2.0 * t + v, right=True) - t * m).clamp_(max=m - 1)
-        paths.view(-1)[ant * n_idx + t] = pick.to(torch.int32)
-        explorer[ant] = True
-    return paths, explorer
+        t_pt = torch.from_numpy(t)
+        v = u.view(-1)[torch.from_numpy(where)].to(torch.float64) / leave.view(-1)[t_pt]
+        pick = (torch.searchsorted(flat, 2.0 * t_pt + v, right=True) - t_pt * m).clamp_(max=m - 1).numpy()
+    return Ants(greedy.numpy(), t, ant, pick, n_ants)
 
 
 def whale_update(
@@ -328,59 +371,77 @@ def _evaluate(fitness: Callable[[torch.Tensor], torch.Tensor], flats: torch.Tens
 
 
 def evaluate_ants(
-    paths: torch.Tensor, explorer: torch.Tensor, cand: torch.Tensor, fitness: Callable[[torch.Tensor], torch.Tensor],
+    ants: Ants, cand: torch.Tensor, fitness: Callable[[torch.Tensor], torch.Tensor],
 ) -> torch.Tensor:
-    """Fitness (P,) of the ants' `paths` (P, T), their models drawn from `cand` (M, T), in one batch.
+    """Fitness (P,) of the ants, their models drawn from `cand` (M, T), in one batch.
 
-    Each distinct path is evaluated once. As q0 grows, more and more ants take the greedy
-    candidate (argmax τ) at every index, i.e. rebuild one and the same model: those (`~explorer`)
-    share one evaluation. Later in a search most explorers leave the greedy path at one to three
-    indices, and about one in eight builds the same model as another ant of its generation (often
-    where the pheromone of an index is split between two candidates): those share one too. The
-    fitness gives a model the same J in any batch (`CalibrationFitness`), so sharing changes no number.
-    The bookkeeping is numpy's (its calls cost a few microseconds where torch's cost ten, and its
-    `take` gathers the models in two thirds of the time of torch's gather with int32 indices).
+    Each distinct model is evaluated once. As q0 grows, more and more ants take the greedy
+    candidate (argmax τ) at every index, i.e. rebuild one and the same model: those (the
+    non-explorers) share one evaluation. Later in a search most explorers leave the greedy path at
+    one to three indices, and about one in eight builds the same model as another ant of its
+    generation (often where the pheromone of an index is split between two candidates): those
+    share one too. The fitness gives a model the same J in any batch (`CalibrationFitness`), so
+    sharing changes no number. The call holds the distinct explorers in ant order, then the greedy
+    model if some ant kept to it. The bookkeeping is numpy's on the departures alone (its calls cost
+    a few microseconds where torch's cost ten).
     """
-    ex = explorer.numpy()
-    n_explorers = int(ex.sum())
-    rows = np.concatenate([np.flatnonzero(ex), np.flatnonzero(~ex)[:1]])  # + one greedy ant, if any
-    picked = paths.numpy()[rows]
-    first, twin = distinct_rows(picked)
     m, n_t = cand.shape
-    # model i's value of parameter t is cand[path[t], t], i.e. element t·M + path[t] of candᵀ
-    index = picked[first] + np.arange(n_t, dtype=picked.dtype) * m
-    flats = torch.from_numpy(np.take(cand.T.contiguous().numpy().reshape(-1), index))
-    j_picked = _evaluate(fitness, flats)[torch.from_numpy(twin)]
-    j = torch.empty(paths.shape[0])
-    j[explorer] = j_picked[:n_explorers]
-    j[~explorer] = j_picked[n_explorers:]  # empty, or the greedy model's J for all of them
-    return j
+    cells = cand.T.contiguous().numpy().reshape(-1)  # model value of parameter t at candidate j: cells[t·M + j]
+    cell = ants.t * m + ants.pick
+    explorers = np.flatnonzero(ants.explorer())
+    owner = same_departures(ants, cell, m * n_t, explorers)  # (P,) the first ant with the same model
+    firsts = explorers[owner[explorers] == explorers]
+    row_of = np.full(ants.n_ants, firsts.size, dtype=np.int64)  # the greedy model's row follows the explorers'
+    row_of[firsts] = np.arange(firsts.size)
+    n_rows = firsts.size + int(explorers.size < ants.n_ants)
+    flats = np.broadcast_to(cells[np.arange(n_t) * m + ants.greedy], (n_rows, n_t)).copy()
+    mine = row_of[ants.ant] < firsts.size  # the departures of the ants evaluated
+    flats[row_of[ants.ant[mine]], ants.t[mine]] = cells[cell[mine]]
+    j_rows = _evaluate(fitness, torch.from_numpy(flats))
+    return j_rows[torch.from_numpy(row_of[owner])]
 
 
-_ROW_KEYS: dict[int, np.ndarray] = {}
+_CELL_KEYS: dict[int, np.ndarray] = {}
 
 
-def distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(first, twin) for integer rows (P, T): `first` the indices of the distinct rows (each one's first
-    occurrence, in order), `twin` (P,) the position in `first` of every row's equal.
+def same_departures(ants: Ants, cell: np.ndarray, n_cells: int, explorers: np.ndarray) -> np.ndarray:
+    """(P,) for every ant the first ant (in ant order) that left the greedy path at the same indices
+    for the same candidates, i.e. built the same model; each non-explorer is its own. `cell` is
+    each departure's t·M + pick, one of `n_cells` = T·M.
 
-    A row's key is its dot product with fixed random weights (one small GEMV); rows with equal keys
+    An ant's key is the sum of fixed random weights of its departures' (index, candidate) cells,
+    added in index order (so equal departures give equal sums, bit for bit). Ants with equal keys
     are then compared whole, so a collision of keys (never seen) only costs the sharing, never a
     wrong J.
     """
-    n, t = rows.shape
-    order = np.arange(n)
-    if n > 1:
-        if t not in _ROW_KEYS:
-            _ROW_KEYS[t] = np.random.default_rng(t).random(t)
-        _, first, inverse = np.unique(rows @ _ROW_KEYS[t], return_index=True, return_inverse=True)
-        if first.size < n:
-            owner = first[inverse]  # the first row with the same key
-            shared = np.flatnonzero(owner != order)
-            if np.array_equal(rows[shared], rows[owner[shared]]):  # else a collision of keys: every row on its own
-                first.sort()
-                return first, np.searchsorted(first, owner)
-    return order, order
+    owner = np.arange(ants.n_ants)
+    if explorers.size < 2:
+        return owner
+    keys = _CELL_KEYS.get(n_cells)
+    if keys is None:
+        keys = _CELL_KEYS[n_cells] = np.random.default_rng(n_cells).random(n_cells)
+    key = np.bincount(ants.ant, weights=keys[cell], minlength=ants.n_ants)[explorers]
+    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    if first.size == explorers.size:
+        return owner
+    mapped = explorers[first[inverse]]  # the first explorer with the same key
+    shared = np.flatnonzero(mapped != explorers)
+    involved = np.unique(np.concatenate([explorers[shared], mapped[shared]]))
+    rows = _rows(ants, involved)
+    if not np.array_equal(rows[np.searchsorted(involved, explorers[shared])], rows[np.searchsorted(involved, mapped[shared])]):
+        return owner  # a collision of keys: every ant on its own
+    owner[explorers] = mapped
+    return owner
+
+
+def _rows(ants: Ants, which: np.ndarray) -> np.ndarray:
+    """Dense paths (len(which), T) of the ants `which` (distinct, ascending)."""
+    row_of = np.full(ants.n_ants, -1, dtype=np.int64)
+    row_of[which] = np.arange(which.size)
+    rows = np.broadcast_to(ants.greedy, (which.size, ants.greedy.size)).copy()
+    mine = row_of[ants.ant] >= 0
+    rows[row_of[ants.ant[mine]], ants.t[mine]] = ants.pick[mine]
+    return rows
 
 
 def _schedule(c: int, n: int) -> tuple[float, float]:
@@ -502,17 +563,18 @@ def _run_mmas(
     bar = tqdm(range(cfg.generations), desc="AcoMerge", disable=not progress, leave=False)
     for g in bar:
         q0 = cfg.q0_start + (cfg.q0_end - cfg.q0_start) * (g / max(1, cfg.generations - 1))
-        paths, explorer = construct_ants(tau, eta, q0, cfg.n_ants, gen, cfg.alpha, cfg.beta)  # (P, T), (P,)
-        j = evaluate_ants(paths, explorer, cand, fitness)
+        ants = construct_departures(tau, eta, q0, cfg.n_ants, gen, cfg.alpha, cfg.beta)
+        j = evaluate_ants(ants, cand, fitness)
         result.evaluations += cfg.n_ants
         ib = int(torch.argmin(j))
-        if _keep_if_better(result, j, lambda i: cand.gather(0, paths[i : i + 1]).squeeze(0), g):
-            best_path = paths[ib].clone()
+        ib_path = ants.path(ib)
+        if _keep_if_better(result, j, lambda i: cand.gather(0, ants.path(i).unsqueeze(0)).squeeze(0), g):
+            best_path = ib_path
             eta = _heuristic(cfg, cand_t, result.best_flat)
         # The global-best deposit reinforces the best path's nodes (after an IWOA update those
         # nodes hold moved values; the pheromone belongs to the node, as in the paper's graph).
         use_gb = cfg.gb_every > 0 and (g + 1) % cfg.gb_every == 0 and best_path is not None
-        path, j_dep = (best_path, result.best_fitness) if use_gb else (paths[ib], float(j[ib]))
+        path, j_dep = (best_path, result.best_fitness) if use_gb else (ib_path, float(j[ib]))
         tau.mul_(cfg.evaporation)
         if math.isfinite(j_dep):
             tau[idx_rows, path] += (1.0 - cfg.evaporation) * cfg.deposit / j_dep

@@ -76,7 +76,7 @@ from .acomerge import (
     MAX_THREADS,
     AcoMergeConfig,
     acomerge,
-    construct_ants,
+    construct_departures,
     default_threads,
     evaluate_ants,
     search_threads,
@@ -195,15 +195,15 @@ def measure(args) -> dict:
     buffer = make_buffer(experts, 15, 0.05, args.seed)
     gen = torch.Generator().manual_seed(args.seed)
     tau = torch.rand(buffer.shape[1], buffer.shape[0], generator=gen) + 0.5
-    paths, explorer = construct_ants(tau, None, 0.5, args.ants, gen)  # early-run pheromone: every ant explores
-    ants = buffer.gather(0, paths)
+    departures = construct_departures(tau, None, 0.5, args.ants, gen)  # early-run pheromone: every ant explores
+    ants = buffer.gather(0, departures.dense().long())
     threads = args.threads or default_threads()
     config = AcoMergeConfig(n_ants=args.ants, generations=args.generations, threads=threads)
 
     fitness = CalibrationFitness(args.arch, x, y, chunk=config.chunk)
     with search_threads(threads):
-        eval_ms, eval_cpu = _timed(lambda: evaluate_ants(paths, explorer, buffer, fitness), args.repeats)
-        batched_j = evaluate_ants(paths, explorer, buffer, fitness)
+        eval_ms, eval_cpu = _timed(lambda: evaluate_ants(departures, buffer, fitness), args.repeats)
+        batched_j = evaluate_ants(departures, buffer, fitness)
 
     torch.set_num_threads(1)  # the reference's forward passes are far too small for intra-op threads
     model = build(args.arch)

@@ -313,3 +313,37 @@ def test_bit_exact_under_qemu(snd_bundle, irregular_bundle, tmp_path, arch, name
         assert f"{what}: 0 soft-float helper symbols (expected absent)" in out
 
 
+
+
+def test_m4_built_for_firmware_that_traps_unaligned_access(irregular_bundle, tmp_path):
+    """-DSLIPEST_TRAP_UNALIGNED=ON (firmware that sets SCB->CCR.UNALIGN_TRP): the test images set the trap at
+    reset, and every image runs with it, the estimator bit-exact on every vector; the hidden loop is the
+    portable one (the written-out loop's SMLSD is absent). The control: the same build with the kernel
+    compiled for unaligned access again (-munaligned-access after the option's -mno-unaligned-access) takes
+    the written-out loop, whose GELU word read is unaligned, and QEMU raises the UsageFault, so the trap is
+    real and the first build's pass means something."""
+    import shutil
+
+    from fleetlab.host_tools.firmware import build, targets
+
+    t = targets.get("cortex-m4")
+    missing = [tool for tool in t.tools if shutil.which(tool) is None]
+    if missing:
+        pytest.skip(f"{', '.join(missing)} not installed: run scripts/setup.sh (scripts/apt-packages.txt)")
+
+    def smlsd_count(build_dir: Path) -> int:
+        dis = subprocess.run(["arm-none-eabi-objdump", "-d", str(build_dir / "libslipest_q.a")],
+                             capture_output=True, text=True, check=True).stdout
+        return len(re.findall(r"\tsmlsd\t", dis))
+
+    trap = build.cmake_build(tmp_path / "trap", irregular_bundle, target=t, options={"SLIPEST_TRAP_UNALIGNED": "ON"})
+    out = build.ctest(trap)
+    assert "100% tests passed" in out
+    assert len(re.findall(r"vectors=\d+ q_fail=0 f32_fail=0 extractor_fail=0 model=\w+ PASS", out)) == 2, out[-3000:]
+    assert smlsd_count(trap) == 0
+
+    control = build.cmake_build(tmp_path / "control", irregular_bundle, target=t,
+                                options={"SLIPEST_TRAP_UNALIGNED": "ON", "SLIPEST_TARGET_KERNEL_OPT": "-munaligned-access"})
+    assert smlsd_count(control) > 0
+    proc = subprocess.run(build.ctest_command(control, "^vectors_q_"), capture_output=True, text=True, timeout=300)
+    assert proc.returncode != 0 and "FAULT" in proc.stdout, proc.stdout[-2000:]

@@ -957,8 +957,11 @@ static uint32_t centre_pass(int32_t *h, unsigned n, unsigned h_bits, unsigned k1
  * registers it needs. Its saturations set the Q flag instead of being compared one by one: the flag is
  * cleared before the loop and read once after it. The flag only says that some SSAT of the pass acted, so
  * when it is set (never in normal operation) the units are counted again one by one, the portable way,
- * and the count is the portable count. Frama-C analyses the portable loop (__FRAMAC__ turns this off). */
-#if SLIPEST_T2_ASM && SLIPEST_HAS_SMMULR && SLIPEST_HAS_SSAT && defined(__ARM_FEATURE_QBIT)
+ * and the count is the portable count. Frama-C analyses the portable loop (__FRAMAC__ turns this off). Its
+ * GELU read is an unaligned word: a build with -mno-unaligned-access (firmware that sets CCR.UNALIGN_TRP,
+ * -DSLIPEST_TRAP_UNALIGNED=ON) leaves __ARM_FEATURE_UNALIGNED undefined and takes the portable loop. */
+#if SLIPEST_T2_ASM && SLIPEST_HAS_SMMULR && SLIPEST_HAS_SSAT && defined(__ARM_FEATURE_QBIT) && \
+    defined(__ARM_FEATURE_UNALIGNED)
 #define SLIPEST_HIDDEN_ASM 1
 #else
 #define SLIPEST_HIDDEN_ASM 0

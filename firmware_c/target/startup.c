@@ -20,6 +20,12 @@ void Reset_Handler(void)
     *(volatile uint32_t *)0xE000ED88u |= (0xFu << 20);
     __asm volatile("dsb\n\tisb");
 #endif
+#if defined(SLIPEST_TRAP_UNALIGNED)
+    /* CCR.UNALIGN_TRP: an unaligned LDR/STR faults, as on firmware that sets the trap (the build then has
+     * -mno-unaligned-access, and the kernel its portable hidden loop: firmware_c/cmake/target.cmake) */
+    *(volatile uint32_t *)0xE000ED14u |= (1u << 3);
+    __asm volatile("dsb\n\tisb");
+#endif
     semihost_exit(main());
 }
 

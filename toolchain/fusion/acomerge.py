@@ -14,9 +14,10 @@ Phase 1, MMAS (every generation, `n_ants` ants):
   ρ0 follows a linear schedule from `q0_start` to `q0_end` (exploration first); the
   paper gives no values, 0.5 → 0.95 gave the lowest D_Cal loss in a small sweep
   (0 → 0.9, 0.3 → 0.98, 0.7 → 0.99, constant 0.9), judged on D_Cal only, never on test data.
-  Vectorised (`construct_ants`): one uniform per (index, ant) decides whether the ant
+  Vectorised (`construct_departures`): one uniform per (index, ant) decides whether the ant
   leaves the greedy candidate there, which has probability (1 − ρ0)·(1 − w_greedy/Σw);
-  only those departures are located in the cumulative weights (one `searchsorted`).
+  only those departures are located in the cumulative weights (one `searchsorted`), and a
+  generation is kept as the greedy path plus its departures (`Ants`).
   Same distribution as the two-step rule; once the pheromone has concentrated only a
   few decisions per thousand depart. Ties in the argmax go to the lowest candidate index.
 - Fitness J(θ) = class-weighted cross-entropy on D_Cal (`fitness.py`), lower is

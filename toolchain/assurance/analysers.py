@@ -12,7 +12,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .sources import fw, generate_dbc, include_dirs, library_sources, need, rel, run
+from .sources import concurrently, fw, generate_dbc, include_dirs, library_sources, need, rel, run
 
 STRICT_WARNINGS = ["-Wall", "-Wextra", "-pedantic", "-Wconversion", "-Wsign-conversion", "-Wcast-align",
                    "-Wshadow", "-Wstrict-prototypes"]
@@ -103,26 +103,26 @@ def frama_c_eva(bundle: Path | None = None, entries: list[str] | None = None,
     """Alarms of EVA per driver entry point (fixed-point library: -DSLIPEST_Q_ONLY). src_dir: where the
     library sources are read from (the tests give a modified copy to show that EVA finds a defect)."""
     frama = need("frama-c")
-    results = []
 
-    def go(files, incs, gen):
-        for entry in entries or list(EVA_TARGETS):
-            names, precision = EVA_TARGETS[entry]
-            srcs = [(src_dir or fw() / "src") / name for name in names]
-            t0 = time.perf_counter()
-            res = run([frama, "-no-autoload-plugins", "-load-module", "eva", *(options or EVA_OPTIONS + precision),
-                       f"-cpp-extra-args={' '.join(incs)} -DSLIPEST_Q_ONLY", fw() / "eva" / "eva_driver.c", *srcs,
-                       "-eva", "-main", entry], timeout=3600)
-            text = res.stdout + res.stderr
-            if res.returncode != 0 or f"done for function {entry}" not in text:
-                raise RuntimeError(f"frama-c failed on {entry}:\n{text[-3000:]}")
-            alarms = []
-            # each message starts with "[eva...]"; an alarm is "[eva:alarm] FILE:LINE: Warning:" + indented text
-            for chunk in re.split(r"\n(?=\[)", text):
-                m = re.match(r"\[eva:alarm\] (\S+?):(\d+): Warning: *\n(.*)", chunk, re.S)
-                if m:
-                    alarms.append(f"{Path(m[1]).name}:{m[2]}: {' '.join(m[3].split())}")
-            results.append(EvaResult(entry, alarms, time.perf_counter() - t0, text))
-        return results
+    def one(entry: str, incs: list[str]) -> EvaResult:
+        names, precision = EVA_TARGETS[entry]
+        srcs = [(src_dir or fw() / "src") / name for name in names]
+        t0 = time.perf_counter()
+        res = run([frama, "-no-autoload-plugins", "-load-module", "eva", *(options or EVA_OPTIONS + precision),
+                   f"-cpp-extra-args={' '.join(incs)} -DSLIPEST_Q_ONLY", fw() / "eva" / "eva_driver.c", *srcs,
+                   "-eva", "-main", entry], timeout=3600)
+        text = res.stdout + res.stderr
+        if res.returncode != 0 or f"done for function {entry}" not in text:
+            raise RuntimeError(f"frama-c failed on {entry}:\n{text[-3000:]}")
+        alarms = []
+        # each message starts with "[eva...]"; an alarm is "[eva:alarm] FILE:LINE: Warning:" + indented text
+        for chunk in re.split(r"\n(?=\[)", text):
+            m = re.match(r"\[eva:alarm\] (\S+?):(\d+): Warning: *\n(.*)", chunk, re.S)
+            if m:
+                alarms.append(f"{Path(m[1]).name}:{m[2]}: {' '.join(m[3].split())}")
+        return EvaResult(entry, alarms, time.perf_counter() - t0, text)
+
+    def go(files, incs, gen):  # the entries are separate analyses: they run side by side
+        return concurrently([lambda e=e: one(e, incs) for e in entries or list(EVA_TARGETS)])
 
     return _with_sources(bundle, go)

@@ -18,7 +18,7 @@ from fleetlab.host_tools.firmware.measure import target_costs
 from fleetlab.host_tools.firmware.build import cmake_build
 from . import analysers, coverage, misra, stack, wcet
 from ..paths import build_root, default_bundle, in_clone, repo_root
-from .sources import need, run, tool_version
+from .sources import concurrently, need, run, tool_version
 
 
 def default_fuzz_stats() -> list[Path]:
@@ -65,6 +65,18 @@ def float_free(build_m3: Path, description: str) -> tuple[bool, str]:
     return ok, body
 
 
+def target_evidence(bundle: Path) -> tuple[tuple[bool, str], dict, tuple]:
+    """The cross builds' evidence: the float-free check of the FPU-less ARM target's archive, and on the
+    reference target the measured cost and stack (`target_costs`) and the worst-case instructions (wcet)."""
+    work = build_root() / "assure"
+    soft = soft_float_target()
+    cmake_build(work / soft.name, bundle, target=soft)
+    free = float_free(work / soft.name, soft.description)
+    ref = target_registry.reference()
+    cmake_build(work / ref.name, bundle, target=ref)
+    return free, target_costs(ref.name, work / ref.name), wcet.measure(work / ref.name, bundle)
+
+
 def required_tools(eva: bool, target: bool) -> list[str]:
     """Every host tool a run of assure calls, so that a missing one stops it before the long work (the
     target builds' compilers and emulators are checked beside it)."""
@@ -100,23 +112,33 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
     summary_row("Bundle hashes (manifest.json)", f"manifest sha256 `{manifest_hash[:16]}…`", ok)
     sections.append(_section("Bundle", f"Bundle: `{bundle}`\n\nmanifest.json sha256: `{manifest_hash}`\n\n{rows}"))
 
-    # target builds: float-free archive, measured stack and cost
-    measured = {}
+    # The checks are independent tools in their own folders: they run side by side (a 2-core machine takes
+    # the report in about half the time), the longest first, and the report is written from their results.
+    checks = {"eva": lambda: analysers.frama_c_eva(bundle)} if eva else {}
     if target:
-        work = build_root() / "assure"
+        checks["target"] = lambda: target_evidence(bundle)
+    checks.update({
+        "misra": lambda: misra.check(bundle),
+        **{fn.__name__: (lambda fn=fn: fn(bundle))
+           for fn in (analysers.clang_tidy, analysers.gcc_analyzer, analysers.strict_warnings)},
+        "coverage": lambda: coverage.measure(build_root() / "assure" / "coverage", bundle),
+        "stack_q": lambda: stack.analyse(bundle, q_only=True),
+        "stack_full": lambda: stack.analyse(bundle, q_only=False),
+    })
+    done = dict(zip(checks, concurrently(list(checks.values()))))
+
+    # target builds: float-free archive, measured stack and cost
+    measured, wcet_result = {}, None
+    if target:
+        (ok, body), measured, wcet_result = done["target"]
         soft = soft_float_target()
-        cmake_build(work / soft.name, bundle, target=soft)
-        ok, body = float_free(work / soft.name, soft.description)
         gating_ok &= ok
         summary_row(f"Float-free fixed-point archive ({soft.description})", "0 soft-float symbols" if ok
                     else "soft-float found", ok)
         sections.append(_section("Float-free check", body))
-        ref = target_registry.reference()
-        cmake_build(work / ref.name, bundle, target=ref)
-        measured = target_costs(ref.name, work / ref.name)
 
     # MISRA
-    m = misra.check(bundle)
+    m = done["misra"]
     gating_ok &= not m.unrecorded
     summary_row("MISRA C:2012 (cppcheck addon)", f"{m.total} findings in {len(m.by_rule())} rules, "
                 f"{len(m.unrecorded)} unrecorded", not m.unrecorded)
@@ -131,14 +153,14 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
     rows = ["| Analyser | Findings | Seconds |", "|---|---:|---:|"]
     details = []
     for fn in (analysers.strict_warnings, analysers.gcc_analyzer, analysers.clang_tidy):
-        r = fn(bundle)
+        r = done[fn.__name__]
         gating_ok &= r.clean
         rows.append(f"| {r.name} | {len(r.findings)} | {r.seconds:.1f} |")
         summary_row(r.name, f"{len(r.findings)} findings", r.clean)
         details += [f"- {f}" for f in r.findings]
     eva_text = "Frama-C EVA skipped (--no-eva)."
     if eva:
-        eva = analysers.frama_c_eva(bundle)
+        eva = done["eva"]
         eva_rows = ["| EVA entry (all int16 inputs) | Alarms | Seconds |", "|---|---:|---:|"]
         alarm_rows = [f"- {e.entry}: `{a}`" for e in eva for a in e.alarms]
         for e in eva:
@@ -154,8 +176,8 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
                              + "\n\n### Frama-C EVA\n\n" + eva_text))
 
     # stack
-    rows_q, cycles = stack.analyse(bundle, q_only=True)
-    rows_full, cycles_full = stack.analyse(bundle, q_only=False)
+    rows_q, cycles = done["stack_q"]
+    rows_full, cycles_full = done["stack_full"]
     no_rec = not cycles and not cycles_full
     gating_ok &= no_rec
     summary_row("No recursion (call-graph cycle check)", "acyclic" if no_rec else f"cycles: {cycles + cycles_full}", no_rec)
@@ -177,7 +199,7 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
     body += "\n\n### Full library (with the float path)\n\n" + stack.table(rows_full[:6])
     sections.append(_section("Worst-case stack", body))
     if measured:
-        desc, wc = wcet.measure(build_root() / "assure" / target_registry.reference().name, bundle)
+        desc, wc = wcet_result
         worst_fn = wcet.per_function(wc)
         summary_row(f"Worst-case instructions ({desc}, measured maximum)",
                     ", ".join(f"{fn} {n:.0f}" for fn, n in worst_fn.items()), None)
@@ -191,7 +213,7 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
                                  f"{measured['node_instructions_per_sample']:.0f} instructions per telemetry sample (3 frames)."))
 
     # coverage
-    cov = coverage.measure(build_root() / "assure" / "coverage", bundle)
+    cov = done["coverage"]
     hw = cov.handwritten()
     cov_ok = hw.line_pct >= coverage.GOAL_LINES and hw.branch_pct >= coverage.GOAL_BRANCHES
     summary_row("Coverage by the C tests (src/*.c)", f"{hw.line_pct:.1f} % statements, {hw.branch_pct:.1f} % branches "

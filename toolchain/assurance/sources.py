@@ -1,10 +1,14 @@
 """What the assurance tools look at: the library's C files found by glob, the generated
-CAN codec, include paths, and a helper that runs a tool and keeps its output."""
+CAN codec, include paths, and helpers that run tools (one, keeping its output; several at once)."""
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import TypeVar
 
 from fleetlab.host_tools.firmware.build import Result, execute
 
@@ -13,6 +17,7 @@ from .. import system_tools
 
 # sources that use float on purpose (the f32 reference path); the fixed-point library omits them
 FLOAT_SOURCES = ("slipest_features_f32.c", "slipest_infer_f32.c")
+T = TypeVar("T")
 
 
 def fw() -> Path:
@@ -58,6 +63,18 @@ def run(cmd: list[str], *, check: bool = False, cwd: Path | None = None, timeout
     if check and res.returncode != 0:
         raise RuntimeError(f"{Path(cmd[0]).name} exited {res.returncode}:\n{res.stdout[-3000:]}\n{res.stderr[-3000:]}")
     return res
+
+
+def concurrently(calls: Sequence[Callable[[], T]]) -> list[T]:
+    """The results of `calls`, in their order, run on as many threads as this process has cores. Each call
+    spends its time waiting for a tool's subprocess (the GIL is free meanwhile), so one report's checks or
+    EVA's entries overlap; an exception is raised after every call has ended."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    if min(cores, len(calls)) <= 1:
+        return [call() for call in calls]
+    with ThreadPoolExecutor(min(cores, len(calls))) as pool:
+        futures = [pool.submit(call) for call in calls]
+        return [f.result() for f in futures]
 
 
 def rel(path: str | Path, gen_dir: Path | None = None) -> str:

@@ -91,7 +91,7 @@ class StackGraph:
         for node in order:
             unknown = set() if node in self.frame else {node}
             best, chain = 0, []
-            for c in self.calls.get(node, ()):
+            for c in sorted(self.calls.get(node, ())):  # of equal callees the first by name: the same report every run
                 b, ch, u = memo[c]
                 unknown |= u
                 if b > best:

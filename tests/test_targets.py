@@ -249,3 +249,21 @@ def test_a_missing_emulator_fails_the_target_tests_in_ci(tmp_path, required):
         assert res.returncode == 1 and "1 failed" in out and "FLEETLAB_REQUIRE_TOOLS is set" in out, out[-3000:]
     else:
         assert res.returncode == 0 and "1 skipped" in out, out[-3000:]
+
+
+def test_only_a_core_that_can_trap_unaligned_access_builds_for_the_trap(tmp_path):
+    """SLIPEST_TARGET_UNALIGNED_TRAP in a target file is the one record of which cores have CCR.UNALIGN_TRP: the
+    ARMv7-M ones. CMake refuses -DSLIPEST_TRAP_UNALIGNED=ON for another target, and so does `bench c` (one
+    line, before any build); tests/test_export_arch.py runs the M4 built for the trap."""
+    found = targets.discover()
+    assert {n for n, t in found.items() if t.unaligned_trap} == {"cortex-m3", "cortex-m4", "cortex-m7"}
+    cmd = build.configure_command(tmp_path / "b", BUNDLE, target=targets.get("riscv32"),
+                                  options={"SLIPEST_TRAP_UNALIGNED": "ON", "SLIPEST_ALLOW_NO_EMULATOR": "ON"})
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    msg = " ".join(res.stderr.split())
+    assert res.returncode != 0 and "target riscv32 has no unaligned-access trap" in msg, msg[-2000:]
+    res = subprocess.run([sys.executable, "-m", "fleetlab.cli", "bench", "c", "--trap-unaligned", "--target", "powerpc",
+                          "--build-dir", str(tmp_path / "bench")], capture_output=True, text=True, timeout=300)
+    assert res.returncode != 0 and not (tmp_path / "bench").exists()
+    assert res.stderr.strip().splitlines()[-1].endswith(
+        "--trap-unaligned: powerpc cannot trap unaligned access (targets that can: cortex-m3, cortex-m4, cortex-m7)")

@@ -13,6 +13,7 @@ set(SLIPEST_TARGET_REFERENCE ON)  # the target whose figures bench c, the demo a
 set(SLIPEST_TARGET_REPORT semihosting)
 set(SLIPEST_TARGET_VECTORS semihosting)
 set(SLIPEST_TARGET_COUNTER systick)
+set(SLIPEST_TARGET_UNALIGNED_TRAP ON)  # ARMv7-M: CCR.UNALIGN_TRP exists; -DSLIPEST_TRAP_UNALIGNED=ON builds for firmware that sets it
 set(SLIPEST_TARGET_STARTUP startup.c)
 set(SLIPEST_TARGET_LINKER_SCRIPT mps2.ld)
 set(SLIPEST_CPU_FLAGS "-mcpu=cortex-m4 -mthumb -mfloat-abi=hard -mfpu=fpv4-sp-d16")

@@ -17,8 +17,9 @@ set(CMAKE_C_FLAGS_RELEASE "${SLIPEST_TARGET_OPT}")
 # images set the trap at reset, so the QEMU runs show that nothing the estimator executes reads unaligned.
 option(SLIPEST_TRAP_UNALIGNED "ARMv7-M: build for firmware that traps unaligned accesses (-mno-unaligned-access)" OFF)
 if(SLIPEST_TRAP_UNALIGNED)
-  if(NOT SLIPEST_CPU_FLAGS MATCHES "cortex-m[347]")
-    message(FATAL_ERROR "SLIPEST_TRAP_UNALIGNED is for the ARMv7-M targets (cortex-m3, -m4, -m7), not ${SLIPEST_TARGET_NAME}")
+  if(NOT SLIPEST_TARGET_UNALIGNED_TRAP)
+    message(FATAL_ERROR "SLIPEST_TRAP_UNALIGNED: target ${SLIPEST_TARGET_NAME} has no unaligned-access trap "
+                        "(its target file does not set SLIPEST_TARGET_UNALIGNED_TRAP: the ARMv7-M ones do)")
   endif()
   add_compile_options(-mno-unaligned-access)
 endif()

@@ -236,9 +236,17 @@ HOT uint32_t eps_scaled(int16_t eps_m, int8_t eps_e, int32_t eps_cap, unsigned k
 #if SLIPEST_DUAL_MAC
 HOT uint32_t pair16(const int16_t *p) /* two adjacent int16 as one word (little-endian) */
 {
+#if defined(__ARM_FEATURE_UNALIGNED)
     uint32_t w;
-    memcpy(&w, p, sizeof w);
+    memcpy(&w, p, sizeof w); /* one LDR, whatever the pair's alignment */
     return w;
+#else
+    /* Built without unaligned access (-DSLIPEST_TRAP_UNALIGNED=ON): a pair of a 2-aligned array may straddle
+     * a word, and GCC would copy it with a call to memcpy; two halfword loads cost two instructions more. */
+    const uint32_t lo = (uint32_t)(uint16_t)p[0];
+    const uint32_t hi = (uint32_t)(uint16_t)p[1];
+    return lo | (hi << 16u);
+#endif
 }
 
 /* b + sum_j w[j] x[j] over the 12 features, two products per SMLAD. */

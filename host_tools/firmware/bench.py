@@ -61,6 +61,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="a second bundle of another architecture (e.g. an SN-D export): its instructions per "
                         "inference, flash and stack on the same targets, and host C against onnxruntime, beside "
                         "the main bundle's (keys compare_*, a second table)")
+    parser.add_argument("--trap-unaligned", action="store_true",
+                        help="build the targets for firmware that traps unaligned access (-DSLIPEST_TRAP_UNALIGNED=ON: "
+                        "no unaligned loads, the portable hidden loop; ARMv7-M targets only): what that costs")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
 
 
@@ -91,6 +94,11 @@ def run(args: argparse.Namespace) -> int:
     bundle = Path(args.bundle or default_bundle())
     if not (bundle / "vectors.bin").is_file():
         raise FileNotFoundError(f"{bundle}: no vectors.bin (not an export bundle?)")
+    if args.trap_unaligned and (no_trap := [n for n in names if not found[n].unaligned_trap]):
+        raise ValueError(f"--trap-unaligned: {', '.join(no_trap)} cannot trap unaligned access "
+                         f"(targets that can: {', '.join(n for n, t in found.items() if t.unaligned_trap)})")
+    # always named, so a reused build folder never keeps the other choice from its cache
+    options = {"SLIPEST_TRAP_UNALIGNED": "ON" if args.trap_unaligned else "OFF"}
     args.build_dir = Path(args.build_dir or build_root() / "bench")
     need("cmake", "fleetlab bench c")
     for name in names:
@@ -100,11 +108,13 @@ def run(args: argparse.Namespace) -> int:
         raise FileNotFoundError(f"{compare}: no vectors.bin (not an export bundle?)")
     steps = tqdm(total=(2 + 2 * len(names)) * (2 if compare else 1), desc="bench c",
                  disable=args.json or not sys.stderr.isatty())
-    builds, t, ref_cost, rows = _measure(bundle, args.build_dir, names, found, ref, args.iterations, steps)
+    builds, t, ref_cost, rows = _measure(bundle, args.build_dir, names, found, ref, args.iterations, steps, options)
     result = bench_figures(ref, builds[ref.name], ref_cost, t, rows, bundle)
     result["arch"] = _arch_of(bundle)
+    result["trap_unaligned"] = args.trap_unaligned
     if compare is not None:
-        _, c_t, _, c_rows = _measure(compare, args.build_dir / "compare", names, found, None, args.iterations, steps)
+        _, c_t, _, c_rows = _measure(compare, args.build_dir / "compare", names, found, None, args.iterations, steps,
+                                     options)
         result["compare"] = {"bundle": str(compare), "arch": _arch_of(compare), "host_ns_per_inference_q": c_t["q"],
                              "host_ns_per_inference_f32": c_t["f32"], "onnxruntime_ns_per_inference": c_t["onnxruntime"],
                              "speedup_vs_onnxruntime": c_t["onnxruntime"] / c_t["q"], "cpu_targets": c_rows}
@@ -120,14 +130,14 @@ def _arch_of(bundle: Path) -> str:
     return json.loads((Path(bundle) / "manifest.json").read_text()).get("arch", "?")
 
 
-def _measure(bundle: Path, build_dir: Path, names: list[str], found: dict, ref, iterations: int, steps):
+def _measure(bundle: Path, build_dir: Path, names: list[str], found: dict, ref, iterations: int, steps, options: dict):
     """Build one bundle for the host and every target; host timings, the reference target's costs (measured
     once, shared by its row and the figures; None when no reference figures are wanted) and one row per target."""
     host = cmake_build(build_dir / "host", bundle)
     steps.update()
     builds = {}
     for name in names:
-        builds[name] = cmake_build(build_dir / name, bundle, target=found[name])
+        builds[name] = cmake_build(build_dir / name, bundle, target=found[name], options=options)
         steps.update()
     t = host_timings(host, bundle, iterations)
     steps.update()

@@ -51,6 +51,7 @@ class Target:
     counter: str  # instruction counter of the cost image: "systick" | "instret" | "trace" | "none"
     reference: bool = False  # the target whose figures are quoted first (bench c's <key>_* figures, the demo)
     cpu_flags: tuple[str, ...] = ()  # SLIPEST_CPU_FLAGS: the compiler's CPU/FPU/ABI options (stack analysis reuses them)
+    unaligned_trap: bool = False  # the core can trap unaligned access (ARMv7-M): -DSLIPEST_TRAP_UNALIGNED=ON builds for it
 
     @property
     def toolchain_file(self) -> Path:
@@ -94,7 +95,7 @@ class Target:
                 "compiler": self.compiler, "reference": self.reference, "endian": self.endian,
                 "fpu": self.fpu, "integer_only": self.integer_only, "qemu": self.qemu, "qemu_mode": self.qemu_mode,
                 "qemu_machine": self.qemu_machine, "qemu_cpu": self.qemu_cpu, "report": self.report,
-                "vectors": self.vectors, "counter": self.counter}
+                "vectors": self.vectors, "counter": self.counter, "unaligned_trap": self.unaligned_trap}
 
 
 _CPU_FLAGS = re.compile(r'^set\(SLIPEST_CPU_FLAGS\s+"([^"]*)"\)', re.M)
@@ -117,7 +118,7 @@ def parse_target_file(path: Path) -> Target | None:
                   compiler=fields["COMPILER"], reference=_on(fields.get("REFERENCE", "OFF")), endian=fields["ENDIAN"], fpu=_on(fields["FPU"]), integer_only=_on(fields["INTEGER_ONLY"]),
                   qemu=fields["QEMU"], qemu_mode=fields["QEMU_MODE"], qemu_machine=fields.get("QEMU_MACHINE", "none"),
                   qemu_cpu=fields.get("QEMU_CPU", ""), report=fields["REPORT"], vectors=fields["VECTORS"],
-                  counter=fields["COUNTER"], cpu_flags=tuple(shlex.split(m.group(1)) if (m := _CPU_FLAGS.search(
+                  counter=fields["COUNTER"], unaligned_trap=_on(fields.get("UNALIGNED_TRAP", "OFF")), cpu_flags=tuple(shlex.split(m.group(1)) if (m := _CPU_FLAGS.search(
                       Path(path).read_text())) else ()))
 
 

@@ -127,12 +127,32 @@ def test_static_analyser_is_clean(tool):
     assert res.clean, f"{res.name}:\n" + "\n".join(res.findings)
 
 
-def test_frama_c_eva_over_all_int16_inputs():
+@pytest.fixture(scope="module")
+def eva(tmp_path_factory):
+    """The EVA analyses of this file, side by side (each is one single-threaded Frama-C process, the
+    extractor's about 40 s): the library as it is, and the two controls with a planted defect."""
+    from fleetlab.assurance import analysers
+    from fleetlab.assurance.sources import concurrently
+
+    # without the saturation that states |e| < 2^14 (a bound that holds only through e's relation to max|d|)
+    kernel = planted_src(tmp_path_factory.mktemp("kernel"), "slipest_infer_q.c",
+                         "int32_t e = SAT(rsr_h(NH * SAT(h[i], 25) - sum, k2_half, k2), 14);",
+                         "int32_t e = rsr_h(NH * SAT(h[i], 25) - sum, k2_half, k2);")
+    # without the 64-bit widening of S * S in the variance of a closed window
+    features = planted_src(tmp_path_factory.mktemp("features"), "slipest_features.c",
+                           "uint64_t d = (uint64_t)(nn * q - (int64_t)s * s);",
+                           "uint64_t d = (uint64_t)(nn * q - s * s);")
+    clean, (planted_kernel,), (planted_features,) = concurrently([
+        lambda: analysers.frama_c_eva(BUNDLE),
+        lambda: analysers.frama_c_eva(BUNDLE, entries=["eva_infer_q"], src_dir=kernel),
+        lambda: analysers.frama_c_eva(BUNDLE, entries=["eva_features"], src_dir=features)])
+    return {e.entry: e for e in clean}, planted_kernel, planted_features
+
+
+def test_frama_c_eva_over_all_int16_inputs(eva):
     """EVA, a sound value analysis: no alarm on the kernel nor on the feature extraction, for every int16
     input at once."""
-    from fleetlab.assurance import analysers
-
-    res = {e.entry: e for e in analysers.frama_c_eva(BUNDLE)}
+    res = eva[0]
     assert set(res) == {"eva_infer_q", "eva_features"}
     assert res["eva_features"].alarms == [], "\n".join(res["eva_features"].alarms)
     assert window_features_reached(res["eva_features"].log)  # the zero covers the window-closing path
@@ -141,15 +161,10 @@ def test_frama_c_eva_over_all_int16_inputs():
     assert infer.alarms == [], "\n".join(infer.alarms)
 
 
-def test_frama_c_eva_finds_an_overflow(tmp_path):
+def test_frama_c_eva_finds_an_overflow(eva):
     """The kernel's zero is not vacuous: without the saturation that states |e| < 2^14 (a bound that holds
     only through e's relation to max|d|), EVA reports the possible overflow of e * e."""
-    from fleetlab.assurance import analysers
-
-    src = planted_src(tmp_path, "slipest_infer_q.c",
-                      "int32_t e = SAT(rsr_h(NH * SAT(h[i], 25) - sum, k2_half, k2), 14);",
-                      "int32_t e = rsr_h(NH * SAT(h[i], 25) - sum, k2_half, k2);")
-    (res,) = analysers.frama_c_eva(BUNDLE, entries=["eva_infer_q"], src_dir=src)
+    res = eva[1]
     assert any("e * e" in a for a in res.alarms), "\n".join(res.alarms)
 
 
@@ -198,14 +213,10 @@ def window_features_reached(log: str) -> bool:
     return False
 
 
-def test_frama_c_eva_finds_an_overflow_in_the_feature_extractor(tmp_path):
+def test_frama_c_eva_finds_an_overflow_in_the_feature_extractor(eva):
     """Negative control of the extractor's proof: with the 64-bit widening of S * S removed from the variance
     of a closed window, EVA reports the signed overflow (reached only through a closed window)."""
-    from fleetlab.assurance import analysers
-
-    src = planted_src(tmp_path, "slipest_features.c", "uint64_t d = (uint64_t)(nn * q - (int64_t)s * s);",
-                      "uint64_t d = (uint64_t)(nn * q - s * s);")
-    (res,) = analysers.frama_c_eva(BUNDLE, entries=["eva_features"], src_dir=src)
+    res = eva[2]
     assert window_features_reached(res.log)
     assert any("slipest_features.c" in a and "overflow" in a and "s * s" in a for a in res.alarms), \
         "\n".join(res.alarms)

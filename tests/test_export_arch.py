@@ -157,27 +157,34 @@ def caps_bundle(tmp_path_factory):
 CAPS_PRECISION = ["-eva-precision", "3"]
 
 
-def test_frama_c_eva_layer_kernel_at_the_caps(caps_bundle):
-    """EVA at the caps (4 blocks of 256 units): no alarm for every int16 input, although the analysis joins
-    the rows and units of each block (the clamps the proof states where they are used, docs/fixed_point.md)."""
+@pytest.fixture(scope="module")
+def caps_eva(caps_bundle, tmp_path_factory):
+    """EVA at the caps on the kernel as it is and without the clamp of e (LAYER_E_CLAMP), the two Frama-C runs
+    side by side (each one single-threaded process of about 35 s)."""
     need("frama-c")
     from fleetlab.assurance import analysers
+    from fleetlab.assurance.sources import concurrently
 
-    (res,) = analysers.frama_c_eva(caps_bundle, entries=["eva_infer_q"],
-                                   options=analysers.EVA_OPTIONS + CAPS_PRECISION)
+    src = planted_src(tmp_path_factory.mktemp("unclamped"), "slipest_infer_q.c", LAYER_E_CLAMP, LAYER_E_UNCLAMPED)
+    options = analysers.EVA_OPTIONS + CAPS_PRECISION
+    (clean,), (planted,) = concurrently([
+        lambda: analysers.frama_c_eva(caps_bundle, entries=["eva_infer_q"], options=options),
+        lambda: analysers.frama_c_eva(caps_bundle, entries=["eva_infer_q"], src_dir=src, options=options)])
+    return clean, planted
+
+
+def test_frama_c_eva_layer_kernel_at_the_caps(caps_eva):
+    """EVA at the caps (4 blocks of 256 units): no alarm for every int16 input, although the analysis joins
+    the rows and units of each block (the clamps the proof states where they are used, docs/fixed_point.md)."""
+    res = caps_eva[0]
     assert "Frama_C_show_each_class: {0; 1; 2}" in res.log  # the analysis ran through the whole kernel
     assert res.alarms == [], "\n".join(res.alarms)
 
 
-def test_frama_c_eva_finds_a_removed_saturation_in_the_layer_kernel(caps_bundle, tmp_path):
+def test_frama_c_eva_finds_a_removed_saturation_in_the_layer_kernel(caps_eva):
     """At the caps, without the clamp that states |e| <= 2^14 (a bound that holds only through e's relation
     to max|d|), EVA reports the possible overflow of e * e in centre_pass: the zero above is not vacuous."""
-    need("frama-c")
-    from fleetlab.assurance import analysers
-
-    src = planted_src(tmp_path, "slipest_infer_q.c", LAYER_E_CLAMP, LAYER_E_UNCLAMPED)
-    (res,) = analysers.frama_c_eva(caps_bundle, entries=["eva_infer_q"], src_dir=src,
-                                   options=analysers.EVA_OPTIONS + CAPS_PRECISION)
+    res = caps_eva[1]
     assert any("e_ * e_" in a for a in res.alarms), "\n".join(res.alarms)
 
 

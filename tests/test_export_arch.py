@@ -22,6 +22,7 @@ from fleetlab.models import build
 from fleetlab.models.train import train_classifier
 
 from planted import LAYER_E_CLAMP, LAYER_E_UNCLAMPED, planted_src
+from required import need_tools
 from test_export_c import INCLUDE, build_check, need
 
 ARCHS = ["sn-d", "24,9", "256,256,256,256"]
@@ -297,8 +298,6 @@ def test_the_m4_cases_enter_every_product_loop_entry():
 
 @pytest.mark.parametrize("arch,name", CASES)
 def test_bit_exact_under_qemu(snd_bundle, irregular_bundle, tmp_path, arch, name):
-    import shutil
-
     from fleetlab.host_tools.firmware import build, targets
 
     if arch == "sn-d":
@@ -309,17 +308,13 @@ def test_bit_exact_under_qemu(snd_bundle, irregular_bundle, tmp_path, arch, name
         bundle = tmp_path / "bundle"
         export_bundle(quick_model(arch), bundle, inputs=draw_inputs(300, None, seed=5))
     t = targets.get(name)
-    missing = [tool for tool in t.tools if shutil.which(tool) is None]
-    if missing:
-        pytest.skip(f"{', '.join(missing)} not installed: run scripts/setup.sh (scripts/apt-packages.txt)")
+    need_tools(*t.tools)  # skips outside CI, fails under FLEETLAB_REQUIRE_TOOLS, naming the package
     out = build.ctest(build.cmake_build(tmp_path / name, bundle, target=t))
     assert "100% tests passed" in out
     passes = re.findall(r"vectors=\d+ q_fail=0 f32_fail=0 extractor_fail=0 model=\w+ PASS", out)
     assert len(passes) == (1 if t.integer_only else 2), out[-3000:]
     for what in ("slipest_test_q.elf", "libslipest_q.a"):
         assert f"{what}: 0 soft-float helper symbols (expected absent)" in out
-
-
 
 
 def test_m4_built_for_firmware_that_traps_unaligned_access(irregular_bundle, tmp_path):
@@ -329,14 +324,10 @@ def test_m4_built_for_firmware_that_traps_unaligned_access(irregular_bundle, tmp
     compiled for unaligned access again (-munaligned-access after the option's -mno-unaligned-access) takes
     the written-out loop, whose GELU word read is unaligned, and QEMU raises the UsageFault, so the trap is
     real and the first build's pass means something."""
-    import shutil
-
     from fleetlab.host_tools.firmware import build, targets
 
     t = targets.get("cortex-m4")
-    missing = [tool for tool in t.tools if shutil.which(tool) is None]
-    if missing:
-        pytest.skip(f"{', '.join(missing)} not installed: run scripts/setup.sh (scripts/apt-packages.txt)")
+    need_tools(*t.tools, "arm-none-eabi-objdump")
 
     def smlsd_count(build_dir: Path) -> int:
         dis = subprocess.run(["arm-none-eabi-objdump", "-d", str(build_dir / "libslipest_q.a")],

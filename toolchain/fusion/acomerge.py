@@ -206,19 +206,24 @@ class Ants:
         ex[self.ant] = True
         return ex
 
+    def rows(self, which: np.ndarray, base: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """(len(which), T): `base` (T,) in every row, with each departure of ant which[r] written into row r as
+        its entry of `values` (one per departure: the candidate picked, or that candidate's parameter value).
+        The ants `which` are distinct."""
+        row_of = np.full(self.n_ants, -1, dtype=np.int64)
+        row_of[which] = np.arange(which.size)
+        out = np.broadcast_to(base, (which.size, base.size)).copy()
+        mine = row_of[self.ant] >= 0
+        out[row_of[self.ant[mine]], self.t[mine]] = values[mine]
+        return out
+
     def path(self, a: int) -> torch.Tensor:
         """Ant a's path (T,), int64."""
-        path = self.greedy.copy()
-        mine = self.ant == a
-        path[self.t[mine]] = self.pick[mine]
-        return torch.from_numpy(path)
+        return torch.from_numpy(self.rows(np.array([a]), self.greedy, self.pick)[0])
 
     def dense(self) -> torch.Tensor:
         """Every ant's path (P, T), int32."""
-        n_idx = self.greedy.size
-        paths = np.broadcast_to(self.greedy.astype(np.int32), (self.n_ants, n_idx)).copy()
-        paths.reshape(-1)[self.ant * n_idx + self.t] = self.pick
-        return torch.from_numpy(paths)
+        return torch.from_numpy(self.rows(np.arange(self.n_ants), self.greedy.astype(np.int32), self.pick))
 
 
 def construct_ants(
@@ -389,15 +394,15 @@ def evaluate_ants(
     m, n_t = cand.shape
     cells = cand.T.contiguous().numpy().reshape(-1)  # model value of parameter t at candidate j: cells[t·M + j]
     cell = ants.t * m + ants.pick
-    explorers = np.flatnonzero(ants.explorer())
+    explorer = ants.explorer()
+    explorers = np.flatnonzero(explorer)
     owner = same_departures(ants, cell, m * n_t, explorers)  # (P,) the first ant with the same model
     firsts = explorers[owner[explorers] == explorers]
     row_of = np.full(ants.n_ants, firsts.size, dtype=np.int64)  # the greedy model's row follows the explorers'
     row_of[firsts] = np.arange(firsts.size)
-    n_rows = firsts.size + int(explorers.size < ants.n_ants)
-    flats = np.broadcast_to(cells[np.arange(n_t) * m + ants.greedy], (n_rows, n_t)).copy()
-    mine = row_of[ants.ant] < firsts.size  # the departures of the ants evaluated
-    flats[row_of[ants.ant[mine]], ants.t[mine]] = cells[cell[mine]]
+    # the distinct explorers, then one ant that kept to the greedy path (if any): its row is the greedy model
+    which = np.concatenate([firsts, np.flatnonzero(~explorer)[:1]])
+    flats = ants.rows(which, cells[np.arange(n_t) * m + ants.greedy], cells[cell])
     j_rows = _evaluate(fitness, torch.from_numpy(flats))
     return j_rows[torch.from_numpy(row_of[owner])]
 
@@ -428,21 +433,11 @@ def same_departures(ants: Ants, cell: np.ndarray, n_cells: int, explorers: np.nd
     mapped = explorers[first[inverse]]  # the first explorer with the same key
     shared = np.flatnonzero(mapped != explorers)
     involved = np.unique(np.concatenate([explorers[shared], mapped[shared]]))
-    rows = _rows(ants, involved)
+    rows = ants.rows(involved, ants.greedy, ants.pick)
     if not np.array_equal(rows[np.searchsorted(involved, explorers[shared])], rows[np.searchsorted(involved, mapped[shared])]):
         return owner  # a collision of keys: every ant on its own
     owner[explorers] = mapped
     return owner
-
-
-def _rows(ants: Ants, which: np.ndarray) -> np.ndarray:
-    """Dense paths (len(which), T) of the ants `which` (distinct, ascending)."""
-    row_of = np.full(ants.n_ants, -1, dtype=np.int64)
-    row_of[which] = np.arange(which.size)
-    rows = np.broadcast_to(ants.greedy, (which.size, ants.greedy.size)).copy()
-    mine = row_of[ants.ant] >= 0
-    rows[row_of[ants.ant[mine]], ants.t[mine]] = ants.pick[mine]
-    return rows
 
 
 def _schedule(c: int, n: int) -> tuple[float, float]:
@@ -569,7 +564,8 @@ def _run_mmas(
         result.evaluations += cfg.n_ants
         ib = int(torch.argmin(j))
         ib_path = ants.path(ib)
-        if _keep_if_better(result, j, lambda i: cand.gather(0, ants.path(i).unsqueeze(0)).squeeze(0), g):
+        # _keep_if_better picks the same argmin, ib: its model is ib_path's
+        if _keep_if_better(result, j, lambda _: cand.gather(0, ib_path.unsqueeze(0)).squeeze(0), g):
             best_path = ib_path
             eta = _heuristic(cfg, cand_t, result.best_flat)
         # The global-best deposit reinforces the best path's nodes (after an IWOA update those

@@ -5,6 +5,7 @@ tiny budgets."""
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -55,6 +56,32 @@ def test_metrics_by_hand():
     assert m["confusion_matrix"] == [[3, 1, 0], [0, 1, 1], [0, 0, 2]]
     with pytest.raises(ValueError):
         classification_metrics(y_true, y_pred[:-1])
+    with pytest.raises(ValueError, match="predicted labels must be classes"):
+        classification_metrics(y_true, np.array([0, 0, 0, 1, 1, 2, 2, 3]))
+
+
+def test_metrics_are_scikit_learns_bit_for_bit():
+    """The metrics come from one confusion matrix: every number equals scikit-learn's own function's,
+    exactly, also where a class is missing from the truth, the predictions or both."""
+    from sklearn.metrics import balanced_accuracy_score, f1_score, precision_recall_fscore_support
+
+    rng = np.random.default_rng(7)
+    checked = 0
+    for case in range(300):
+        n = int(rng.integers(1, 400))
+        classes_true = rng.choice(3, size=int(rng.integers(1, 4)), replace=False)
+        classes_pred = rng.choice(3, size=int(rng.integers(1, 4)), replace=False)
+        y_true, y_pred = rng.choice(classes_true, n), rng.choice(classes_pred, n)
+        m = classification_metrics(y_true, y_pred)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "y_pred contains classes not in y_true"
+            ba = balanced_accuracy_score(y_true, y_pred)
+        p, r, _, _ = precision_recall_fscore_support(y_true, y_pred, labels=[0, 1, 2], zero_division=0)
+        assert m["balanced_accuracy"] == float(ba), case
+        assert m["macro_f1"] == float(f1_score(y_true, y_pred, labels=[0, 1, 2], average="macro", zero_division=0)), case
+        assert m["precision"] == p.tolist() and m["recall"] == r.tolist(), case
+        checked += len(set(y_true.tolist())) < 3 or len(set(y_pred.tolist())) < 3
+    assert checked > 100  # the cases with a class missing were exercised
 
 
 def test_method_parsing():

@@ -2,7 +2,6 @@
 CAN codec, include paths, and helpers that run tools (one, keeping its output; several at once)."""
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 from collections.abc import Callable, Sequence
@@ -12,6 +11,7 @@ from typing import TypeVar
 
 from fleetlab.host_tools.firmware.build import Result, execute
 
+from ..cores import usable_cores
 from ..paths import default_bundle, repo_root
 from .. import system_tools
 
@@ -69,7 +69,7 @@ def concurrently(calls: Sequence[Callable[[], T]]) -> list[T]:
     """The results of `calls`, in their order, run on as many threads as this process has cores. Each call
     spends its time waiting for a tool's subprocess (the GIL is free meanwhile), so one report's checks or
     EVA's entries overlap; an exception is raised after every call has ended."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    cores = usable_cores()
     if min(cores, len(calls)) <= 1:
         return [call() for call in calls]
     with ThreadPoolExecutor(min(cores, len(calls))) as pool:

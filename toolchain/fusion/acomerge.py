@@ -89,6 +89,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from ..cores import usable_cores
 from ..models import n_params
 from .buffer import BUFFER_KINDS, make_buffer
 from .fitness import CalibrationFitness
@@ -345,7 +346,7 @@ def default_threads() -> int:
     and a 2-thread SN-S run took 11.3 s instead of 1.1 s on one thread (2 cores, load 6,
     `fleetlab bench fusion --load`). So a run takes only the cores that are free when it starts.
     """
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    cores = usable_cores()
     free = min(cores, (os.cpu_count() or 1) - busy_cores())
     return max(1, min(MAX_THREADS, cores, int(free + 0.25)))
 

@@ -68,6 +68,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, TensorDataset
 
+from ..cores import usable_cores
 from ..data.contracts import N_CLASSES
 from ..models import build, flatten, load_flat
 from ..models.train import class_weights
@@ -308,7 +309,7 @@ def busy_processes(n: int):
 def busy_machine(experts: torch.Tensor, x: np.ndarray, y: np.ndarray, args) -> dict:
     """Full-run times (best of --full-runs) with the threads a run chooses, idle and with --load busy
     processes, and loaded with every core as threads (the fixed choice that collapses)."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    cores = usable_cores()
 
     def runs(threads: int) -> tuple[float, int]:
         chosen = threads or default_threads()

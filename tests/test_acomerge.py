@@ -24,6 +24,7 @@ from fleetlab.fusion.acomerge import (
 from fleetlab.fusion.bench import synthetic_calibration
 from fleetlab.fusion.buffer import make_buffer
 from fleetlab.fusion.finetune import finetune
+from fleetlab.fusion import fitness as fitness_module
 from fleetlab.fusion.fitness import CalibrationFitness
 from fleetlab.models import build, flatten, load_flat, n_params
 from fleetlab.models.train import class_weights
@@ -78,15 +79,16 @@ def test_fitness_buffer_reuse_keeps_every_call_independent(cal):
     fresh = CalibrationFitness("sn-s", x, y, chunk=150)
     unkept = fresh._operands
 
-    def nan_filled(p: int, h: int):  # new buffers every call, NaN wherever the fitness would not write
+    def nan_filled(p: int, h: int, size: int):  # new buffers every call, NaN wherever the fitness would not write
         fresh._kept = None
-        a, b, act, logits = unkept(p, h)
+        a, b, act, logits = unkept(p, h, size)
         for buf in (a, b[:, :-1], act, logits):
             buf.fill_(float("nan"))
         return a, b, act, logits
 
     fresh._operands = nan_filled
     assert torch.equal(kept(flats), fresh(flats))
+
 
 def test_fitness_rejects_bad_calibration():
     with pytest.raises(ValueError, match="NaN"):
@@ -290,6 +292,24 @@ def test_fitness_of_a_model_does_not_depend_on_its_batch(cal):
         assert torch.equal(fitness(flats[i]), whole[i : i + 1])
         assert torch.equal(fitness(flats[i : i + 2]), whole[i : i + 2])
     assert torch.equal(fitness(flats[100:203]), whole[100:203])
+
+
+def test_fitness_does_not_depend_on_the_piece_size(cal, monkeypatch):
+    """The SN-S activations are made in pieces of SUB_CHUNK ants per intra-op thread (`piece_size`): so
+    that a run's numbers do not depend on the thread count through the pieces, J is the same bits in
+    pieces of any size, a single ant's piece of a larger call excepted (it never occurs)."""
+    x, y = cal
+    gen = torch.Generator().manual_seed(3)
+    flats = torch.stack([flatten(build("sn-s", seed=s)) for s in range(3)]).repeat(60, 1)[:173]
+    flats = flats + 0.3 * torch.randn(flats.shape, generator=gen)
+    monkeypatch.setattr(fitness_module, "SUB_CHUNK", 25)
+    kept = CalibrationFitness("sn-s", x, y)  # its buffers grow with the piece size (a thread count raised)
+    reference = kept(flats)
+    for size in (3, 7, 50, 86, 200, 25):
+        monkeypatch.setattr(fitness_module, "SUB_CHUNK", size)
+        assert fitness_module.piece_size() == size * torch.get_num_threads()
+        assert torch.equal(CalibrationFitness("sn-s", x, y)(flats), reference), size
+        assert torch.equal(kept(flats), reference), size
 
 
 def _toy(n_idx=20, m=8, seed=0):

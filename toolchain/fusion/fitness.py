@@ -25,7 +25,17 @@ from ..models.mlp import LN_EPS, hidden_sizes, param_shapes
 from ..models.train import class_weights
 
 
-SUB_CHUNK = 25  # ants whose activations go from the first GEMM to the head together (see _snS)
+SUB_CHUNK = 25  # ants per intra-op thread whose activations go from the first GEMM to the head together (piece_size)
+
+
+def piece_size() -> int:
+    """Ants per piece of the SN-S activations: SUB_CHUNK per intra-op thread.
+
+    Why per thread: each GEMM and the GELU of a piece is split over the threads, which meet at a
+    barrier after every step; with two threads, pieces of 25 spent a tenth of a 300-ant call at those
+    barriers. Pieces of 50 on two threads take 11 % less time, and on one thread pieces of 25 stay the
+    fastest. The numbers are the same in pieces of any size (docs/scaling.md, "Fifth pass")."""
+    return SUB_CHUNK * max(1, torch.get_num_threads())
 
 
 def _pieces(p: int, size: int) -> list[tuple[int, int]]:
@@ -39,7 +49,7 @@ class CalibrationFitness:
     """Callable: flats (P, T) float32 -> weighted CE (P,) float32, one batched computation.
 
     `chunk` bounds the models per forward pass of the generic (deeper) path; the SN-S path takes
-    any number at once and bounds its activations itself (SUB_CHUNK)."""
+    any number at once and bounds its activations itself (piece_size)."""
 
     def __init__(self, arch: str, x: np.ndarray, y: np.ndarray, chunk: int = 100):
         x = np.asarray(x, dtype=np.float32)
@@ -81,7 +91,7 @@ class CalibrationFitness:
         if p == 1:
             return self(flats.expand(2, -1))[:1]
         with torch.no_grad():
-            if self.fast:  # one call: its activations are made in pieces of SUB_CHUNK ants anyway (_snS)
+            if self.fast:  # one call: its activations are made in pieces anyway (_snS)
                 return self._snS(flats)
             return torch.cat([self._generic(flats[i:j]) for i, j in _pieces(p, self.chunk)])
 
@@ -108,27 +118,29 @@ class CalibrationFitness:
         # Scaling the (13, N) inputs per ant by 1/std costs a tenth of scaling the (H, N)
         # pre-activations, and β rides in the same GEMM as a 14th input that is always 1:
         # [γ ⊙ W̃c, β] @ [x̃ / std; 1] = γ ⊙ normalised + β in one pass.
-        a, b, act, logits = self._operands(p, h)
+        size = piece_size()
+        a, b, act, logits = self._operands(p, h, size)
         k = self.xt_t.shape[0]
         torch.mul(wc, g.unsqueeze(-1), out=a[:, :, :k])
         a[:, :, k].copy_(beta)
         torch.mul(self.xt_t, inv_std, out=b[:, :k])
         b2 = b2.unsqueeze(-1)
         # The activations of a few ants at a time, so that they stay in the L2 cache from the GEMM
-        # through the GELU to the head's GEMM (150 ants' are 3.6 MB; the three steps take 12 % less
-        # time in pieces of about 25). Each ant's numbers do not depend on the piece it is in, as long
-        # as no piece is a single ant of a larger call (a lone GEMM takes another path in MKL).
-        for i, j in _pieces(p, SUB_CHUNK):
+        # through the GELU to the head's GEMM (150 ants' are 3.6 MB; the steps take
+        # 12 % less time in pieces of about 25 per thread). Each ant's numbers do not depend on the
+        # piece it is in, as long as no piece is a single ant of a larger call (a lone GEMM takes
+        # another path in MKL).
+        for i, j in _pieces(p, size):
             piece = act[: j - i]
             torch.bmm(a[i:j], b[i:j], out=piece)  # (piece, H, N)
             torch.ops.aten.gelu_(piece)
             torch.baddbmm(b2[i:j], w2[i:j], piece, out=logits[i:j])  # (piece, 3, N)
         return self._loss(logits)
 
-    def _operands(self, p: int, h: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    def _operands(self, p: int, h: int, size: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """Views (p models) of four buffers kept for the whole search, grown to the largest call: the
         first layer's weights (p, H, 14), its inputs (p, 14, N) whose last row is 1 once and for all,
-        the activations of one piece of ants (≤ SUB_CHUNK, H, N) and the logits (p, 3, N).
+        the activations of one piece of ants (≤ `size`, H, N) and the logits (p, 3, N).
 
         Why (issue 30): `torch.baddbmm(β, ...)` allocated a fresh (chunk, H, N) result every call
         (3.6 MB for 150 ants), paid the page faults of that memory and filled it with β through a
@@ -137,11 +149,11 @@ class CalibrationFitness:
         CPU, and gives the same bits as before on this machine (docs/scaling.md, "Profile and cuts").
         """
         k, n = self.xt_t.shape
-        if self._kept is None or self._kept[0].shape[0] < p:
-            rows = p  # the largest call so far: the buffers only grow
+        if self._kept is None or self._kept[0].shape[0] < p or self._kept[2].shape[0] < min(p, size):
+            rows = max(p, 0 if self._kept is None else self._kept[0].shape[0])  # the buffers only grow
             b = torch.empty(rows, k + 1, n)
             b[:, k].fill_(1.0)
-            self._kept = (torch.empty(rows, h, k + 1), b, torch.empty(min(rows, SUB_CHUNK), h, n),
+            self._kept = (torch.empty(rows, h, k + 1), b, torch.empty(min(rows, size), h, n),
                           torch.empty(rows, N_CLASSES, n))
         a, b, act, logits = self._kept
         return a[:p], b[:p], act, logits[:p]

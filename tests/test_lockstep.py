@@ -8,6 +8,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -127,6 +129,16 @@ def test_threads_follow_the_free_cores():
     with busy_processes(cores):
         assert busy_cores(0.2) >= cores - 0.5
         assert default_threads() == 1
+
+
+def test_a_run_takes_no_more_threads_than_the_cores_it_may_use():
+    """A process confined to one core (taskset, a container's cpuset, a batch slot) counts one core and
+    gives a run one thread, however many the machine has."""
+    code = ("import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); "
+            "from fleetlab.cores import usable_cores; from fleetlab.fusion.acomerge import default_threads; "
+            "print(usable_cores(), default_threads())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["1", "1"]
 
 
 def test_bench_reports_idle_and_loaded_runs(capsys):

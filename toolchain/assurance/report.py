@@ -65,16 +65,16 @@ def float_free(build_m3: Path, description: str) -> tuple[bool, str]:
     return ok, body
 
 
-def target_evidence(bundle: Path) -> tuple[tuple[bool, str], dict, tuple]:
-    """The cross builds' evidence: the float-free check of the FPU-less ARM target's archive, and on the
-    reference target the measured cost and stack (`target_costs`) and the worst-case instructions (wcet)."""
+def target_evidence(bundle: Path) -> tuple[target_registry.Target, tuple[bool, str], dict, tuple]:
+    """The cross builds' evidence: the FPU-less ARM target and the float-free check of its archive, and on
+    the reference target the measured cost and stack (`target_costs`) and the worst-case instructions (wcet)."""
     work = build_root() / "assure"
     soft = soft_float_target()
     cmake_build(work / soft.name, bundle, target=soft)
     free = float_free(work / soft.name, soft.description)
     ref = target_registry.reference()
     cmake_build(work / ref.name, bundle, target=ref)
-    return free, target_costs(ref.name, work / ref.name), wcet.measure(work / ref.name, bundle)
+    return soft, free, target_costs(ref.name, work / ref.name), wcet.measure(work / ref.name, bundle)
 
 
 def required_tools(eva: bool, target: bool) -> list[str]:
@@ -130,8 +130,7 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
     # target builds: float-free archive, measured stack and cost
     measured, wcet_result = {}, None
     if target:
-        (ok, body), measured, wcet_result = done["target"]
-        soft = soft_float_target()
+        soft, (ok, body), measured, wcet_result = done["target"]
         gating_ok &= ok
         summary_row(f"Float-free fixed-point archive ({soft.description})", "0 soft-float symbols" if ok
                     else "soft-float found", ok)

@@ -14,7 +14,7 @@ from fleetlab.cli import main
 from fleetlab.data.dataset import load_dataset
 from fleetlab.evaluation.mccv import EvalSettings, run_mccv
 from fleetlab.evaluation.methods import parse_methods, selectable
-from fleetlab.evaluation.metrics import classification_metrics
+from fleetlab.evaluation.metrics import balanced_accuracy, classification_metrics
 from fleetlab.evaluation.tables import markdown_table
 from fleetlab.fusion.registry import Budget
 from required import need_module
@@ -82,6 +82,23 @@ def test_metrics_are_scikit_learns_bit_for_bit():
         assert m["precision"] == p.tolist() and m["recall"] == r.tolist(), case
         checked += len(set(y_true.tolist())) < 3 or len(set(y_pred.tolist())) < 3
     assert checked > 100  # the cases with a class missing were exercised
+
+
+def test_balanced_accuracy_alone_is_the_same_number_without_a_warning():
+    """`balanced_accuracy` (realism, domain gap) is classification_metrics's figure, scikit-learn's number,
+    and stays quiet where the truth lacks a predicted class (scikit-learn warns on every such call)."""
+    from sklearn.metrics import balanced_accuracy_score
+
+    y_true, y_pred = np.array([0, 0, 1, 1, 0]), np.array([0, 2, 1, 0, 0])  # class 2 never true
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ours = balanced_accuracy(y_true, y_pred)
+    with warnings.catch_warnings(record=True) as theirs_said:
+        warnings.simplefilter("always")
+        theirs = balanced_accuracy_score(y_true, y_pred)
+    assert theirs_said, "scikit-learn no longer warns here: this test's premise is gone"
+    assert ours == float(theirs) == (2 / 3 + 1 / 2) / 2
+    assert ours == classification_metrics(y_true, y_pred)["balanced_accuracy"]
 
 
 def test_method_parsing():

@@ -12,12 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from sklearn.metrics import balanced_accuracy_score
 
 from ..data.dataset import EARTH, TARGET
 from ..data.simulator.engine import Trace
 from ..models import build
 from ..models.train import predict, train_classifier
+from .metrics import balanced_accuracy
 
 
 @dataclass(frozen=True)
@@ -61,8 +61,8 @@ def earth_to_moon_gap(traces: list[tuple[str, str, Trace]], seed: int = 0, heldo
     finally:
         torch.set_num_threads(threads)
     return DomainGap(
-        earth_heldout_bacc=float(balanced_accuracy_score(y_te, predict(model, x_te))),
-        target_moon_bacc=float(balanced_accuracy_score(y_moon, predict(model, x_moon))),
+        earth_heldout_bacc=balanced_accuracy(y_te, predict(model, x_te)),
+        target_moon_bacc=balanced_accuracy(y_moon, predict(model, x_moon)),
         n_train=len(y_tr),
         n_earth_heldout=len(y_te),
         n_target=len(y_moon),

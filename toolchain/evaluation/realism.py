@@ -17,7 +17,6 @@ import copy
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from sklearn.metrics import balanced_accuracy_score
 
 from ..data.dataset import EARTH, TARGET, Dataset
 from ..data.splits import make_split
@@ -25,6 +24,7 @@ from ..fusion.baselines import earth_finetune
 from ..models import build
 from ..models.train import EXPERT_EPOCHS, predict, train_classifier
 from .mccv import single_threaded_torch
+from .metrics import balanced_accuracy
 
 CAL_SIZE = 150
 
@@ -44,7 +44,7 @@ class Learnability:
 
 
 def _bacc(model, x: np.ndarray, y: np.ndarray) -> float:
-    return float(balanced_accuracy_score(y, predict(model, x)))
+    return balanced_accuracy(y, predict(model, x))
 
 
 def loto(dataset: Dataset, seed: int = 0, epochs: int = EXPERT_EPOCHS) -> list[float]:

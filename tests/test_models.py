@@ -58,6 +58,38 @@ def test_save_load_roundtrip_and_refusals(tmp_path):
         load_model(tmp_path / "other.pt")
 
 
+def test_damaged_or_edited_model_files_are_one_line_refusals(tmp_path):
+    """Garbage bytes, a missing file, a folder and a fleetlab file with edited fields each give one
+    ValueError line naming the file (never torch's multi-line advice to load with weights_only=False)."""
+    good = save_model(tmp_path / "m.pt", build("sn-s", seed=0))
+    payload = torch.load(good, weights_only=True)
+    first = next(iter(payload["state_dict"]))
+
+    def edited(name, change):
+        copy = {k: dict(v) if isinstance(v, dict) else v for k, v in payload.items()}
+        change(copy)
+        torch.save(copy, tmp_path / name)
+        return tmp_path / name
+
+    (tmp_path / "garbage.pt").write_bytes(b"\x00\x01 not a checkpoint " * 10)
+    (tmp_path / "folder.pt").mkdir()
+    cases = {
+        tmp_path / "garbage.pt": "not a torch checkpoint",
+        tmp_path / "absent.pt": "No such file",
+        tmp_path / "folder.pt": "Is a directory",
+        edited("no_arch.pt", lambda d: d.pop("arch")): "missing or wrong fields: arch",
+        edited("other_arch.pt", lambda d: d.update(arch="sn-q")): "unknown architecture 'sn-q'",
+        edited("shape.pt", lambda d: d["state_dict"].update({first: torch.zeros(2)})): "is (2,) where a sn-s has (30, 12)",
+        edited("dropped.pt", lambda d: d["state_dict"].pop(first)): f"weights missing: ['{first}']",
+        edited("nan.pt", lambda d: d["state_dict"].update({first: torch.full((30, 12), float("nan"))})): "NaN or infinity",
+    }
+    for path, expected in cases.items():
+        with pytest.raises(ValueError) as refused:
+            load_model(path)
+        text = str(refused.value)
+        assert expected in text and text.startswith(str(path)) and "\n" not in text, text
+
+
 def test_training_batches_are_epoch_permutations_cut_to_the_step_budget():
     """The batch order both step engines (CPU loop, captured GPU steps) share: a fresh permutation
     per epoch, an epoch's last batch shorter, exactly `total` batches."""

@@ -105,6 +105,7 @@ print(len(names))
 
 @pytest.mark.parametrize("args, says", [
     (["export", "no-such-model.pt", "--out", "b"], "no-such-model.pt"),
+    (["export", "x", "--out", "b"], "x: cannot read model file (empty or cut short)"),
     (["emulate", "--bundle", "no-such-bundle"], "no-such-bundle"),
     (["bench", "c", "--target", "no-such-cpu"], "no-such-cpu"),
     (["c-sources", "--out", "."], "not an empty folder"),
@@ -114,3 +115,12 @@ def test_user_mistakes_are_one_line(tmp_path, args, says):
     res = _fleetlab(args, tmp_path)
     assert res.returncode in (1, 2) and "Traceback" not in res.stderr, res.stderr
     assert len(res.stderr.strip().splitlines()) == 1 and says in res.stderr, res.stderr
+
+
+def test_options_are_taken_by_their_full_names_only(tmp_path):
+    """`--model` is not an option of export: it is refused as such, not taken for `--model-version`."""
+    res = _fleetlab(["export", "--model", "m.pt"], tmp_path)
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+    assert "unrecognized arguments: --model" in res.stderr and "invalid int" not in res.stderr, res.stderr
+    res = _fleetlab(["evaluate", "--data", "d", "--run", "3"], tmp_path)  # a prefix of --runs and --rng
+    assert res.returncode == 2 and "unrecognized arguments: --run" in res.stderr, res.stderr

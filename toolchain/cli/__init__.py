@@ -46,11 +46,21 @@ def _available() -> dict[str, tuple[str, str]]:
     return found
 
 
+class _Parser(argparse.ArgumentParser):
+    """Options by their full names only. With argparse's abbreviations, a mistyped `export --model FILE`
+    was taken as `--model-version FILE` and refused as "invalid int value"; the subcommands' parsers
+    are of this class too (add_subparsers makes its parsers of the parent's class)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+
+
 def build_parser(selected: str | None = None) -> argparse.ArgumentParser:
     """The parser; only the `selected` subcommand's module is imported for its options."""
     from .. import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="fleetlab",
         description="Lunar-rover wheel-slip estimation: simulate or load fleet data, fuse expert "
         "models with AcoMerge, export to fixed-point C, and verify the C estimator bit for bit.",

@@ -44,8 +44,10 @@ def load_model(path: Path | str):
         # torch's own text here advises weights_only=False, i.e. running the file's code: not for a model
         raise ValueError(f"{path}: cannot read model file (not a torch checkpoint of tensors and plain values: "
                          "damaged, or another format)") from None
-    except Exception as e:  # torch raises many types for a damaged file (zip reader, EOF, ...)
-        raise ValueError(f"{path}: cannot read model file ({type(e).__name__}: {_first_line(e)})") from None
+    except EOFError:
+        raise ValueError(f"{path}: cannot read model file (empty or cut short)") from None
+    except Exception as e:  # torch raises many types for a damaged file (its zip reader's, ...)
+        raise ValueError(f"{path}: cannot read model file ({_first_line(e)})") from None
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise ValueError(f"{path}: not a fleetlab model file (expected format {FORMAT})")
     fields = {"arch": str, "feature_names": (list, tuple), "state_dict": dict, "meta": dict}
@@ -68,8 +70,9 @@ def load_model(path: Path | str):
 
 
 def _first_line(error: Exception) -> str:
+    """The error's type and the first line of its text (torch's texts run to paragraphs)."""
     text = str(error).strip()
-    return text.splitlines()[0] if text else type(error).__name__
+    return f"{type(error).__name__}: {text.splitlines()[0]}" if text else type(error).__name__
 
 
 def _weights_problem(got: dict, expected: dict, arch: str) -> str | None:

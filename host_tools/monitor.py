@@ -15,6 +15,7 @@ from typing import Callable
 import can
 
 from .links import from_message
+from .sources import log_messages
 from .wire.dbc import Frame, OutputAssembler, StatusReport, WindowEstimate, by_id
 from .wire.serial_framing import Rejected
 
@@ -85,10 +86,8 @@ def monitor_bus(bus: can.BusABC, duration: float = 0.0, count: int = 0, show: Ca
 
 
 def monitor_log(path: Path, show: Callable[[str], None] | None = print, show_all: bool = False) -> MonitorStats:
-    if not path.is_file():
-        raise OSError(f"{path}: no such log file")
     mon = Monitor(show_all)
-    for msg in can.LogReader(str(path)):
+    for msg in log_messages(path):
         if msg.is_error_frame:
             continue
         line = mon.feed(from_message(msg), msg.timestamp)

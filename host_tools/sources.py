@@ -108,14 +108,35 @@ def imported_source(path: Path | str) -> TelemetrySource:
     return TelemetrySource(f"import({root}, {len(parts)} files)", np.concatenate(parts).astype(np.int16), traces)
 
 
-def log_frames(path: Path | str) -> Iterator[tuple[Frame, float]]:
-    """Frames of a python-can log (.log candump, .asc, .blf, .csv ...) with their timestamps."""
+def log_messages(path: Path | str) -> Iterator:
+    """The messages of a python-can log (.log candump, .asc, .blf, ...), error frames included.
+
+    python-can's readers raise whatever their parsing meets (a candump line without its three fields
+    is "not enough values to unpack"): here that is one line naming the file and how far it was read."""
     import can
 
     p = Path(path)
     if not p.is_file():
         raise OSError(f"{p}: no such log file")
-    for msg in can.LogReader(str(p)):
+    try:
+        messages = iter(can.LogReader(str(p)))
+    except Exception as e:  # an unknown suffix, an unreadable header
+        raise ValueError(f"{p}: not a python-can log ({type(e).__name__}: {e})") from None
+    read = 0
+    while True:
+        try:
+            msg = next(messages)
+        except StopIteration:
+            return
+        except Exception as e:
+            raise ValueError(f"{p}: malformed python-can log after {read} frames ({type(e).__name__}: {e})") from None
+        read += 1
+        yield msg
+
+
+def log_frames(path: Path | str) -> Iterator[tuple[Frame, float]]:
+    """Standard-ID data frames of a python-can log with their timestamps (the DBC has no other kind)."""
+    for msg in log_messages(path):
         if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
             continue
         yield Frame(msg.arbitration_id, bytes(msg.data)), float(msg.timestamp)

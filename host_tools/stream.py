@@ -129,16 +129,16 @@ def stream(link: Link, frames: Iterable[tuple[Frame, float | None, bool]], realt
 
     t0 = time.perf_counter()
     send(control_frame(CONTROL_RESET))
-    bar = tqdm(total=total, unit="frame", desc=f"stream {link.name}", disable=not progress, unit_scale=True)
-    for frame, due, closes in frames:
-        if stats.pacer is not None and due is not None:
-            stats.pacer.wait(due)
-        send(frame)
-        stats.windows_sent += int(closes)
-        bar.update(1)
-        if stats.frames_sent % 64 == 0:
-            drain()
-    bar.close()
+    # closed before any error of the source (a malformed log) is printed, so that it gets a line of its own
+    with tqdm(total=total, unit="frame", desc=f"stream {link.name}", disable=not progress, unit_scale=True) as bar:
+        for frame, due, closes in frames:
+            if stats.pacer is not None and due is not None:
+                stats.pacer.wait(due)
+            send(frame)
+            stats.windows_sent += int(closes)
+            bar.update(1)
+            if stats.frames_sent % 64 == 0:
+                drain()
     sent_before_status = stats.frames_sent
     send(control_frame(CONTROL_STATUS))
     deadline = time.monotonic() + wait_s

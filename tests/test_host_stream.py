@@ -137,3 +137,15 @@ def test_bad_sources_give_one_line_errors(tmp_path, capsys):
     assert rc == 1 and "bit_flip" in capsys.readouterr().err
     rc = fleetlab_main(["monitor", "can", "--replay", str(tmp_path / "none.asc")])
     assert rc == 1 and "none.asc" in capsys.readouterr().err
+
+
+def test_a_malformed_can_log_is_one_line_naming_the_file_and_how_far_it_was_read(tmp_path, capsys):
+    """python-can's candump reader raises 'not enough values to unpack' on a broken line: both commands that
+    read logs say which file, and after how many good frames."""
+    log = tmp_path / "cut.log"
+    log.write_text("(0.100000) vcan0 123#0011\n(0.200000) vcan0 124#22\nthe rest was lost\n")
+    for args in (["monitor", "can", "--replay", str(log)], ["stream", "can", "--source", str(log), "--quiet"]):
+        rc = fleetlab_main(args)
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc == 1 and err, args
+        assert "cut.log: malformed python-can log after 2 frames" in err[-1] and "Traceback" not in "".join(err), err

@@ -145,3 +145,23 @@ def test_fuse_traverse_protocol(real_data_dir, tmp_path):
     assert meta["calibration"]["indices"] == split.cal.tolist()
     assert meta["calibration"]["test_size"] == len(split.test)
     assert not set(groups[split.cal]) & set(groups[split.test])  # no traverse on both sides
+
+
+def test_rows_with_nan_are_dropped_with_a_word_and_counted_in_the_report(tmp_path, capsys):
+    """A damaged row never reaches a model, and never goes without a word: the command says how many
+    rows it dropped, and the run's report and model metadata count them."""
+    data = tmp_path / "sim"
+    assert main(["simulate", "--out", str(data), "--scale", "0.1"]) == 0
+    files = sorted(data.glob("*.csv"))
+    for path, column in ((files[0], 2), (files[-1], 5)):
+        table = read_windows_csv(path)
+        table.features[1, column] = np.nan if column == 2 else np.inf
+        write_windows_csv(path, table)
+    capsys.readouterr()
+    out = tmp_path / "run"
+    assert main(["fuse", "--data", str(data), "--out", str(out), "--cal-size", "50",
+                 *FAST[:2], "--generations", "2", "--ants", "20", "--no-progress", "--threads", "1"]) == 0
+    err = capsys.readouterr().err
+    assert f"{data}: 2 rows holding NaN or infinity dropped" in err, err
+    assert "rows rejected for NaN/Inf: 2" in (out / "report.md").read_text()
+    assert load_model(out / "fused.pt")[1]["data"]["rejected_nonfinite_rows"] == 2

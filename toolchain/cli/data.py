@@ -14,9 +14,10 @@ from pathlib import Path
 from ..data import info
 from ..data.compare import compare_statistics
 from ..data.contracts import CLASS_NAMES, FEATURE_NAMES
-from ..data.dataset import ROLE_PATTERN, load_dataset
+from ..data.dataset import ROLE_PATTERN
 from ..data.log_import import UNASSIGNED, drop_summary, import_log, write_import
 from ..data.rover_profile import load_profile
+from . import dataset_input
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -153,7 +154,7 @@ def plot_report(rep: dict, path: Path) -> None:
 
 
 def run_compare(args: argparse.Namespace) -> int:
-    ds_a, ds_b = load_dataset(args.dir_a), load_dataset(args.dir_b)
+    ds_a, ds_b = dataset_input.load(args.dir_a), dataset_input.load(args.dir_b)
     rep = compare_statistics(ds_a, ds_b)
     if not args.no_learnability:
         from ..evaluation.realism import learnability

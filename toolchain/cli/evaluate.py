@@ -11,7 +11,7 @@ from ..evaluation.mccv import BACKENDS, EvalSettings, run_mccv, write_atomic
 from ..evaluation.methods import parse_methods, selectable
 from ..fusion.registry import Budget
 from ..models.train import EXPERT_LR
-from . import options
+from . import dataset_input, options
 
 DEFAULT_CAL_SIZES = EvalSettings.cal_sizes
 DEFAULT_RUNS = EvalSettings.runs
@@ -78,7 +78,6 @@ def settings_from_args(args: argparse.Namespace) -> EvalSettings:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..data.dataset import load_dataset
     from ..evaluation.plots import write_plots
     from ..evaluation.tables import markdown_table
 
@@ -86,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     if args.resume and args.out and args.out.resolve() != args.resume.resolve():
         raise ValueError("--resume DIR writes into DIR: give no other --out")
     args.out = args.resume or args.out
-    dataset = load_dataset(args.data)
+    dataset = dataset_input.load(args.data)
     result = run_mccv(dataset, settings, n_jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
                       progress=not args.no_progress, results_dir=args.out, resume=args.resume is not None)
     result["config"]["data"] = str(args.data)

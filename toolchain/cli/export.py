@@ -47,11 +47,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _data_windows(dirs: list[Path]) -> np.ndarray | None:
-    from ..data.dataset import load_dataset
+    from . import dataset_input
 
     xs = []
     for d in dirs:
-        ds = load_dataset(d)
+        ds = dataset_input.load(d)
         xs += [ds.xy(role)[0] for role in ds.roles]
     return np.concatenate(xs) if xs else None
 

@@ -14,7 +14,6 @@ from pathlib import Path
 import torch
 
 from ..data.calibration import calibration_set
-from ..data.dataset import load_dataset
 from ..evaluation.fuse_report import Row, scores, write_run
 from ..fusion import registry
 from ..fusion.acomerge import run_threads
@@ -24,7 +23,7 @@ from ..fusion.fitness import CalibrationFitness
 from ..fusion.pipeline import fuse, needs_joint, prepare_sources, source_device
 from ..fusion.registry import Budget
 from ..models import flatten
-from . import options
+from . import dataset_input, options
 
 DEFAULT_METHOD = "acomerge"
 DEFAULT_CAL_SIZE = 150
@@ -73,7 +72,7 @@ def _fuse(args: argparse.Namespace) -> int:
     device = options.resolved_device(args)  # a missing GPU fails before any training
     label = registry.get(args.method).label
     seconds: dict[str, float] = {}
-    dataset = load_dataset(args.data)
+    dataset = dataset_input.load(args.data)
     dataset.check_roles()
     cal = calibration_set(dataset, args.protocol, args.cal_size, args.seed, args.calibration)  # bad input fails early
 

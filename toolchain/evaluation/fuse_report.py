@@ -65,7 +65,7 @@ def plot_convergence(history: dict, path: Path, title: str) -> None:
 
 
 def write_report(path: Path, run: dict, cal: CalibrationSet, rows: list[Row], fused: FusedModel, label: str,
-                 seconds: dict[str, float]) -> None:
+                 seconds: dict[str, float], rejected_rows: int) -> None:
     d = fused.details
     if "config" in d and "evaluations" in d:  # AcoMerge and its variants: the search as run
         cfg = d["config"]
@@ -76,7 +76,8 @@ def write_report(path: Path, run: dict, cal: CalibrationSet, rows: list[Row], fu
         search = f"- {label}: budget {run['budget']['steps']} optimisation steps"
     lines = [
         "# fleetlab fuse report", "",
-        f"- data: `{run['data']}`; architecture {fused.arch}; seed {run['seed']}; method {fused.method}",
+        f"- data: `{run['data']}`; architecture {fused.arch}; seed {run['seed']}; method {fused.method}; "
+        f"rows rejected for NaN/Inf: {rejected_rows}",
         f"- D_Cal: {cal.info['size']} rows ({cal.info['source']}); test set: {cal.info['test_size']} target rows",
         search,
         f"- Earth+FullFinetune: {run['finetune_steps']} Adam steps on class-weighted CE over the same D_Cal",
@@ -98,6 +99,7 @@ def write_run(out: Path, run: dict, dataset: Dataset, cal: CalibrationSet, fused
     budget (dict) and data (the folder as given)."""
     out.mkdir(parents=True, exist_ok=True)
     data_summary = {"root": str(dataset.root), "roles": {r: int(len(dataset.table(r))) for r in dataset.roles},
+                    "rejected_nonfinite_rows": dataset.rejected_nonfinite,
                     "class_counts_cal": np.bincount(cal.y_cal, minlength=N_CLASSES).tolist(),
                     "classes": list(CLASS_NAMES)}
     config = fused.details.get("config", {"budget": run["budget"]})
@@ -121,4 +123,4 @@ def write_run(out: Path, run: dict, dataset: Dataset, cal: CalibrationSet, fused
     (out / "history.json").write_text(json.dumps(history, indent=1))
     if history["history"].get("best_so_far"):
         plot_convergence(history["history"], out / "convergence.png", label)
-    write_report(out / "report.md", run, cal, rows, fused, label, seconds)
+    write_report(out / "report.md", run, cal, rows, fused, label, seconds, dataset.rejected_nonfinite)

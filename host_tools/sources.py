@@ -81,7 +81,9 @@ def csv_dir_source(path: Path | str) -> FeatureSource:
     if not files:
         raise ValueError(f"{root}: no *.csv window files")
     table = WindowTable.concat([read_windows_csv(f) for f in files])
-    return FeatureSource(f"csv({root}, {len(files)} files)", quantize_features(table.features))
+    # rows holding NaN/Inf cannot be sent as features: the reader drops them, and the name says how many
+    dropped = f", {table.rejected_nonfinite} rows with NaN/Inf dropped" if table.rejected_nonfinite else ""
+    return FeatureSource(f"csv({root}, {len(files)} files{dropped})", quantize_features(table.features))
 
 
 def imported_source(path: Path | str) -> TelemetrySource:

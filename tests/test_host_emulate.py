@@ -204,3 +204,22 @@ def test_model_matches_the_c_node_across_a_reset(bundle, sim):
     c, exp = est.counters(), model.status_snapshot()
     assert all(c[k] == getattr(exp, k) for k in ("frames_received", "frames_rejected", "samples_dropped",
                                                   "windows_flagged", "windows_done"))
+
+
+def test_a_csv_source_names_the_rows_it_dropped_for_nan(tmp_path):
+    """A window CSV folder as a feature source: rows holding NaN/Inf cannot be sent, and the source's
+    name (printed by emulate) counts them."""
+    import numpy as np
+
+    from fleetlab.data.csvio import read_windows_csv, write_windows_csv
+    from fleetlab.host_tools.sources import csv_dir_source
+
+    assert fleetlab_main(["simulate", "--out", str(tmp_path), "--scale", "0.1"]) == 0
+    first = sorted(tmp_path.glob("*.csv"))[0]
+    clean = csv_dir_source(tmp_path)
+    table = read_windows_csv(first)
+    table.features[0, 0] = np.nan
+    write_windows_csv(first, table)
+    damaged = csv_dir_source(tmp_path)
+    assert "dropped" not in clean.name and "1 rows with NaN/Inf dropped" in damaged.name
+    assert damaged.n_windows == clean.n_windows - 1

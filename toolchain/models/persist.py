@@ -58,8 +58,8 @@ def load_model(path: Path | str):
         raise ValueError(f"{path}: model expects a different feature order: {payload['feature_names']}")
     try:
         model = build(payload["arch"])
-    except ValueError as e:  # an architecture name this version does not know
-        raise ValueError(f"{path}: damaged fleetlab model file ({e})") from None
+    except ValueError as e:  # an architecture name this version does not know (an edit, or a newer fleetlab)
+        raise ValueError(f"{path}: fleetlab model of an architecture this version cannot build ({e})") from None
     problem = _weights_problem(payload["state_dict"], model.state_dict(), payload["arch"])
     if problem:
         raise ValueError(f"{path}: damaged fleetlab model file ({problem})")

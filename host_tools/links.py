@@ -98,7 +98,8 @@ def open_can_bus(interface: str, channel: str | None, **kwargs) -> can.BusABC:
     try:
         return can.Bus(interface=interface, channel=channel, **kwargs)
     except can.CanError as e:
-        raise OSError(f"{interface} bus on {channel!r}: {e}") from None
+        where = f"on {channel!r}" if channel is not None else "(no --channel given)"
+        raise OSError(f"{interface} bus {where}: {e}") from None
 
 
 class Link:

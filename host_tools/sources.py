@@ -7,6 +7,7 @@ feature vectors in raw LSB units (`quantize_features`).
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -136,10 +137,13 @@ def log_messages(path: Path | str) -> Iterator:
         yield msg
 
 
-def log_frames(path: Path | str) -> Iterator[tuple[Frame, float]]:
-    """Standard-ID data frames of a python-can log with their timestamps (the DBC has no other kind)."""
+def log_frames(path: Path | str, skipped: Counter | None = None) -> Iterator[tuple[Frame, float]]:
+    """Standard-ID data frames of a python-can log with their timestamps (the DBC has no other kind);
+    the others are counted in `skipped`."""
     for msg in log_messages(path):
         if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
+            if skipped is not None:
+                skipped["error, remote or extended-ID frames"] += 1
             continue
         yield Frame(msg.arbitration_id, bytes(msg.data)), float(msg.timestamp)
 

@@ -10,6 +10,7 @@ Everything sent and received can be logged with `--log FILE` in python-can's for
 from __future__ import annotations
 
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Iterator
@@ -52,13 +53,18 @@ class StreamStats:
     pacer: Pacer | None = None  # the real-time schedule kept (a realtime stream only)
 
 
-def timed_frames(source: TelemetrySource | FeatureSource | Path, limit: int = 0) -> Iterator[tuple[Frame, float | None, bool]]:
-    """(frame, due time in s from the start or None, closes a window) for any source."""
+def timed_frames(source: TelemetrySource | FeatureSource | Path, limit: int = 0,
+                 skipped: Counter | None = None) -> Iterator[tuple[Frame, float | None, bool]]:
+    """(frame, due time in s from the start or None, closes a window) for any source. A log's frames that
+    the host does not send (the estimator's answers, other nodes' traffic) are not sent again: they are
+    counted in `skipped`."""
     if isinstance(source, Path):
         senders = {m.frame_id for m in database().messages if "HOST" in m.senders}
         t0 = None
-        for frame, ts in log_frames(source):
+        for frame, ts in log_frames(source, skipped):
             if frame.can_id not in senders:
+                if skipped is not None:
+                    skipped["frames the host does not send"] += 1
                 continue
             t0 = ts if t0 is None else t0
             yield frame, ts - t0, False

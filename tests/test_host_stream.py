@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import socket
 import threading
 from pathlib import Path
@@ -44,7 +45,13 @@ def test_stream_virtual_logs_and_the_log_replays(tmp_path, n_vectors, suffix, ca
     # replaying the log as a source sends only the host's frames again: same answers
     rc = fleetlab_main(["stream", "can", "--interface", "virtual", "--source", str(log), "--quiet"])
     assert rc == 0
-    assert f"received {n_vectors} estimates" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert f"received {n_vectors} estimates" in out
+    # and says what it did not send again: every frame of the log is either sent or counted
+    in_log = sum(1 for m in can.LogReader(str(log)))
+    sent = int(re.search(r"sent (\d+) frames", out).group(1)) - 2  # the CONTROL reset and status of the replay
+    counted = re.search(r"not sent again: (\d+) frames the host does not send", out)
+    assert counted and sent + int(counted.group(1)) == in_log, out
 
 
 def test_estimates_match_the_bundle_vectors(lib, n_vectors):

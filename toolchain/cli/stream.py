@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 from pathlib import Path
 
 from ..data.features_int import SAMPLES_PER_WINDOW
@@ -89,12 +90,13 @@ def run(args: argparse.Namespace) -> int:
             port = emu.start()
         link = link_class("cobs").over_port(port, baudrate=args.baudrate)
     log = TrafficLog(args.log)
+    skipped: Counter = Counter()  # a replayed log's frames that are not sent again
     try:
         total = None
         if not isinstance(source, Path):
             per = 3 * SAMPLES_PER_WINDOW if isinstance(source, TelemetrySource) else 4
             total = per * (min(args.limit, source.n_windows) if args.limit else source.n_windows)
-        stats = stream(link, timed_frames(source, args.limit), args.realtime, log, args.wait,
+        stats = stream(link, timed_frames(source, args.limit, skipped), args.realtime, log, args.wait,
                        None if args.quiet else _print_estimate, total, progress=True)
     finally:
         log.close()
@@ -103,6 +105,8 @@ def run(args: argparse.Namespace) -> int:
             emu.stop()
     print(f"sent {stats.frames_sent} frames ({stats.windows_sent} windows) in {stats.wall_s:.2f} s; "
           f"received {len(stats.estimates)} estimates")
+    if skipped:
+        print(f"log {source}: not sent again: " + ", ".join(f"{n} {what}" for what, n in sorted(skipped.items())))
     st = stats.status
     if st is not None:
         print(f"estimator: frames received {st.frames_received}, rejected {st.frames_rejected}, samples dropped "

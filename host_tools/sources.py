@@ -15,6 +15,7 @@ from typing import Iterator
 import numpy as np
 
 from fleetlab.data.features_int import SAMPLES_PER_WINDOW, quantize_features, quantize_samples
+from fleetlab.errors import first_line
 
 from .wire.dbc import Frame
 
@@ -124,7 +125,7 @@ def log_messages(path: Path | str) -> Iterator:
     try:
         messages = iter(can.LogReader(str(p)))
     except Exception as e:  # an unknown suffix, an unreadable header
-        raise ValueError(f"{p}: not a python-can log ({type(e).__name__}: {e})") from None
+        raise ValueError(f"{p}: not a python-can log ({type(e).__name__}: {first_line(e)})") from None
     read = 0
     while True:
         try:
@@ -132,7 +133,8 @@ def log_messages(path: Path | str) -> Iterator:
         except StopIteration:
             return
         except Exception as e:
-            raise ValueError(f"{p}: malformed python-can log after {read} frames ({type(e).__name__}: {e})") from None
+            raise ValueError(f"{p}: malformed python-can log after {read} frames "
+                             f"({type(e).__name__}: {first_line(e)})") from None
         read += 1
         yield msg
 

@@ -5,6 +5,13 @@ the installation. `fleetlab` prints its message as one line and exits 2; a bug s
 from __future__ import annotations
 
 
+def first_line(error: BaseException) -> str:
+    """The first line of an exception's message, or its type's name where it has none. torch's and
+    python-can's messages run to paragraphs; fleetlab's errors and warnings are one line."""
+    text = str(error).strip()
+    return text.splitlines()[0] if text else type(error).__name__
+
+
 class FleetlabError(Exception):
     """Something the user can fix; the message says what is wrong and how to fix it, in one line."""
 

@@ -44,6 +44,7 @@ import torch.nn.functional as F
 from tqdm.auto import tqdm
 
 from ..data.contracts import N_CLASSES
+from ..errors import first_line
 from ..models import batched_logits
 from ..models.train import class_weights
 from .acomerge import AcoMergeConfig, AcoMergeResult, _schedule, acomerge, checked_inputs, mmas_bounds, whale_update
@@ -191,7 +192,7 @@ def graphed(fitness: Callable[[torch.Tensor], torch.Tensor], example: torch.Tens
     try:
         return GraphedFitness(fitness, example)
     except RuntimeError as e:
-        print(f"warning: CUDA graph capture of the fitness failed ({str(e).splitlines()[0]}); running it eagerly",
+        print(f"warning: CUDA graph capture of the fitness failed ({first_line(e)}); running it eagerly",
               file=sys.stderr)
         return fitness
 
@@ -340,9 +341,8 @@ class _Lockstep:
         try:
             return step(self, *args)
         except Exception as e:  # torch.compile raises many types (BackendCompilerFailed, InductorError, ...)
-            first = str(e).splitlines()[0] if str(e) else type(e).__name__
-            print(f"warning: compiling the AcoMerge generation failed ({type(e).__name__}: {first}); running it "
-                  "uncompiled", file=sys.stderr)
+            print(f"warning: compiling the AcoMerge generation failed ({type(e).__name__}: {first_line(e)}); "
+                  "running it uncompiled", file=sys.stderr)
             self.before_draws, self.after_draws = generation_steps(False)
             return plain(self, *args)
 
@@ -480,9 +480,8 @@ class _Replayed:
         except (RuntimeError, AttributeError) as e:
             for g, s in zip(self.gens, states):
                 g.set_state(s)
-            first = str(e).splitlines()[0] if str(e) else type(e).__name__
-            print(f"warning: CUDA graph capture of the AcoMerge {self.name} failed ({first}); running it eagerly",
-                  file=sys.stderr)
+            print(f"warning: CUDA graph capture of the AcoMerge {self.name} failed ({first_line(e)}); "
+                  "running it eagerly", file=sys.stderr)
             return None
 
 

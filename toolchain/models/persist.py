@@ -9,6 +9,7 @@ from typing import Any
 import torch
 
 from ..data.contracts import FEATURE_NAMES
+from ..errors import first_line
 from .mlp import arch_of, build
 
 FORMAT = "fleetlab-model/1"
@@ -47,7 +48,7 @@ def load_model(path: Path | str):
     except EOFError:
         raise ValueError(f"{path}: cannot read model file (empty or cut short)") from None
     except Exception as e:  # torch raises many types for a damaged file (its zip reader's, ...)
-        raise ValueError(f"{path}: cannot read model file ({_first_line(e)})") from None
+        raise ValueError(f"{path}: cannot read model file ({type(e).__name__}: {first_line(e)})") from None
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise ValueError(f"{path}: not a fleetlab model file (expected format {FORMAT})")
     fields = {"arch": str, "feature_names": (list, tuple), "state_dict": dict, "meta": dict}
@@ -67,12 +68,6 @@ def load_model(path: Path | str):
     model.eval()
     meta = dict(payload["meta"], arch=payload["arch"])
     return model, meta
-
-
-def _first_line(error: Exception) -> str:
-    """The error's type and the first line of its text (torch's texts run to paragraphs)."""
-    text = str(error).strip()
-    return f"{type(error).__name__}: {text.splitlines()[0]}" if text else type(error).__name__
 
 
 def _weights_problem(got: dict, expected: dict, arch: str) -> str | None:

@@ -12,6 +12,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "slipest_crc.h" /* slipest_crc16: the packets' checksum */
 #include "slipest_status.h"
 
 #ifdef __cplusplus
@@ -27,14 +28,6 @@ typedef struct {
 
 /** Flag bit of slipest_frame_t.id marking an extended (29-bit) ID. */
 #define SLIPEST_FRAME_EXT 0x80000000u
-
-/**
- * @brief CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, no reflection, no xorout.
- * @param[in] data  bytes to cover (may be NULL when len is 0)
- * @param[in] len   number of bytes
- * @return the CRC
- */
-uint16_t slipest_crc16(const uint8_t *data, size_t len);
 
 /* ---- COBS + CRC packets: COBS(can_id u16 LE, dlc u8, data[dlc], crc u16 LE) 0x00 ---- */
 /** Longest decoded packet payload: 2 + 1 + 8 + 2 bytes. */

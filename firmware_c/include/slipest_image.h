@@ -15,6 +15,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "slipest_crc.h" /* slipest_crc32: the trailer's checksum */
 #include "slipest_image_layout.h"
 #include "slipest_model.h"
 #include "slipest_status.h"
@@ -68,15 +69,6 @@ typedef struct {
 slipest_status_t slipest_image_read(const uint8_t *img, size_t len, uint32_t expect32, slipest_model_q_t *mq,
                                     slipest_image_q_storage_t *qs, slipest_model_f32_t *mf,
                                     slipest_image_f32_storage_t *fs);
-
-/**
- * @brief CRC-32 (IEEE 802.3: reflected polynomial 0xEDB88320, init and final xor 0xFFFFFFFF), as
- *        zlib.crc32 computes it.
- * @param[in] data  bytes to cover
- * @param[in] len   number of bytes
- * @return the CRC
- */
-uint32_t slipest_crc32(const uint8_t *data, size_t len);
 
 #ifdef __cplusplus
 }

@@ -13,22 +13,6 @@
 #define CCS_ABORT 4u
 #define CCS_BLOCK_DOWNLOAD 6u
 
-/* CRC-16 of CiA 301 block transfers: polynomial 0x1021, initial value 0 (XMODEM), bitwise:
- * a few bytes of code instead of a 512-byte table */
-static uint16_t crc16_update(uint16_t crc_in, const uint8_t *data, uint32_t len)
-{
-    uint16_t crc = crc_in;
-    uint32_t i;
-    unsigned b;
-    for (i = 0; i < len; i++) {
-        crc ^= (uint16_t)((uint16_t)data[i] << 8);
-        for (b = 0; b < 8u; b++) {
-            crc = ((crc & 0x8000u) != 0u) ? (uint16_t)((uint16_t)(crc << 1) ^ 0x1021u) : (uint16_t)(crc << 1);
-        }
-    }
-    return crc;
-}
-
 static void frame8(slipest_co_t *co, slipest_frame_t *f)
 {
     f->id = 0x580u + co->node_id;
@@ -286,7 +270,7 @@ static int block_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_f
         return n;
     }
     co->sdo.crc_on = (uint8_t)((cmd >> 2) & 1u);
-    co->sdo.crc = 0u;
+    co->sdo.crc = SLIPEST_CRC16_SDO_INIT;
     co->sdo.seq_ok = 0u;
     co->sdo.seq_bad = 0u;
     co->sdo.state = SLIPEST_CO_SDO_BLOCK;
@@ -315,7 +299,7 @@ static int block_segment(slipest_co_t *co, const slipest_frame_t *in, slipest_fr
             (void)abort_cur(co, code, out);
             return 1 + n;
         }
-        co->sdo.crc = crc16_update(co->sdo.crc, &in->data[1], len);
+        co->sdo.crc = slipest_crc16_update(co->sdo.crc, &in->data[1], len);
         co->sdo.seq_ok = seq;
         if (last != 0u) {
             co->sdo.state = SLIPEST_CO_SDO_BLOCK_END;

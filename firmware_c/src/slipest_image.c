@@ -51,29 +51,6 @@ int16_t slipest_image_s16(uint16_t u) { return s16(u); }
 int32_t slipest_image_s32(uint32_t u) { return s32(u); }
 #endif
 
-/* data is never NULL: slipest_crc32() checks its argument, the stream passes its own bytes */
-static uint32_t crc32_update(uint32_t crc_in, const uint8_t *data, size_t len)
-{
-    uint32_t crc = crc_in;
-    size_t i;
-    int b;
-    for (i = 0; i < len; ++i) {
-        crc ^= data[i];
-        for (b = 0; b < 8; ++b) {
-            crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
-        }
-    }
-    return crc;
-}
-
-uint32_t slipest_crc32(const uint8_t *data, size_t len)
-{
-    if (data == NULL) {
-        return 0u;
-    }
-    return crc32_update(0xFFFFFFFFu, data, len) ^ 0xFFFFFFFFu;
-}
-
 #ifndef SLIPEST_Q_ONLY
 /* IEEE-754 binary32 from its bit pattern (the pattern is assembled byte-order-independently) */
 static float f32_of(uint32_t bits)
@@ -372,7 +349,7 @@ slipest_status_t slipest_image_stream_feed(slipest_image_stream_t *w, const uint
         } else {
             payload_byte(w, p[i]);
         }
-        w->crc = crc32_update(w->crc, &p[i], 1u);
+        w->crc = slipest_crc32_update(w->crc, &p[i], 1u);
     }
     return SLIPEST_OK;
 }

@@ -1,4 +1,4 @@
-/* CRC, COBS and SLCAN codecs: known answers, round trips, chunking, bounds. */
+/* CRCs, COBS and SLCAN codecs: known answers, round trips, chunking, bounds. */
 #include <string.h>
 
 #include "check.h"
@@ -13,9 +13,24 @@ static uint32_t next_rand(void)
 
 static void test_crc(void)
 {
-    /* CRC-16/CCITT-FALSE check value */
-    CHECK(slipest_crc16((const uint8_t *)"123456789", 9) == 0x29B1u);
+    const uint8_t *check = (const uint8_t *)"123456789"; /* the catalogue's check input */
+    uint16_t sdo;
+    uint32_t c32;
+    /* CRC-16/CCITT-FALSE check value (the link's packets) */
+    CHECK(slipest_crc16(check, 9) == 0x29B1u);
     CHECK(slipest_crc16(NULL, 0) == 0xFFFFu);
+    /* CRC-16/XMODEM check value (SDO block downloads): the same update from 0, here in three pieces */
+    sdo = slipest_crc16_update(SLIPEST_CRC16_SDO_INIT, check, 2);
+    sdo = slipest_crc16_update(sdo, &check[2], 0);
+    sdo = slipest_crc16_update(sdo, &check[2], 7);
+    CHECK(sdo == 0x31C3u);
+    CHECK(slipest_crc16_update(0x1234u, NULL, 3) == 0x1234u);
+    /* CRC-32 (zlib.crc32) check value, whole and byte by byte as the image stream runs it */
+    CHECK(slipest_crc32(check, 9) == 0xCBF43926u);
+    c32 = 0xFFFFFFFFu;
+    for (size_t i = 0; i < 9u; i++) c32 = slipest_crc32_update(c32, &check[i], 1u);
+    CHECK((c32 ^ 0xFFFFFFFFu) == 0xCBF43926u);
+    CHECK(slipest_crc32_update(0x1234u, NULL, 3) == 0x1234u);
 }
 
 static void test_cobs_known(void)

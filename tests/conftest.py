@@ -35,3 +35,28 @@ def real_data_dir() -> Path:
             pytest.fail(f"FLEETLAB_REQUIRE_REAL_DATA is set but {msg}", pytrace=False)
         pytest.skip(msg)
     return path
+
+
+# --------------------------------------------------------------- the CANopen node tests' builds and models
+@pytest.fixture(scope="module")
+def bdir() -> Path:
+    """The host build holding the emulator process and the in-process library (the CANopen node's two links)."""
+    from fleetlab.host_tools.emulator import EMULATOR_TARGET, HOST_LIBRARY_TARGET, build
+
+    return build(None, targets=(EMULATOR_TARGET, HOST_LIBRARY_TARGET))
+
+
+@pytest.fixture(scope="module")
+def new_bundle(tmp_path_factory) -> Path:
+    """A second, different SN-S exported as model version 2 (the model to upload)."""
+    from canopen_helpers import export_upload_bundle
+
+    return export_upload_bundle(tmp_path_factory.mktemp("canopen") / "new")
+
+
+@pytest.fixture(scope="module")
+def samples():
+    """100 windows of simulated raw telemetry (int16, DBC channel order) to stream to the node."""
+    from fleetlab.host_tools.sources import sim_source
+
+    return sim_source(0, 0.05).samples_q[: 100 * 12]

@@ -14,59 +14,19 @@ import numpy as np
 import pytest
 
 from fleetlab.canopen_od import objects as od
-from fleetlab.data import features_int as fi
-from fleetlab.export.bundle import export_bundle, load_bundle
-from fleetlab.export.vectors import draw_inputs
+from fleetlab.export.bundle import load_bundle
 from fleetlab.host_tools.canopen_master import EstimateCollector
 from fleetlab.host_tools.canopen_session import CanopenSession, eds_for, stream_telemetry
-from fleetlab.host_tools.emulator import EMULATOR_TARGET, HOST_LIBRARY_TARGET, build, find_artifact
-from fleetlab.host_tools.sources import sim_source
-from fleetlab.host_tools.verify.reference import Reference
+from fleetlab.host_tools.emulator import EMULATOR_TARGET, find_artifact
 
-REPO = Path(__file__).resolve().parents[1]
-EXAMPLE = REPO / "firmware_c" / "bundles" / "example"
-NODE_ID = 5
+from canopen_helpers import EXAMPLE, NODE_ID, REPO, expected_logits, wait_emcy
+
 LINKS = ("inproc", "slcan")
-
-
-@pytest.fixture(scope="module")
-def bdir() -> Path:
-    return build(None, targets=(EMULATOR_TARGET, HOST_LIBRARY_TARGET))
-
-
-@pytest.fixture(scope="module")
-def new_bundle(tmp_path_factory) -> Path:
-    """A second, different SN-S exported as model version 2 (the model to upload)."""
-    from test_export_bundle import small_model
-
-    out = tmp_path_factory.mktemp("canopen") / "new"
-    export_bundle(small_model(seed=9), out, inputs=draw_inputs(200, None, seed=3), model_version=2)
-    return out
-
-
-@pytest.fixture(scope="module")
-def samples() -> np.ndarray:
-    return sim_source(0, 0.05).samples_q[: 100 * 12]
 
 
 def open_session(link: str, bdir: Path, tmp_path: Path) -> CanopenSession:
     return CanopenSession(link, eds_for(bdir), NODE_ID, lib=find_artifact(bdir, "libslipest_host.so"),
                           emulator=find_artifact(bdir, EMULATOR_TARGET), nvm_file=tmp_path / "nvm.bin")
-
-
-def expected_logits(bundle: Path, samples: np.ndarray) -> np.ndarray:
-    logits, _ = Reference.load(bundle).q_logits(fi.featurise_int(samples).features)
-    return logits
-
-
-def wait_emcy(node, code: int, timeout: float = 2.0) -> bool:
-    """True when the node's EMCY log (python canopen's EMCY consumer) holds `code`."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:  # safety net: the wait ends on the EMCY, False when it never comes
-        if any(e.code == code for e in node.emcy.log):
-            return True
-        time.sleep(0.01)
-    return False
 
 
 def heartbeat_reaches(node, state: str, beats: int = 100) -> bool:

@@ -13,14 +13,13 @@ import canopen
 import numpy as np
 import pytest
 
-from fleetlab.export.bundle import load_bundle
 from fleetlab.host_tools.canopen_master import EstimateCollector
 from fleetlab.host_tools.canopen_session import CanopenSession, eds_for, stream_telemetry
 from fleetlab.host_tools.emulator import EMULATOR_TARGET, find_artifact
 from fleetlab.host_tools.verify.upload_faults import (UPLOAD_EFFECTS, UPLOAD_FAULTS, UPLOAD_WIRE_FAULTS,
                                                       SdoFaultBus, faulty_image)
 
-from test_canopen_node import EXAMPLE, NODE_ID, bdir, expected_logits, new_bundle, samples, wait_emcy  # noqa: F401
+from canopen_helpers import EXAMPLE, NODE_ID, expected_logits, wait_emcy
 
 
 def counters(s: CanopenSession, which: str) -> dict[str, int]:

@@ -17,23 +17,18 @@ import torch
 from fleetlab.export import intref
 from fleetlab.export.bundle import check_bundle, export_bundle, load_bundle
 from fleetlab.export.quant import QNet
-from fleetlab.export.vectors import builtin_windows, draw_inputs
+from fleetlab.export.vectors import draw_inputs
 from fleetlab.models import build
 from fleetlab.models.train import train_classifier
 
+from c_check import INCLUDE, build_check
 from planted import LAYER_E_CLAMP, LAYER_E_UNCLAMPED, planted_src
+from required import need_tool as need
 from required import need_tools
-from test_export_c import INCLUDE, build_check, need
+from small_models import quick_model
 
 ARCHS = ["sn-d", "24,9", "256,256,256,256"]
 REPO = Path(__file__).resolve().parents[1]
-
-
-def quick_model(arch: str, seed: int = 4):
-    x = builtin_windows(400, np.random.default_rng(seed)).astype(np.float32)
-    y = np.digitize(x[:, 3] / np.maximum(x[:, 2], 1e-3), [0.08, 0.3]).astype(np.int64)
-    torch.set_num_threads(1)
-    return train_classifier(build(arch, seed=seed), x, y, steps=40, seed=seed)
 
 
 @pytest.fixture(scope="module", params=ARCHS)

@@ -18,21 +18,10 @@ from fleetlab.export import headers, manifest
 from fleetlab.export.bundle import check_bundle, load_bundle
 from fleetlab.export.onnx_export import onnx_logits
 from fleetlab.export.quant import FloatParams, quantize
-from fleetlab.export.vectors import builtin_windows, read_vectors, read_vectors_bin
+from fleetlab.export.vectors import read_vectors, read_vectors_bin
 from fleetlab.models import build, save_model
-from fleetlab.models.train import train_classifier
 
-
-def small_model(seed: int = 5):
-    """An SN-S trained briefly on built-in windows with a rule-based label (fast, not a random net)."""
-    x = builtin_windows(600, np.random.default_rng(seed)).astype(np.float32)
-    y = np.digitize(x[:, 3] / np.maximum(x[:, 2], 1e-3), [0.08, 0.3]).astype(np.int64)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # tiny batches: threads only add overhead
-    try:
-        return train_classifier(build("sn-s", seed=seed), x, y, steps=150, seed=seed)
-    finally:
-        torch.set_num_threads(threads)
+from small_models import small_model
 
 
 class Result:

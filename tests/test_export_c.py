@@ -10,37 +10,21 @@ import pytest
 
 from fleetlab.export.bundle import export_bundle
 from fleetlab.export.vectors import draw_inputs
+
+from c_check import INCLUDE, KERNELS, STRICT, SUPPORT, build_check
 from required import need_tool as need
+from small_models import small_model
 
 REPO = Path(__file__).resolve().parents[1]
-INCLUDE = REPO / "firmware_c" / "include"
-KERNELS = [REPO / "firmware_c" / "src" / "slipest_infer_q.c", REPO / "firmware_c" / "src" / "slipest_infer_f32.c"]
-# model validation and the one vectors.bin reader, linked beside the kernels
-SUPPORT = [REPO / "firmware_c" / "src" / "slipest_model.c", REPO / "firmware_c" / "common" / "slipest_vectors.c",
-           REPO / "firmware_c" / "src" / "slipest_model_hash.c"]
-COMMON = REPO / "firmware_c" / "common"
-CHECK_SRC = REPO / "export" / "c" / "check_vectors.c"
 EXAMPLE = REPO / "firmware_c" / "bundles" / "example"
-STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 ARM_GCC = "arm-none-eabi-gcc"
 
 
 @pytest.fixture(scope="module")
 def fresh_bundle(tmp_path_factory) -> Path:
-    from test_export_bundle import small_model
-
     out = tmp_path_factory.mktemp("cb") / "bundle"
     export_bundle(small_model(seed=9), out, inputs=draw_inputs(1000, None, seed=3))
     return out
-
-
-def build_check(bundle: Path, out: Path, cc: str, flags: list[str]) -> Path:
-    exe = out / f"check_{Path(cc).name}"
-    cmd = [cc, *STRICT, "-O2", *flags, f"-I{INCLUDE}", f"-I{COMMON}", f"-I{bundle}", str(CHECK_SRC),
-           *map(str, KERNELS), *map(str, SUPPORT), "-lm", "-o", str(exe)]
-    res = subprocess.run(cmd, capture_output=True, text=True)
-    assert res.returncode == 0, res.stderr
-    return exe
 
 
 @pytest.mark.parametrize("which", ["fresh", "example"])

@@ -13,13 +13,6 @@ from __future__ import annotations
 import canopen
 import numpy as np
 import pytest
-from test_golden_frames import (
-    NO_FLOAT_CLASS,
-    assert_windows_equal_the_reference,
-    golden_line,
-    golden_lines,
-    node_frames_stream,
-)
 
 from fleetlab.canopen_od import generate
 from fleetlab.canopen_od import objects as od
@@ -28,6 +21,14 @@ from fleetlab.export.bundle import load_bundle
 from fleetlab.export.intref import q_logits_of
 from fleetlab.host_tools.status_codes import status
 from fleetlab.paths import repo_root
+
+from golden_node_frames import (
+    NO_FLOAT_CLASS,
+    assert_windows_equal_the_reference,
+    golden_line,
+    golden_lines,
+    node_frames_stream,
+)
 
 REPO = repo_root()
 GOLDEN = REPO / "firmware_c" / "tests" / "golden" / "co_frames_example.txt"

@@ -144,3 +144,19 @@ def test_argparse_stays_in_the_cli_package():
     outside = {u for u in users if not u.startswith("toolchain/cli/")}
     assert outside <= ARGPARSE_OUTSIDE_CLI.keys(), f"argparse outside toolchain/cli/: {sorted(outside - ARGPARSE_OUTSIDE_CLI.keys())}"
     assert not any(u.startswith("toolchain/assurance/") for u in users)
+
+
+def test_no_test_module_imports_another():
+    """What several test files share lives in conftest.py (fixtures) or a helper module (functions, paths):
+    a test file importing another runs that file's module-level code and ties the two files together."""
+    import ast
+
+    tests = REPO / "tests"
+    names = {p.stem for p in tests.glob("test_*.py")}
+    crossing = []
+    for path in sorted(tests.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            imported = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                        else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            crossing += [f"{path.name}:{node.lineno} imports {m}" for m in imported if m.split(".")[0] in names]
+    assert names and not crossing, "\n".join(crossing)

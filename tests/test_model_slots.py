@@ -29,6 +29,8 @@ from fleetlab.export.vectors import draw_inputs
 from fleetlab.host_tools.emulator import EMULATOR_TARGET, build, find_artifact
 from fleetlab.host_tools.firmware.build import cmake_build
 
+from small_models import quick_model, small_model
+
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "firmware_c" / "bundles" / "example"
 LONG = os.environ.get("FLEETLAB_LONG") == "1"
@@ -44,7 +46,6 @@ def emu() -> Path:
 def models(tmp_path_factory) -> dict:
     """old: the example bundle (version 1, the emulator's built-in model); new: another trained SN-S
     exported as version 2, with its own vectors."""
-    from test_export_bundle import small_model
 
     out = tmp_path_factory.mktemp("slots") / "new"
     export_bundle(small_model(seed=9), out, inputs=draw_inputs(1000, None, seed=3), model_version=2)
@@ -139,7 +140,6 @@ def table_emu() -> Path:
 @pytest.fixture(scope="module")
 def snd_models(tmp_path_factory) -> dict:
     """old: the example SN-S (version 1); new: an SN-D exported as version 2 (a 77 KB format-2 image)."""
-    from test_export_arch import quick_model
 
     out = tmp_path_factory.mktemp("slots-snd") / "new"
     export_bundle(quick_model("sn-d"), out, inputs=draw_inputs(1000, None, seed=3), model_version=2)
@@ -247,7 +247,6 @@ def test_hmac_provisioned_build_refuses_unsigned_and_wrongly_signed_images(keyed
             (name, res.stderr)
         assert "store boot: built-in model" in res.stderr  # still the built-in (old) model
     # the image `fleetlab export --hmac-key` writes (export_bundle(hmac_key=...)) is accepted
-    from test_export_bundle import small_model
 
     from fleetlab.export.bundle import check_bundle
 

@@ -14,7 +14,8 @@ from fleetlab.cli import main
 from fleetlab.export.bundle import load_bundle
 from fleetlab.host_tools.verify.upload_faults import faulty_image
 
-from test_canopen_node import EXAMPLE, bdir, new_bundle  # noqa: F401
+from canopen_helpers import EXAMPLE
+from small_models import quick_model
 
 
 @pytest.mark.parametrize("link", ["canopen", "serial"])
@@ -66,7 +67,6 @@ def snd_bundle(tmp_path_factory):
     """An SN-D (12 -> 128 -> 64 -> 32 -> 3) exported as model version 2: a 77 KB format-2 image."""
     from fleetlab.export.bundle import export_bundle
     from fleetlab.export.vectors import draw_inputs
-    from test_export_arch import quick_model
 
     out = tmp_path_factory.mktemp("upload-snd") / "snd"
     export_bundle(quick_model("sn-d"), out, inputs=draw_inputs(200, None, seed=3), model_version=2)

@@ -1,0 +1,27 @@
+"""The C kernels built straight with a compiler (no CMake) into the bundle-vector checker
+(export/c/check_vectors.c): the paths and the strict flag set the kernel tests share."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+INCLUDE = REPO / "firmware_c" / "include"
+KERNELS = [REPO / "firmware_c" / "src" / "slipest_infer_q.c", REPO / "firmware_c" / "src" / "slipest_infer_f32.c"]
+# model validation and the one vectors.bin reader, linked beside the kernels
+SUPPORT = [REPO / "firmware_c" / "src" / "slipest_model.c", REPO / "firmware_c" / "common" / "slipest_vectors.c",
+           REPO / "firmware_c" / "src" / "slipest_model_hash.c"]
+COMMON = REPO / "firmware_c" / "common"
+CHECK_SRC = REPO / "export" / "c" / "check_vectors.c"
+STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
+
+
+def build_check(bundle: Path, out: Path, cc: str, flags: list[str]) -> Path:
+    """The vector checker for `bundle`, compiled by `cc` with `flags` into `out`; fails the test on a warning."""
+    exe = out / f"check_{Path(cc).name}"
+    cmd = [cc, *STRICT, "-O2", *flags, f"-I{INCLUDE}", f"-I{COMMON}", f"-I{bundle}", str(CHECK_SRC),
+           *map(str, KERNELS), *map(str, SUPPORT), "-lm", "-o", str(exe)]
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    return exe

@@ -128,3 +128,29 @@ def test_options_are_taken_by_their_full_names_only(capsys):
         err = capsys.readouterr().err
         assert stopped.value.code == 2 and f"unrecognized arguments: {unknown}" in err, err
         assert "invalid int" not in err, err
+
+
+def test_a_reader_that_stops_early_is_no_error(tmp_path):
+    """`fleetlab data info DIR | head`: the reader closes the pipe before the output is written. The command
+    stops quietly with 141 (128 + SIGPIPE, as a shell tool would), without Python's broken-pipe message."""
+    sim = tmp_path / "sim"
+    made = _fleetlab(["simulate", "--out", str(sim), "--scale", "0.05"], tmp_path)
+    assert made.returncode == 0, made.stderr
+    proc = subprocess.Popen([sys.executable, "-m", "fleetlab.cli", "data", "info", str(sim)], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()  # the reader is gone before the first line
+    err = proc.stderr.read()
+    assert proc.wait(timeout=120) == 141 and err == "", err
+
+
+def test_a_broken_pipe_elsewhere_is_still_an_error(monkeypatch, capsys):
+    """A pipe other than stdout (an emulator process that died, say) breaking is still said, in one line."""
+    from fleetlab import cli
+    from fleetlab.cli import data
+
+    def broken(args):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(data, "run", broken)
+    assert cli.main(["data", "info", "x"]) == 1
+    assert capsys.readouterr().err == "fleetlab data: error: [Errno 32] Broken pipe\n"

@@ -126,12 +126,8 @@ ARGPARSE_OUTSIDE_CLI = {
     "export/example.py": "maintainer script (python -m), regenerates the example bundle",
     "host_tools/bench_link.py": "fleetlab bench link options (the bench modules' pattern, not yet moved)",
     "host_tools/firmware/bench.py": "fleetlab bench c options (not yet moved)",
-    "host_tools/wire/dbc.py": "the shared --dbc option (not yet moved)",
     "toolchain/data/bench.py": "fleetlab bench data options (not yet moved)",
     "toolchain/data/import_bench.py": "fleetlab bench import options (the bench modules' pattern, not yet moved)",
-    "toolchain/data/info.py": "fleetlab data info options (not yet moved)",
-    "toolchain/data/simulator/cli.py": "fleetlab simulate (not yet moved)",
-    "toolchain/demo.py": "fleetlab demo (not yet moved)",
     "toolchain/fusion/bench.py": "fleetlab bench fusion options (not yet moved)",
 }
 

@@ -110,7 +110,7 @@ def _ctest_summary(log: Path) -> str:
 def _section_c(out: Path, by_name: dict, cortex_note: str | None) -> list[str]:
     lines = ["## C estimator builds", "", "| build | ctest |", "|---|---|"]
     lines.append(f"| host (x86-64) | {_ctest_summary(out / 'logs' / 'build_host.log')} |")
-    cpu = cpu_targets.reference()  # the demo's cross build (toolchain/demo.py)
+    cpu = cpu_targets.reference()  # the demo's cross build (toolchain/cli/demo.py)
     if "build_m4" in by_name:
         lines.append(f"| {cpu.label} | {_ctest_summary(out / 'logs' / 'build_m4.log')} |")
     else:

@@ -14,7 +14,6 @@ that check as a script to refuse an incompatible one (docs/can_interface.md).
 
 from __future__ import annotations
 
-import argparse
 import os
 import struct
 from dataclasses import dataclass
@@ -117,19 +116,6 @@ def use_dbc(path: Path | str | None) -> Path:
     _active = _checked(Path(path))
     os.environ[DBC_ENV] = str(_active)
     return _active
-
-
-def add_dbc_option(parser: argparse.ArgumentParser) -> None:
-    """`--dbc FILE` for the commands that talk CAN (emulate, stream, monitor)."""
-    parser.add_argument("--dbc", type=Path, default=None, metavar="FILE",
-                        help=f"CAN database with the rover's own frame IDs (default: ${DBC_ENV} or "
-                             "dbc/slipest.dbc); must keep the layout of dbc/slipest.dbc. "
-                             "A started emulator is built against it")
-
-
-def apply_dbc_option(args: argparse.Namespace) -> Path:
-    """Select the DBC named by `--dbc` (if given); returns the DBC in use."""
-    return use_dbc(args.dbc) if getattr(args, "dbc", None) is not None else dbc_path()
 
 
 def _checked(path: Path) -> Path:

@@ -1,7 +1,7 @@
 """`fleetlab` command line: one subcommand per everyday task.
 
 The CLI layer sits on top of every library package. Each subcommand is a thin module
-(`fleetlab.cli.<name>` where it has been moved here) providing `add_arguments(parser)`
+(`fleetlab.cli.<name>`) providing `add_arguments(parser)`
 and `run(args) -> int`; `COMMANDS` below is the one table of subcommands. A module is
 imported only when its subcommand runs, so `fleetlab --help` stays fast. Shared option
 groups (data folder, seeds, budgets, jobs, JSON output) are in `options`.
@@ -12,13 +12,15 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
+import os
+import select
 import sys
 
 from ..errors import FleetlabError
 
 # name -> (module, one-line help): the one table of subcommands
 COMMANDS: dict[str, tuple[str, str]] = {
-    "simulate": ("fleetlab.data.simulator.cli", "simulate rover telemetry and write window CSVs (built-in fleet scenario)"),
+    "simulate": ("fleetlab.cli.simulate", "simulate rover telemetry and write window CSVs (built-in fleet scenario)"),
     "data": ("fleetlab.cli.data", "inspect a dataset folder (info) or compare two of them (compare: realism report)"),
     "fuse": ("fleetlab.cli.fuse", "train the experts and fuse them into one model (AcoMerge or any registered method)"),
     "evaluate": ("fleetlab.cli.evaluate", "Monte Carlo cross-validation of AcoMerge against the paper's baselines"),
@@ -30,7 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("fleetlab.cli.bench", "benchmarks: featurisation and simulation, fusion, C inference"),
     "assure": ("fleetlab.cli.assure", "flight-software evidence: MISRA, analysers, stack, coverage, fuzzing report"),
     "c-sources": ("fleetlab.cli.c_sources", "copy the slipest C library (sources, headers, CMake files) out for a firmware build"),
-    "demo": ("fleetlab.demo", "the whole pipeline on built-in defaults, ending in a report"),
+    "demo": ("fleetlab.cli.demo", "the whole pipeline on built-in defaults, ending in a report"),
 }
 
 
@@ -76,6 +78,17 @@ def build_parser(selected: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def _reader_gone() -> bool:
+    """True when the process reading fleetlab's stdout has closed its end of the pipe: polling the write end
+    reports an error then (Linux, macOS). A failed write drops its bytes, so writing again cannot tell."""
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & select.POLLERR for _, events in poller.poll(0))
+    except (AttributeError, OSError, ValueError):  # no poll() here, or stdout is no file
+        return False
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     try:
@@ -87,7 +100,17 @@ def main(argv: list[str] | None = None) -> int:
         build_parser().print_help()
         return 2
     try:
-        return int(importlib.import_module(args._module).run(args) or 0)
+        code = int(importlib.import_module(args._module).run(args) or 0)
+        sys.stdout.flush()  # so that a reader gone away (`| head`) is met here, not in the interpreter's exit
+        return code
+    except BrokenPipeError as e:
+        if not _reader_gone():
+            print(f"fleetlab {args.command}: error: {e}", file=sys.stderr)  # another pipe: bad input as below
+            return 1
+        # `fleetlab data info DIR | head`: the reader has what it wanted. Nothing is wrong, so no message; the
+        # rest of the output goes nowhere, so that the exit's own flush cannot fail again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE: what a shell tool stopped by the same closed pipe returns
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

@@ -1,4 +1,4 @@
-"""`fleetlab data`: `info PATH` (fleetlab.data.info), `compare DIR_A DIR_B` and `import SOURCE...` (this module).
+"""`fleetlab data`: `info PATH`, `compare DIR_A DIR_B` and `import SOURCE...`.
 
 `compare` joins the pure statistics of `fleetlab.data.compare` with the SN-S
 learnability figures of `fleetlab.evaluation.realism`; this module only wires the
@@ -11,17 +11,18 @@ import argparse
 import json
 from pathlib import Path
 
-from ..data import info
 from ..data.compare import compare_statistics
 from ..data.contracts import CLASS_NAMES, FEATURE_NAMES
-from ..data.dataset import ROLE_PATTERN
+from ..data.dataset import ROLE_PATTERN, load_dataset
+from ..data.info import plot_histograms, summarise
 from ..data.log_import import UNASSIGNED, drop_summary, import_log, write_import
 from ..data.rover_profile import load_profile
 from . import dataset_input
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    sub = info.add_arguments(parser)
+    sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    add_info_arguments(sub)
     p = sub.add_parser(
         "compare",
         help="compare two dataset folders role by role (realism report)",
@@ -38,6 +39,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="model seed (default 0)")
     p.add_argument("--no-learnability", action="store_true", help="statistics only, no model training (fast)")
     add_import_arguments(sub)
+
+
+def add_info_arguments(sub) -> None:
+    p = sub.add_parser(
+        "info",
+        help="summarise a dataset folder",
+        description="Rows and class counts per role and per file, and per-feature summary statistics, of a "
+        "dataset folder (one made by 'fleetlab simulate' or a folder of the original Fleet-To-Lab CSV files).",
+    )
+    p.add_argument("path", type=Path, help="dataset folder")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
+    p.add_argument("--plot", type=Path, metavar="FILE", help="write per-class feature histograms to this PNG")
 
 
 def add_import_arguments(sub) -> None:
@@ -172,7 +185,42 @@ def run_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _mix(counts: list[int]) -> str:
+    n = max(sum(counts), 1)
+    return " / ".join(f"{c} ({100 * c / n:.0f}%)" for c in counts)
+
+
+def print_info(s: dict) -> None:
+    print(f"{s['path']}: {s['total_rows']} rows in {len(s['files'])} files (roles from {s['recognised_by']})")
+    if s["rejected_nonfinite_rows"]:
+        print(f"  rejected {s['rejected_nonfinite_rows']} rows holding NaN/Inf")
+    print(f"\n{'role':<16}{'files':>6}{'rows':>7}   low / moderate / high")
+    for role, r in s["roles"].items():
+        print(f"{role:<16}{r['files']:>6}{r['rows']:>7}   {_mix(r['classes'])}")
+    print(f"\n{'file':<70}{'role':<14}{'rows':>6}   classes")
+    for f in s["files"]:
+        name = f["file"] if len(f["file"]) < 70 else "…" + f["file"][-68:]
+        print(f"{name:<70}{f['role']:<14}{f['rows']:>6}   {f['classes']}")
+    print(f"\n{'feature':<20}{'mean':>12}{'std':>12}{'min':>12}{'max':>12}")
+    for name, st in s["features"].items():
+        print(f"{name:<20}{st['mean']:>12.4g}{st['std']:>12.4g}{st['min']:>12.4g}{st['max']:>12.4g}")
+
+
+def run_info(args: argparse.Namespace) -> int:
+    ds = load_dataset(args.path)
+    s = summarise(ds)
+    if args.json:
+        print(json.dumps(s, indent=2))
+    else:
+        print_info(s)
+    if args.plot:
+        plot_histograms(ds, args.plot)
+        if not args.json:
+            print(f"\nwrote {args.plot}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     if args.action == "import":
         return run_import(args)
-    return run_compare(args) if args.action == "compare" else info.run(args)
+    return run_compare(args) if args.action == "compare" else run_info(args)

@@ -18,7 +18,7 @@ from fleetlab.host_tools.emulate import (
 )
 from fleetlab.host_tools.sources import FeatureSource, TelemetrySource, resolve
 from fleetlab.host_tools.verify import stream_faults as fault_mod
-from fleetlab.host_tools.wire.dbc import add_dbc_option, apply_dbc_option
+from .dbc_option import add_dbc_option, apply_dbc_option
 from ..paths import default_bundle
 
 EPILOG = """\

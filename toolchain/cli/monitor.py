@@ -10,7 +10,7 @@ import can
 
 from fleetlab.host_tools.links import open_can_bus
 from fleetlab.host_tools.monitor import monitor_bus, monitor_log
-from fleetlab.host_tools.wire.dbc import add_dbc_option, apply_dbc_option
+from .dbc_option import add_dbc_option, apply_dbc_option
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -12,7 +12,8 @@ from fleetlab.host_tools.emulator import EmulatorProcess, build, find_artifact
 from fleetlab.host_tools.links import CanBusLink, Link, link_class, open_can_bus
 from fleetlab.host_tools.sources import LOG_SUFFIXES, FeatureSource, TelemetrySource, resolve
 from fleetlab.host_tools.stream import TrafficLog, stream, timed_frames
-from fleetlab.host_tools.wire.dbc import WindowEstimate, add_dbc_option, apply_dbc_option
+from fleetlab.host_tools.wire.dbc import WindowEstimate
+from .dbc_option import add_dbc_option, apply_dbc_option
 from ..paths import default_bundle
 
 

@@ -18,11 +18,11 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .fusion.acomerge import AcoMergeConfig
+from ..fusion.acomerge import AcoMergeConfig
 from fleetlab.host_tools.firmware import build as fw_build
 from fleetlab.host_tools.firmware import targets as cpu_targets
-from .models.train import EXPERT_EPOCHS
-from .paths import repo_root
+from ..models.train import EXPERT_EPOCHS
+from ..paths import repo_root
 
 _ACO = AcoMergeConfig()  # the paper's search budget: the full demo runs it as is
 
@@ -186,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
             break  # later stages need this one's output
     bar.close()
     total = time.perf_counter() - t_start
-    from .report import write_report
+    from ..report import write_report
 
     report = write_report(out, stages, total, args, prof,
                           cortex_note=None if cortex_m else _cortex_skip_reason(args, prof, missing))

@@ -9,12 +9,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..contracts import CLASS_NAMES, DEFAULT_RATE_HZ
-from ..dataset import load_dataset
-from .bag import STORAGES
-from .engine import ACCEL_CONVENTIONS, ACCEL_LINEAR
-from .rovers import ROVERS
-from .scenario import DEFAULT_FLEET, SCENARIO, write_scenario
+from ..data.contracts import CLASS_NAMES, DEFAULT_RATE_HZ
+from ..data.dataset import load_dataset
+from ..data.simulator.bag import STORAGES
+from ..data.simulator.engine import ACCEL_CONVENTIONS, ACCEL_LINEAR
+from ..data.simulator.rovers import ROVERS
+from ..data.simulator.scenario import DEFAULT_FLEET, SCENARIO, write_scenario
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -174,15 +174,7 @@ def run_compare(args: argparse.Namespace) -> int:
 
         rep["learnability"] = {side: learnability(ds, seed=args.seed, runs=args.runs).as_dict()
                                for side, ds in (("a", ds_a), ("b", ds_b))}
-    if args.json:
-        print(json.dumps(rep, indent=2))
-    else:
-        print_report(rep)
-    if args.plot:
-        plot_report(rep, args.plot)
-        if not args.json:
-            print(f"\nwrote {args.plot}")
-    return 0
+    return _output(rep, args, print_report, lambda path: plot_report(rep, path))
 
 
 def _mix(counts: list[int]) -> str:
@@ -209,12 +201,17 @@ def print_info(s: dict) -> None:
 def run_info(args: argparse.Namespace) -> int:
     ds = load_dataset(args.path)
     s = summarise(ds)
+    return _output(s, args, print_info, lambda path: plot_histograms(ds, path))
+
+
+def _output(rep: dict, args: argparse.Namespace, print_text, plot) -> int:
+    """The report as one JSON object (--json) or as text tables, then the plot if --plot names a file."""
     if args.json:
-        print(json.dumps(s, indent=2))
+        print(json.dumps(rep, indent=2))
     else:
-        print_info(s)
+        print_text(rep)
     if args.plot:
-        plot_histograms(ds, args.plot)
+        plot(args.plot)
         if not args.json:
             print(f"\nwrote {args.plot}")
     return 0

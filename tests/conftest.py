@@ -49,9 +49,13 @@ def bdir() -> Path:
 @pytest.fixture(scope="module")
 def new_bundle(tmp_path_factory) -> Path:
     """A second, different SN-S exported as model version 2 (the model to upload)."""
-    from canopen_helpers import export_upload_bundle
+    from fleetlab.export.bundle import export_bundle
+    from fleetlab.export.vectors import draw_inputs
+    from small_models import small_model
 
-    return export_upload_bundle(tmp_path_factory.mktemp("canopen") / "new")
+    out = tmp_path_factory.mktemp("canopen") / "new"
+    export_bundle(small_model(seed=9), out, inputs=draw_inputs(200, None, seed=3), model_version=2)
+    return out
 
 
 @pytest.fixture(scope="module")

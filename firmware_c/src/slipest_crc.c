@@ -37,5 +37,6 @@ uint32_t slipest_crc32_update(uint32_t crc, const uint8_t *data, size_t len)
 
 uint32_t slipest_crc32(const uint8_t *data, size_t len)
 {
-    return (data == NULL) ? 0u : (slipest_crc32_update(0xFFFFFFFFu, data, len) ^ 0xFFFFFFFFu);
+    /* NULL: the update leaves the starting value, and the final xor makes it 0 (as documented) */
+    return slipest_crc32_update(0xFFFFFFFFu, data, len) ^ 0xFFFFFFFFu;
 }

@@ -103,14 +103,6 @@ def main(argv: list[str] | None = None) -> int:
         code = int(importlib.import_module(args._module).run(args) or 0)
         sys.stdout.flush()  # so that a reader gone away (`| head`) is met here, not in the interpreter's exit
         return code
-    except BrokenPipeError as e:
-        if not _reader_gone():
-            print(f"fleetlab {args.command}: error: {e}", file=sys.stderr)  # another pipe: bad input as below
-            return 1
-        # `fleetlab data info DIR | head`: the reader has what it wanted. Nothing is wrong, so no message; the
-        # rest of the output goes nowhere, so that the exit's own flush cannot fail again.
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 141  # 128 + SIGPIPE: what a shell tool stopped by the same closed pipe returns
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
@@ -119,7 +111,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"fleetlab {args.command}: error: {e}", file=sys.stderr)
         return 2
     except (ValueError, OSError) as e:
-        # Bad input: one clear line naming what is wrong, no traceback. Bugs still show theirs.
+        if isinstance(e, BrokenPipeError) and _reader_gone():
+            # `fleetlab data info DIR | head`: the reader has what it wanted. Nothing is wrong, so no message;
+            # the rest of the output goes nowhere, so that the exit's own flush cannot fail again.
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 141  # 128 + SIGPIPE: what a shell tool stopped by the same closed pipe returns
+        # Bad input (a pipe other than stdout breaking too): one clear line naming what is wrong, no
+        # traceback. Bugs still show theirs.
         print(f"fleetlab {args.command}: error: {e}", file=sys.stderr)
         return 1
 

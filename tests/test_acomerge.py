@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -25,7 +27,7 @@ from fleetlab.fusion.bench import synthetic_calibration
 from fleetlab.fusion.buffer import make_buffer
 from fleetlab.fusion.finetune import finetune
 from fleetlab.fusion import fitness as fitness_module
-from fleetlab.fusion.fitness import CalibrationFitness
+from fleetlab.fusion.fitness import CalibrationFitness, fitness_seconds
 from fleetlab.models import build, flatten, load_flat, n_params
 from fleetlab.models.train import class_weights
 
@@ -88,6 +90,29 @@ def test_fitness_buffer_reuse_keeps_every_call_independent(cal):
 
     fresh._operands = nan_filled
     assert torch.equal(kept(flats), fresh(flats))
+
+
+def test_fitness_time_counts_each_call_once_on_its_own_thread(cal):
+    """`fitness_seconds` (what evaluate and bench fusion report as the fitness's share): a lone model,
+    evaluated inside as a batch of two, is one call and counted once, and a call on another thread
+    is that thread's, not this one's."""
+    x, y = cal
+    fit = CalibrationFitness("sn-s", x, y)
+    flats = torch.stack([flatten(build("sn-s", seed=s)) for s in range(40)])
+    before = fitness_seconds()
+    t0 = time.perf_counter()
+    for _ in range(20):
+        fit(flats[0])
+        fit(flats)
+    elapsed = time.perf_counter() - t0
+    wall, cpu = (a - b for a, b in zip(fitness_seconds(), before))
+    assert 0.5 * elapsed < wall <= elapsed and cpu > 0
+
+    other = threading.Thread(target=lambda: [fit(flats) for _ in range(5)])
+    here = fitness_seconds()
+    other.start()
+    other.join()
+    assert fitness_seconds() == here
 
 
 def test_fitness_rejects_bad_calibration():

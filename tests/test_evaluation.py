@@ -11,11 +11,13 @@ import numpy as np
 import pytest
 
 from fleetlab.cli import main
+from fleetlab.cores import usable_cores
 from fleetlab.data.dataset import load_dataset
 from fleetlab.evaluation.mccv import EvalSettings, run_mccv
 from fleetlab.evaluation.methods import parse_methods, selectable
 from fleetlab.evaluation.metrics import balanced_accuracy, classification_metrics
 from fleetlab.evaluation.tables import markdown_table
+from fleetlab.fusion.bench import table_figures
 from fleetlab.fusion.registry import Budget
 from required import need_module
 
@@ -166,6 +168,26 @@ def test_timing_says_where_the_cpu_time_went(loky_result, small_settings):
         assert t["method_mean_cpu_s"][m] == pytest.approx(total / small_settings.runs)
     assert t["cpu_s"] == pytest.approx(sum(t["sources_cpu_s"].values()) + sum(t["method_cpu_s"].values()))
     assert t["jobs_without_cpu_time"] == 0
+    # of a job's time, its fitness calls on D_Cal: the searches' share, none for a fine-tuning or a distillation
+    fit = t["method_fitness_cpu_s"]
+    assert fit["earth-ft"] == 0 and fit["distill"] == 0
+    for m in ("acomerge", "evomerge", "modelswarm"):
+        assert 0 < fit[m] < t["method_cpu_s"][m], m
+    assert t["fitness_cpu_s"] == pytest.approx(sum(fit.values()))
+
+
+def test_bench_table_bounds_the_wall_time_without_the_fitness(loky_result):
+    """`bench fusion --table-runs`: the least wall time a table could take if its fitness cost nothing is
+    the command's other CPU seconds over its jobs (or cores); the goal is judged for the goal's table only."""
+    t = loky_result["timing"]
+    process_cpu_s = t["cpu_s"] + 5.0  # start-up and pickling beside the jobs
+    small = table_figures(t, 50.0, process_cpu_s, "sn-s", 2, 2)
+    assert small["wall_s_bound_without_fitness"] == pytest.approx(
+        (process_cpu_s - t["fitness_cpu_s"]) / min(2, usable_cores()), abs=0.01)
+    assert small["method_fitness_cpu_s"] == {m: round(v, 2) for m, v in t["method_fitness_cpu_s"].items()}
+    assert "goal" not in small
+    goal = table_figures(t, 50.0, 1e4, "sn-s", 30, 2)["goal"]
+    assert goal == {"wall_s": 60.0, "met": True, "within_reach_of_a_faster_fitness": False}
 
 
 def test_another_seed_changes_the_search(dataset, small_settings, loky_result):

@@ -148,6 +148,10 @@ def test_bench_reports_idle_and_loaded_runs(capsys):
     busy = json.loads(capsys.readouterr().out)["busy"]
     assert busy["load"] == 1 and busy["run_s_idle"] > 0 and busy["run_s_loaded"] > 0
     assert busy["run_s_loaded_all_cores"] > 0 and 1 <= busy["threads_loaded"] <= busy["threads_all_cores"]
+    # the idle run in two parts: its fitness calls, and what no faster fitness would shorten
+    assert 0 < busy["run_s_idle_in_fitness"] < busy["run_s_idle"]
+    assert busy["run_s_idle_outside_fitness"] == pytest.approx(busy["run_s_idle"] - busy["run_s_idle_in_fitness"],
+                                                               abs=2e-3)
     assert busy["goals"] == {"run_s_idle": 0.35, "run_s_loaded": 0.6,
                              "met": busy["run_s_idle"] <= 0.35 and busy["run_s_loaded"] <= 0.6}
 

@@ -52,6 +52,7 @@ from ..data.dataset import TARGET, Dataset
 from ..data.splits import PROTOCOLS, make_split
 from ..models import batched_logits, canonical_arch
 from ..fusion import registry
+from ..fusion.fitness import fitness_seconds
 from ..fusion.pipeline import (Sources, align_sources, fuse_many, needs_joint, source_device, train_expert_flats,
                                train_joint_flat)
 from ..fusion.registry import Budget
@@ -181,8 +182,9 @@ def run_jobs(cal_size: int, runs: list[int], method: str, src: Sources, target: 
     """Fit one method on several calibration draws (batched where the method batches, i.e.
     AcoMerge on a GPU) and score each on its own test rows. `seconds` is the wall time per run and
     `cpu_seconds` this process's CPU time per run, fit and scoring (the job runs on one thread, so
-    it is the job's own work, whatever else the machine runs)."""
-    c0 = time.process_time()
+    it is the job's own work, whatever else the machine runs), `fitness_cpu_seconds` the part of it
+    spent in fitness calls on D_Cal (0 for the methods that only train)."""
+    c0, f0 = time.process_time(), fitness_seconds()[1]
     with single_threaded_torch():
         splits = [make_split(settings.protocol, target.y, target.groups, cal_size, seed=r) for r in runs]
         draws = [(target.x[sp.cal], target.y[sp.cal], derive_seed(settings.seed, cal_size, r, method_code(method)),
@@ -207,8 +209,10 @@ def run_jobs(cal_size: int, runs: list[int], method: str, src: Sources, target: 
                 "calibration_fit": {k: fit[k] for k in SCALAR_METRICS},
             })
     cpu_seconds = (time.process_time() - c0) / len(runs)
+    fitness_cpu_seconds = (fitness_seconds()[1] - f0) / len(runs)
     for job in out:
         job["cpu_seconds"] = cpu_seconds
+        job["fitness_cpu_seconds"] = fitness_cpu_seconds
     return out
 
 
@@ -426,17 +430,20 @@ def run_mccv(
 
 def cpu_breakdown(jobs: list[dict], source_seconds: dict[str, float], methods: tuple[str, ...]) -> dict:
     """Where the evaluation's CPU time went: the source models' training (CPU seconds of their jobs)
-    and every method's jobs (sum over its runs, and the mean per run). CPU time, not wall time: on a
-    shared machine it is what the work itself cost. Jobs read back by --resume from an older
-    fleetlab may lack it (counted as missing)."""
-    timed = [j for j in jobs if "cpu_seconds" in j]
+    and every method's jobs (sum over its runs, and the mean per run), and of the jobs' time the part
+    spent in fitness calls. CPU time, not wall time: on a shared machine it is what the work itself
+    cost. Jobs read back by --resume from an older fleetlab may lack it (counted as missing)."""
+    timed = [j for j in jobs if "cpu_seconds" in j and "fitness_cpu_seconds" in j]
     per_method = {m: float(sum(j["cpu_seconds"] for j in timed if j["method"] == m)) for m in methods}
+    in_fitness = {m: float(sum(j["fitness_cpu_seconds"] for j in timed if j["method"] == m)) for m in methods}
     sources = {k[: -len("_cpu")]: v for k, v in source_seconds.items() if k.endswith("_cpu")}
     return {
         "sources_cpu_s": sources,
         "method_cpu_s": per_method,
         "method_mean_cpu_s": {m: per_method[m] / max(1, sum(1 for j in timed if j["method"] == m)) for m in methods},
+        "method_fitness_cpu_s": in_fitness,
         "cpu_s": float(sum(sources.values()) + sum(per_method.values())),
+        "fitness_cpu_s": float(sum(in_fitness.values())),
         "jobs_without_cpu_time": len(jobs) - len(timed),
     }
 

@@ -16,6 +16,9 @@ which is one small GEMM for all ants and rows. Other architectures use
 
 from __future__ import annotations
 
+import threading
+import time
+
 import numpy as np
 import torch
 
@@ -23,6 +26,26 @@ from ..data.contracts import N_CLASSES
 from ..models import batched_logits
 from ..models.mlp import LN_EPS, hidden_sizes, param_shapes
 from ..models.train import class_weights
+
+
+class _Clock(threading.local):
+    """Seconds this thread has spent in fitness calls (wall, and CPU of the whole process)."""
+
+    wall_s = 0.0
+    cpu_s = 0.0
+
+
+_CLOCK = _Clock()
+
+
+def fitness_seconds() -> tuple[float, float]:
+    """Wall and process-CPU seconds spent in `CalibrationFitness` calls on this thread so far.
+
+    Why: the fitness is the part of a search that a faster kernel could shorten, and everything
+    else (ant construction, the updates, the other methods' training) is not. `evaluate` and
+    `bench fusion` report both parts, so a speed goal can be checked against what the fitness
+    alone could ever save (issue 30). Per thread, so runs on parallel threads keep their own."""
+    return _CLOCK.wall_s, _CLOCK.cpu_s
 
 
 SUB_CHUNK = 25  # ants per intra-op thread whose activations go from the first GEMM to the head together (piece_size)
@@ -81,6 +104,14 @@ class CalibrationFitness:
         self.neg_row_weight = -self.class_weight[self.y]
 
     def __call__(self, flats: torch.Tensor) -> torch.Tensor:
+        w0, c0 = time.perf_counter(), time.process_time()
+        try:
+            return self._evaluate(flats)
+        finally:
+            _CLOCK.wall_s += time.perf_counter() - w0
+            _CLOCK.cpu_s += time.process_time() - c0
+
+    def _evaluate(self, flats: torch.Tensor) -> torch.Tensor:
         if flats.dim() == 1:
             flats = flats.unsqueeze(0)
         p = flats.shape[0]
@@ -89,7 +120,7 @@ class CalibrationFitness:
         # them, and the last bit can differ: so a single model is evaluated as a batch of two copies,
         # and the chunks are as equal as can be, none of them a lone model.
         if p == 1:
-            return self(flats.expand(2, -1))[:1]
+            return self._evaluate(flats.expand(2, -1))[:1]
         with torch.no_grad():
             if self.fast:  # one call: its activations are made in pieces anyway (_snS)
                 return self._snS(flats)

@@ -7,6 +7,7 @@ frama-c-base) and the test extras (gcovr); a missing tool fails the test naming 
 """
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import subprocess
@@ -82,6 +83,25 @@ def test_misra_findings_are_all_recorded_deviations(misra_findings):
     assert res.total > 0, "the MISRA addon reported nothing: is it running at all?"
     assert not res.unrecorded, "unrecorded MISRA findings (fix them or add a permit): " + "; ".join(
         f"rule {r} in {f}: {n} found, {rec} recorded, lines {res.lines[(r, f)]}" for r, f, n, rec in res.unrecorded)
+    # the record is exact for the library: a count above what is found would hide that many new findings
+    assert not res.stale, "stale MISRA records (lower the counts): " + "; ".join(
+        f"rule {r} in {f}: {n} found, {rec} recorded" for r, f, n, rec in res.stale)
+
+
+def test_misra_checker_finds_a_stale_record_in_the_library_only(tmp_path, misra_findings):
+    """A library count above what is found is stale; a bundle header's count above an SN-S header's is not
+    (a layer-table header has more, MISRA_DEVIATIONS.md MD-2.3)."""
+    from fleetlab.assurance import misra
+
+    text = misra.deviations_file().read_text()
+    row = "| 20.7 | firmware_c/src/slipest_infer_q.c | "
+    start = text.index(row) + len(row)
+    count = int(text[start:text.index(" ", start)])
+    record = tmp_path / "MISRA_DEVIATIONS.md"
+    record.write_text(text.replace(f"{row}{count} ", f"{row}{count + 1} "))
+    res = misra.compare(misra_findings[0], record)
+    assert [(r, f, n, rec) for r, f, n, rec in res.stale] == [("20.7", "firmware_c/src/slipest_infer_q.c", count, count + 1)]
+    assert res.recorded[("2.3", "bundle/slipest_model_q.h")] > res.findings[("2.3", "bundle/slipest_model_q.h")]
 
 
 def test_misra_checker_fails_on_an_unrecorded_deviation(tmp_path, misra_findings):
@@ -314,3 +334,28 @@ def test_assure_refuses_mixed_or_missing_options(capsys):
     assert "--out DIR is required for the report" in capsys.readouterr().err
     assert main(["assure", "--out", "x", "--no-eva", "stack"]) == 1
     assert "--out, --no-eva: options of the full report, not of 'assure stack'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("check", [None, "misra", "stack"])
+def test_assure_refuses_a_broken_bundle_in_one_line(tmp_path, capsys, check):
+    """A bundle with an edited file, or an ONNX-only one, is one line before any tool runs (before, the report
+    ended in a compiler's traceback and `assure misra` counted what cppcheck could parse of a half-model)."""
+    from fleetlab.cli import main
+
+    edited = tmp_path / "edited"
+    shutil.copytree(BUNDLE, edited)
+    header = edited / "slipest_model_q.h"
+    header.write_text(header.read_text().replace("#include", "#include  ", 1))  # two bytes more
+    onnx_only = tmp_path / "onnx_only"
+    onnx_only.mkdir()
+    manifest = json.loads((BUNDLE / "manifest.json").read_text())
+    manifest.pop("quantization")
+    manifest["files"] = {}
+    (onnx_only / "manifest.json").write_text(json.dumps(manifest))
+    for bundle, message in ((edited, f"slipest_model_q.h: {header.stat().st_size} bytes, manifest.json says "
+                                       f"{header.stat().st_size - 2} (truncated or edited)"), (onnx_only, "an ONNX-only bundle has no C model")):
+        args = ["assure", "--bundle", str(bundle), *(["--out", str(tmp_path / "report")] if check is None else [check])]
+        assert main(args) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "report").exists()

@@ -9,10 +9,10 @@ from __future__ import annotations
 import hashlib
 import json
 import re
-import sys
 import time
 from pathlib import Path
 
+from fleetlab.export.bundle import load_bundle
 from fleetlab.host_tools.firmware import targets as target_registry
 from fleetlab.host_tools.firmware.measure import target_costs
 from fleetlab.host_tools.firmware.build import cmake_build
@@ -42,6 +42,14 @@ def bundle_hashes(bundle: Path) -> tuple[bool, str, str]:
         ok &= match
         rows.append(f"| {name} | `{entry['sha256'][:16]}…` | {'yes' if match else 'NO (' + got[:16] + ')'} |")
     return ok, hashlib.sha256(manifest.read_bytes()).hexdigest(), "\n".join(rows)
+
+
+def checked_bundle(bundle: Path) -> Path:
+    """The bundle, once it is known to be whole and to have a C model: a missing, truncated or edited file,
+    or an ONNX-only export, is one line here rather than a compiler's error inside some analyser."""
+    if load_bundle(bundle).qparams is None:
+        raise ValueError(f"{bundle}: an ONNX-only bundle has no C model to check (export it without --onnx-only)")
+    return bundle
 
 
 def soft_float_target() -> target_registry.Target:
@@ -98,8 +106,8 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
     if target:
         for t in (soft_float_target(), target_registry.reference()):
             t.need_tools(f"fleetlab assure (the {t.name} build; --no-target skips it)")
+    bundle = checked_bundle((bundle or default_bundle()).resolve())  # again: assure() is also called directly
     out.mkdir(parents=True, exist_ok=True)
-    bundle = (bundle or default_bundle()).resolve()
     t_start = time.perf_counter()
     sections, summary, gating_ok = [], [], True
 

@@ -13,8 +13,8 @@ from pathlib import Path
 from fleetlab.host_tools.firmware import targets as target_registry
 
 from ..assurance import analysers, coverage, misra, stack, wcet
-from ..assurance.report import assure
-from ..paths import build_root
+from ..assurance.report import assure, checked_bundle
+from ..paths import build_root, default_bundle
 
 __all__ = ["add_arguments", "run"]
 
@@ -117,6 +117,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # a broken bundle is one line before any tool runs: a check would otherwise fail inside its compiler
+    # or, worse, report on what it could parse (MISRA's counts of a half-built model)
+    args.bundle = checked_bundle(args.bundle or default_bundle())
     if args.check is not None:
         given = [f"--{k.replace('_', '-')}" for k in REPORT_ONLY if getattr(args, k) not in (None, False)]
         if given:

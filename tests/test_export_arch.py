@@ -209,6 +209,24 @@ def test_misra_record_covers_a_layer_table_bundle(snd_bundle):
     assert in_headers == {k: n for k, n in res.recorded.items() if k[1].startswith(misra.BUNDLE_FILES)}
 
 
+def test_a_build_folder_follows_its_bundle_to_the_layer_table_and_back(snd_bundle, tmp_path):
+    """CMake's SLIPEST_LAYER_TABLE defaults to what the bundle needs, also when one build folder is configured
+    again with another bundle (`fleetlab assure` on an SN-S bundle, then on an SN-D one, refused the second:
+    the folder's cache kept OFF); a value given by hand stays."""
+    example = REPO / "firmware_c" / "bundles" / "example"
+
+    def configure(folder: str, bundle: Path, *options: str) -> str:
+        build = tmp_path / folder
+        proc = subprocess.run(["cmake", "-S", str(REPO), "-B", str(build), f"-DSLIPEST_BUNDLE={bundle}", *options],
+                              capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        return re.search(r"^SLIPEST_LAYER_TABLE:BOOL=(\w+)$", (build / "CMakeCache.txt").read_text(), re.M)[1]
+
+    assert [configure("a", b) for b in (example, snd_bundle, example)] == ["OFF", "ON", "OFF"]
+    by_hand = [configure("b", example, "-DSLIPEST_LAYER_TABLE=ON"), configure("b", snd_bundle), configure("b", example)]
+    assert by_hand == ["ON", "ON", "ON"]
+
+
 def test_emulator_serves_an_sn_d_bundle_bit_exact_over_slcan(snd_bundle):
     """`fleetlab emulate --bundle SN-D --link slcan`: the emulator process built with the bundle's
     layer-table headers, simulated telemetry over a real pty, every window bit-exact with intref."""

@@ -857,7 +857,7 @@ static uint32_t shifted_sum(const int32_t *h, unsigned n, unsigned k1)
                          : "cc", "memory");
     }
 #else
-    while (p != h_end) {
+    while (p < h_end) {
         usum += (uint32_t)rsr_h(p[0], half, k1) + (uint32_t)rsr_h(p[1], half, k1);
         p = &p[2];
     }
@@ -871,7 +871,7 @@ static uint32_t shifted_sum(const int32_t *h, unsigned n, unsigned k1)
  * and of e to 2^14 (|e| <= 2^e_bits <= 2^13) never act either; the constant bounds (one SSAT each on
  * M3/M4/M7) are what the rounding, e * e and norm_z need. s is unsigned. */
 #define CENTRE_LOOP(HSAT)                                                                                      \
-    while (p != h_end) {                                                                                      \
+    while (p < h_end) {                                                                                       \
         const int32_t hr_ = rsr_h(*p, half1, k1);                                                             \
         const int32_t hp_ = (HSAT);                                                                           \
         const int32_t e_ = SAT(rsr_h(SAT(nh * hp_ - sum, 30), half, k2), 14);                                 \
@@ -1077,7 +1077,7 @@ static void hidden_pass(const slipest_layer_q_t *l, const int32_t *e, int32_t mu
     const int16_t *const table = l->gelu;
     uint32_t ns = *sat; /* a local held in a register */
 
-    while (ep != e_end) {
+    while (ep < e_end) {
         /* |z| < 2^15 (|e| <= sqrt(v), c <= SLIPEST_Q_C_MAX), |gamma z| < 2^30; the output is the next
          * block's int16 input as it is: the requantisation is folded into its weights */
         *op = (int16_t)hidden_out(*gp, *bp, table, u_shift, u_half, to_q15, *ep, mult, &ns);

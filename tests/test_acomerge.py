@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -92,24 +91,34 @@ def test_fitness_buffer_reuse_keeps_every_call_independent(cal):
     assert torch.equal(kept(flats), fresh(flats))
 
 
-def test_fitness_time_counts_each_call_once_on_its_own_thread(cal):
+class _TickClock:
+    """A clock that moves one second each time it is read: a call timed once adds exactly 1."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        self.now += 1.0
+        return self.now
+
+
+def test_fitness_time_counts_each_call_once_on_its_own_thread(cal, monkeypatch):
     """`fitness_seconds` (what evaluate and bench fusion report as the fitness's share): a lone model,
     evaluated inside as a batch of two, is one call and counted once, and a call on another thread
-    is that thread's, not this one's."""
+    is that thread's, not this one's. Simulated clocks: each call adds exactly one tick to each sum."""
+    monkeypatch.setattr(fitness_module.time, "perf_counter", _TickClock())
+    monkeypatch.setattr(fitness_module.time, "process_time", _TickClock())
     x, y = cal
     fit = CalibrationFitness("sn-s", x, y)
     flats = torch.stack([flatten(build("sn-s", seed=s)) for s in range(40)])
     before = fitness_seconds()
-    t0 = time.perf_counter()
-    for _ in range(20):
+    for _ in range(5):
         fit(flats[0])
         fit(flats)
-    elapsed = time.perf_counter() - t0
-    wall, cpu = (a - b for a, b in zip(fitness_seconds(), before))
-    assert 0.5 * elapsed < wall <= elapsed and cpu > 0
+    assert tuple(a - b for a, b in zip(fitness_seconds(), before)) == (10.0, 10.0)
 
-    other = threading.Thread(target=lambda: [fit(flats) for _ in range(5)])
     here = fitness_seconds()
+    other = threading.Thread(target=lambda: [fit(flats) for _ in range(5)])
     other.start()
     other.join()
     assert fitness_seconds() == here

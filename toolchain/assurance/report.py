@@ -106,7 +106,7 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
     if target:
         for t in (soft_float_target(), target_registry.reference()):
             t.need_tools(f"fleetlab assure (the {t.name} build; --no-target skips it)")
-    bundle = checked_bundle((bundle or default_bundle()).resolve())  # again: assure() is also called directly
+    bundle = checked_bundle((bundle or default_bundle()).resolve())  # a broken bundle: one line, before any tool
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     sections, summary, gating_ok = [], [], True

@@ -117,10 +117,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    # a broken bundle is one line before any tool runs: a check would otherwise fail inside its compiler
-    # or, worse, report on what it could parse (MISRA's counts of a half-built model)
-    args.bundle = checked_bundle(args.bundle or default_bundle())
     if args.check is not None:
+        # a broken bundle is one line before the check runs: it would otherwise fail inside its compiler or,
+        # worse, report on what it could parse (MISRA's counts of a half-built model); the report checks it itself
+        args.bundle = checked_bundle(args.bundle or default_bundle())
         given = [f"--{k.replace('_', '-')}" for k in REPORT_ONLY if getattr(args, k) not in (None, False)]
         if given:
             raise ValueError(f"{', '.join(given)}: options of the full report, not of 'assure {args.check}'")

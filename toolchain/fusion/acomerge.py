@@ -387,8 +387,10 @@ def evaluate_ants(
     non-explorers) share one evaluation. Later in a search most explorers leave the greedy path at
     one to three indices, and about one in eight builds the same model as another ant of its
     generation (often where the pheromone of an index is split between two candidates): those
-    share one too. The fitness gives a model the same J in any batch (`CalibrationFitness`), so
-    sharing changes no number. The call holds the distinct explorers in ant order, then the greedy
+    share one too. Every ant that built a model takes the J of that model's one row of this one
+    call, so sharing is exact by construction on any CPU: no J crosses from one call or batch shape
+    to another (in a call of another size a model's J may differ in its last bit, see
+    `CalibrationFitness`). The call holds the distinct explorers in ant order, then the greedy
     model if some ant kept to it. The bookkeeping is numpy's on the departures alone (its calls cost
     a few microseconds where torch's cost ten).
     """

@@ -115,12 +115,11 @@ class CalibrationFitness:
         if flats.dim() == 1:
             flats = flats.unsqueeze(0)
         p = flats.shape[0]
-        # A model's J must not depend on which others share its call (AcoMerge evaluates each distinct
-        # ant once, in calls of any size). MKL multiplies a lone matrix another way than a batch of
-        # them, and the last bit can differ: so a single model is evaluated as a batch of two copies,
-        # and the chunks are as equal as can be, none of them a lone model.
-        if p == 1:
-            return self._evaluate(flats.expand(2, -1))[:1]
+        # A model's J is the same bits only within one call: MKL and OpenBLAS pick GEMM kernels by the
+        # matrices' shapes and by the CPU, so the same model in a call of another size can differ in
+        # its last bit (2 to 12 of 33 lone models did, on AMD Zen 2-4 and Intel Haswell; issue 42).
+        # Nothing relies on more: AcoMerge gives ants that built one model the J of that model's row
+        # of one call (`acomerge.evaluate_ants`). Across calls, sizes and CPUs J agrees to rounding.
         with torch.no_grad():
             if self.fast:  # one call: its activations are made in pieces anyway (_snS)
                 return self._snS(flats)

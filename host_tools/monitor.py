@@ -3,6 +3,10 @@
 Every frame is decoded with the DBC (cantools); estimates are shown once their three
 frames arrived, status frames as one line. Frames the DBC does not know, or with the
 wrong length, are counted and shown — never skipped silently.
+
+The node's STATUS counters count over its whole life, and the monitor may start long after it: the first status
+report seen is the baseline (shown as the node's totals), every later one also shows its counters as the
+difference from that baseline (across a wrap), i.e. what happened while the monitor watched.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import can
 
 from .links import from_message
 from .sources import log_messages
+from .stream import status_delta
 from .wire.dbc import Frame, OutputAssembler, StatusReport, WindowEstimate, by_id
 from .wire.serial_framing import Rejected
 
@@ -27,6 +32,13 @@ class MonitorStats:
     statuses: list[StatusReport] = field(default_factory=list)
     unknown: int = 0  # frames not in the DBC or not decodable
     problems: list[str] = field(default_factory=list)
+
+    def counters(self) -> StatusReport | None:
+        """The last status report with its counters counted from the first one seen (the baseline): what the node
+        did while it was watched. None before two reports."""
+        if len(self.statuses) < 2:
+            return None
+        return status_delta(self.statuses[-1], self.statuses[0])
 
 
 class Monitor:
@@ -58,13 +70,23 @@ class Monitor:
             return (f"estimate window {out.window_counter}: class {cls} (f32 {out.slip_class_f32}) flags "
                     f"{out.flags:#04x} n {out.n_samples} sat {out.saturations} logits {out.logits}")
         if isinstance(out, StatusReport):
-            self.stats.statuses.append(out)
-            return (f"status: model {out.model_hash:08x} v{out.lib_version >> 8}.{out.lib_version & 0xFF} "
-                    f"windows {out.windows_done} rx {out.frames_received} rejected {out.frames_rejected} "
-                    f"dropped {out.samples_dropped} flagged {out.windows_flagged}")
+            return self.status_line(out)
         if self.show_all:
             return f"{codec.name} {codec.decode_dict(frame.data)}"
         return None
+
+    def status_line(self, st: StatusReport) -> str:
+        """Record a status report; its line: the node's totals, and from the second report on the counters since
+        the first one (the monitor's start)."""
+        self.stats.statuses.append(st)
+        line = (f"status: model {st.model_hash:08x} v{st.lib_version >> 8}.{st.lib_version & 0xFF} "
+                f"windows {st.windows_done} rx {st.frames_received} rejected {st.frames_rejected} "
+                f"dropped {st.samples_dropped} flagged {st.windows_flagged}")
+        d = self.stats.counters()
+        if d is not None:
+            line += (f"; since the monitor started: windows {d.windows_done} rx {d.frames_received} rejected "
+                     f"{d.frames_rejected} dropped {d.samples_dropped} flagged {d.windows_flagged}")
+        return line
 
 
 def monitor_bus(bus: can.BusABC, duration: float = 0.0, count: int = 0, show: Callable[[str], None] | None = print,

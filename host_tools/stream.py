@@ -5,13 +5,17 @@ vectors, FEATURES frames), a folder of window CSVs (FEATURES frames) or a python
 (.log candump / .asc / .blf; only the frames the HOST sends per the DBC are replayed).
 Real time (`--realtime`: 50 Hz samples, or the log's own timing) or as fast as possible.
 Everything sent and received can be logged with `--log FILE` in python-can's formats.
+
+The estimator's STATUS counters count over its whole life (a node that ran before, and will run after, this
+command). A stream first asks for the status (CONTROL 2) and takes the answer as its baseline: every counter it
+reports or checks is the difference from that baseline, modulo the counter's width in the DBC (so across a wrap).
 """
 
 from __future__ import annotations
 
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterable, Iterator
 
@@ -42,15 +46,49 @@ SAMPLE_RATE_HZ = 50.0
 WINDOW_PERIOD_S = SAMPLES_PER_WINDOW / SAMPLE_RATE_HZ
 
 
+# the STATUS counters (StatusReport fields) and their DBC messages; model_hash and lib_version are not counters
+STATUS_COUNTERS = {"windows_done": "STATUS_MODEL", "frames_received": "STATUS_RX", "frames_rejected": "STATUS_RX",
+                   "samples_dropped": "STATUS_LOSS", "windows_flagged": "STATUS_LOSS"}
+
+
+def counter_delta(now: int, start: int, bits: int = 32) -> int:
+    """How much a `bits`-wide counter rose from `start` to `now`, across a wrap (less than one full turn)."""
+    return (now - start) % (1 << bits)
+
+
+def status_counter_bits() -> dict[str, int]:
+    """Width in bits of each STATUS counter, from the DBC in use (windows_done is 16 bits, the others 32)."""
+    db = database()
+    return {name: db.get_message_by_name(msg).get_signal_by_name(name).length
+            for name, msg in STATUS_COUNTERS.items()}
+
+
+def status_delta(now: StatusReport | None, start: StatusReport | None) -> StatusReport | None:
+    """`now` with every counter read as the difference from `start` (None: `now` as reported, i.e. counted from
+    the node's start)."""
+    if now is None or start is None:
+        return now
+    bits = status_counter_bits()
+    return replace(now, **{k: counter_delta(getattr(now, k), getattr(start, k), bits[k]) for k in STATUS_COUNTERS})
+
+
 @dataclass
 class StreamStats:
-    frames_sent: int = 0
+    frames_sent: int = 0  # the stream's frames: CONTROL reset, the source's frames, CONTROL status
     windows_sent: int = 0
     estimates: list[WindowEstimate] = field(default_factory=list)
-    status: StatusReport | None = None
+    node_start: StatusReport | None = None  # the node's answer to the status request before the stream (baseline)
+    node_status: StatusReport | None = None  # the node's last STATUS report as sent (its lifetime counters)
     rx_errors: list[str] = field(default_factory=list)
     wall_s: float = 0.0
     pacer: Pacer | None = None  # the real-time schedule kept (a realtime stream only)
+
+    @property
+    def status(self) -> StatusReport | None:
+        """The node's last STATUS report with its counters counted from the baseline: what this stream caused.
+        The baseline's answer counts the status request itself, so after the final status request
+        `status.frames_received == frames_sent` when no frame was lost."""
+        return status_delta(self.node_status, self.node_start)
 
 
 def timed_frames(source: TelemetrySource | FeatureSource | Path, limit: int = 0,
@@ -102,13 +140,21 @@ class TrafficLog:
 def stream(link: Link, frames: Iterable[tuple[Frame, float | None, bool]], realtime: bool, log: TrafficLog,
            wait_s: float = 5.0, on_estimate=None, total: int | None = None, progress: bool = True,
            clock=None) -> StreamStats:
-    """Send CONTROL reset, the frames, CONTROL status; collect every answer. A realtime stream sends each
-    frame at its due time on `clock` (the wall clock unless a test gives fleetlab.host_tools.pacing's
-    SimulatedClock)."""
+    """Ask for the node's status (its answer is the baseline of the counters), then send CONTROL reset, the
+    frames, CONTROL status; collect every answer. A realtime stream sends each frame at its due time on `clock`
+    (the wall clock unless a test gives fleetlab.host_tools.pacing's SimulatedClock). The node may have run
+    before: `stats.status` counts from the baseline (`stats.node_status` is the node's report as sent)."""
     stats = StreamStats()
-    if realtime:
-        stats.pacer = Pacer(clock or WallClock())
     asm = OutputAssembler()
+    awaiting_baseline = True
+
+    def discard_pending() -> None:
+        """Answers queued before this command (a previous command's, an interrupted one's) are not ours."""
+        while True:
+            try:
+                link.rx.get_nowait()
+            except Exception:
+                return
 
     def drain() -> None:
         while True:
@@ -126,7 +172,10 @@ def stream(link: Link, frames: Iterable[tuple[Frame, float | None, bool]], realt
                 if on_estimate:
                     on_estimate(out)
             elif isinstance(out, StatusReport):
-                stats.status = out
+                if awaiting_baseline:
+                    stats.node_start = out  # the answer to the status request sent before the stream
+                else:
+                    stats.node_status = out
 
     def send(frame: Frame) -> None:
         link.write([WireItem(frame)])
@@ -134,6 +183,22 @@ def stream(link: Link, frames: Iterable[tuple[Frame, float | None, bool]], realt
         stats.frames_sent += 1
 
     t0 = time.perf_counter()
+    discard_pending()
+    # the baseline: not one of the stream's frames (not in frames_sent), but counted by the node in its answer
+    request = control_frame(CONTROL_STATUS)
+    link.write([WireItem(request)])
+    log(request, False)
+    deadline = time.monotonic() + wait_s
+    while stats.node_start is None and time.monotonic() < deadline:
+        drain()
+        if stats.node_start is None:
+            time.sleep(0.002)
+    awaiting_baseline = False
+    if stats.node_start is None:
+        stats.rx_errors.append(f"no answer to the status request within {wait_s:g} s: the counters are the "
+                               "node's totals, not this stream's")
+    if realtime:
+        stats.pacer = Pacer(clock or WallClock())  # the schedule starts after the baseline's round trip
     send(control_frame(CONTROL_RESET))
     # closed before any error of the source (a malformed log) is printed, so that it gets a line of its own
     with tqdm(total=total, unit="frame", desc=f"stream {link.name}", disable=not progress, unit_scale=True) as bar:
@@ -145,12 +210,13 @@ def stream(link: Link, frames: Iterable[tuple[Frame, float | None, bool]], realt
             bar.update(1)
             if stats.frames_sent % 64 == 0:
                 drain()
-    sent_before_status = stats.frames_sent
     send(control_frame(CONTROL_STATUS))
     deadline = time.monotonic() + wait_s
     while time.monotonic() < deadline:
         drain()
-        if stats.status is not None and stats.status.frames_received >= sent_before_status + 1:
+        # the answer to the final request (periodic reports come before it, with fewer frames counted)
+        st = stats.status
+        if st is not None and st.frames_received >= stats.frames_sent:
             break
         time.sleep(0.005)
     stats.rx_errors.extend(asm.errors)

@@ -6,6 +6,9 @@ The transfer is an SDO block download (CRC-checked) of the DOMAIN object 0x2000 
 socketcan, ...) or over the serial link's COBS packets. Every frame of the transfer is counted
 and its bits on a CAN bus are computed (stuff bits exactly), so the report states the bus time
 at a given bit rate.
+
+The node may have run long before the command and keeps running after it: its counters (0x2003, 0x2005, all
+UNSIGNED32) are read at the start and reported as differences from there (across a wrap), with the totals beside.
 """
 
 from __future__ import annotations
@@ -76,6 +79,11 @@ class UploadReport:
         return asdict(self)
 
 
+def counters_since(now: dict[str, int], start: dict[str, int]) -> dict[str, int]:
+    """Each UNSIGNED32 counter's rise from `start` to `now` (across a wrap)."""
+    return {k: (v - start.get(k, 0)) % (1 << 32) for k, v in now.items()}
+
+
 def explain(e: Exception) -> str:
     """One line for an SDO failure: the abort code and its meaning."""
     if isinstance(e, canopen.SdoAbortedError):
@@ -142,6 +150,7 @@ def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Pat
     first = samples[: windows * fi.SAMPLES_PER_WINDOW]
     second = samples[windows * fi.SAMPLES_PER_WINDOW: 2 * windows * fi.SAMPLES_PER_WINDOW]
     m = session.master
+    counters_start, store_start = m.counters(), m.store_counters()  # the node may have run before
     m.node.tpdo.read()
     col = EstimateCollector(m.node)
     m.node.nmt.state = "OPERATIONAL"
@@ -151,6 +160,11 @@ def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Pat
     streamer = threading.Thread(target=lambda: sent.append(stream_telemetry(session, first, col)), daemon=True)
     streamer.start()
     if not col.wait_for(2, 20):
+        rejected = counters_since(m.counters(), counters_start)["frames_rejected"]
+        if rejected:
+            raise OSError(f"the node rejected {rejected} telemetry frames of this rehearsal and sent no estimates: "
+                          "its sample counter is past this rehearsal's (which starts at 0), as on a node that ran "
+                          "before; reset it (NMT reset node) to rehearse on it")
         raise OSError("the node sends no estimates (is it operational?)")
     t0 = time.monotonic()
     report = upload_image(session, tap, image, activate=False, block=block, progress=progress)
@@ -172,6 +186,7 @@ def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Pat
     if not col.wait_for(n1 + n, 20):
         raise OSError(f"windows lost after activation: {col.count() - n1} of {n}")
     phase2 = np.array([e.logits for e in col.estimates[n1:]])
+    counters, store = m.counters(), m.store_counters()
     ref2 = Reference.load(new_bundle).q_logits(fi.featurise_int(second).features)[0]
     return {
         "upload": report.as_dict() | {"windows_during_upload": during},
@@ -182,5 +197,9 @@ def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Pat
         "boot_model_bit_exact": exact1,
         "windows_after_activation": int(len(phase2)),
         "new_model_bit_exact": bool(np.array_equal(phase2, ref2)),
-        "store_counters": m.store_counters(),
+        # what this rehearsal did to the node's counters (it may have run before), and the node's totals
+        "store_counters": counters_since(store, store_start),
+        "counters": counters_since(counters, counters_start),
+        "store_counters_total": store,
+        "counters_total": counters,
     }

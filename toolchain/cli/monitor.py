@@ -49,4 +49,9 @@ def run(args: argparse.Namespace) -> int:
             return 130
     print(f"{stats.frames} frames: {len(stats.estimates)} estimates, {len(stats.statuses)} status reports, "
           f"{stats.unknown} unknown/undecodable, {len(stats.problems)} problems")
+    d = stats.counters()  # the node may have run long before the monitor: counted from the first status seen
+    if d is not None:
+        print(f"estimator while watched (first to last status): windows done {d.windows_done}, frames received "
+              f"{d.frames_received}, rejected {d.frames_rejected}, samples dropped {d.samples_dropped}, "
+              f"windows flagged {d.windows_flagged}")
     return 0

@@ -108,11 +108,15 @@ def run(args: argparse.Namespace) -> int:
           f"received {len(stats.estimates)} estimates")
     if skipped:
         print(f"log {source}: not sent again: " + ", ".join(f"{n} {what}" for what, n in sorted(skipped.items())))
-    st = stats.status
+    st = stats.status  # the node's counters since this stream's start (it may have run before)
     if st is not None:
         print(f"estimator: frames received {st.frames_received}, rejected {st.frames_rejected}, samples dropped "
               f"{st.samples_dropped}, windows flagged {st.windows_flagged}, windows done {st.windows_done}, "
               f"model {st.model_hash:08x}")
+        if stats.node_start is not None and stats.node_start.frames_received > 1:  # not a fresh node
+            tot = stats.node_status
+            print(f"estimator totals since its start: frames received {tot.frames_received}, windows done "
+                  f"{tot.windows_done} (the counters above are this stream's)")
     for e in stats.rx_errors[:10]:
         print(f"PROBLEM: {e}")
     if args.log:

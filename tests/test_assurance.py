@@ -118,23 +118,224 @@ def test_misra_checker_fails_on_an_unrecorded_deviation(tmp_path, misra_findings
 
 
 # --------------------------------------------------------------------------- 4 coverage
-def test_c_tests_cover_the_library():
-    """gcov statement/branch coverage of src/*.c by ctest. The issue's goal is >= 95 % statements
-    and >= 90 % branches; the floors here are what this branch's C tests reach (regressions fail)."""
+def _with_a_failing_c_test(real_run):
+    """coverage's `run`, adding one C test that fails (`false`) to the build's test list just before ctest runs
+    (configure writes the list again, so the next measurement in the folder is clean)."""
+    def run(cmd, **kwargs):
+        if Path(str(cmd[0])).name == "ctest":
+            build = Path(cmd[cmd.index("--test-dir") + 1])
+            with open(build / "CTestTestfile.cmake", "a") as f:
+                f.write(f'add_test(planted_failure "{shutil.which("false")}")\n')
+        return real_run(cmd, **kwargs)
+    return run
+
+
+@pytest.fixture(scope="module")
+def coverage_runs(tmp_path_factory):
+    """Two coverage measurements, one after the other in one build folder outside the source tree (where
+    FLEETLAB_BUILD_ROOT or a wheel's cache puts it): an SN-D bundle (layer-table) with one planted failing C test,
+    then the example SN-S bundle. Two coverage builds, about 30 s on a 2-core machine (with the SN-D export)."""
+    from fleetlab.assurance import coverage
+    from fleetlab.export.bundle import export_bundle
+    from fleetlab.export.vectors import draw_inputs
+    from small_models import quick_model
+
+    snd = tmp_path_factory.mktemp("coverage-snd") / "bundle"
+    export_bundle(quick_model("sn-d"), snd, inputs=draw_inputs(1000, None, seed=3))
+    build = tmp_path_factory.mktemp("coverage-outside-the-tree") / "coverage"
+    assert not build.resolve().is_relative_to(REPO)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(coverage, "run", _with_a_failing_c_test(coverage.run))
+        layer_table = coverage.measure(build, snd)
+    return layer_table, coverage.measure(build, BUNDLE)
+
+
+def test_c_tests_cover_the_library(coverage_runs):
+    """gcov statement/branch coverage of src/*.c by ctest, from a build folder outside the source tree (before,
+    gcovr got `--root /` there and ended in "maximum recursion depth exceeded"). The issue's goal is >= 95 %
+    statements and >= 90 % branches; the floors here are what this branch's C tests reach (regressions fail)."""
     from fleetlab.assurance import coverage
 
-    res = coverage.measure(REPO / "build" / "test-coverage")  # inside the repo: gcovr needs that
-    assert "100% tests passed" in res.ctest_summary
+    res = coverage_runs[1]
+    assert "100% tests passed" in res.ctest_summary and not res.ctest_failure
     names = {f.name for f in res.files}
     assert {"firmware_c/src/slipest_node.c", "firmware_c/src/slipest_infer_q.c", "generated/slipest_dbc.c"} <= names
     hw = res.handwritten()
-    # floors = what the C tests reach (99.0 % / 92.0 % with the model store and the CANopen node in the
+    # floors = what the C tests reach (98.8 % / 91.3 % with the model store and the CANopen node in the
     # library), minus a small margin; the issue's goal is 95 % / 90 %. What stays uncovered and why:
     # docs/assurance.md
     assert hw.line_pct >= 98.5, coverage.table(res)
     assert hw.branch_pct >= 91.0, coverage.table(res)
     # every file the tests reach is listed with real counts (a broken gcov run gives zeros)
     assert all(f.lines > 0 and f.lines_hit > 0 for f in res.files), coverage.table(res)
+    assert coverage.headline(res) == (f"{hw.line_pct:.1f} % statements, {hw.branch_pct:.1f} % branches "
+                                      f"(goal 95 % / 90 %)", True)
+
+
+def test_coverage_forgets_the_objects_of_an_earlier_configuration(coverage_runs):
+    """The SN-S measurement after a layer-table one in the same folder counts only what the SN-S build compiles:
+    before, the stale slipest_image_table.c.gcno was counted at 0 % (88.3 % statements, "FAIL")."""
+    layer_table, sn_s = coverage_runs
+    assert "firmware_c/src/slipest_image_table.c" in {f.name for f in layer_table.files}
+    assert "firmware_c/src/slipest_image_table.c" not in {f.name for f in sn_s.files}
+    assert sn_s.removed_stale > 0
+
+
+def test_a_failing_c_test_is_recorded_not_raised(coverage_runs):
+    """A failing ctest is a failed row with its names, and the coverage is still measured (before: RuntimeError
+    "ctest exited 8", and no report)."""
+    from fleetlab.assurance import coverage
+
+    layer_table = coverage_runs[0]
+    text, ok = coverage.ctest_line(layer_table)
+    assert not ok and re.fullmatch(r"ctest: 1 of \d+ tests failed: planted_failure", text), text
+    assert layer_table.handwritten().line_pct > 0
+
+
+def test_layer_table_coverage_is_shown_and_not_held_to_the_goal(coverage_runs):
+    """A layer-table bundle's coverage is measured and shown; the goal, held on SN-S bundles, is said not to apply
+    (the store's, the node's and the model checks' C tests run on SN-S images only): no FAIL, no pass."""
+    from fleetlab.assurance import coverage
+
+    layer_table = coverage_runs[0]
+    assert layer_table.layer_table
+    text, ok = coverage.headline(layer_table)
+    hw = layer_table.handwritten()
+    assert ok is None
+    assert text.startswith(f"{hw.line_pct:.1f} % statements, {hw.branch_pct:.1f} % branches (layer-table bundle")
+    assert "applies to SN-S bundles only" in text
+
+
+def _coverage_result(lines_hit: int, branches_hit: int, **fields):
+    """A coverage result of 1000 statements and 1000 branches in src/*.c and a codec far below the goal."""
+    from fleetlab.assurance.coverage import CoverageResult, FileCoverage
+
+    return CoverageResult([FileCoverage("firmware_c/src/slipest_node.c", 1000, lines_hit, 1000, branches_hit),
+                           FileCoverage("generated/slipest_dbc.c", 500, 300, 100, 30)],
+                          "100% tests passed, 0 tests failed out of 17", "gcovr 8.8", **fields)
+
+
+def _name(fn, name):
+    fn.__name__ = name
+    return fn
+
+
+@pytest.fixture
+def fast_checks(monkeypatch):
+    """The report's MISRA, analyser and stack checks replaced by instant clean results, so that a test of what
+    `assure` does with the coverage check's result takes a second, not minutes."""
+    from fleetlab.assurance import analysers, misra, stack
+
+    monkeypatch.setattr(misra, "check", lambda bundle=None: misra.compare([]))
+    for fn in ("clang_tidy", "gcc_analyzer", "strict_warnings"):
+        monkeypatch.setattr(analysers, fn, _name(lambda bundle=None, fn=fn: analysers.ToolResult(fn, version="x"), fn))
+    monkeypatch.setattr(stack, "analyse", lambda bundle, q_only: ([], []))
+
+
+def _report(tmp_path, capsys) -> tuple[int, str, str, str]:
+    """`fleetlab assure` without EVA and the CPU targets: exit status, assurance.md, stdout, stderr."""
+    from fleetlab.cli import main
+
+    code = main(["assure", "--bundle", str(BUNDLE), "--out", str(tmp_path / "report"), "--no-eva", "--no-target"])
+    out, err = capsys.readouterr()
+    md = tmp_path / "report" / "assurance.md"
+    return code, md.read_text() if md.exists() else "", out, err
+
+
+COVERAGE_CASES = {
+    # src/*.c above the goal, the codec far below it: pass (before, `assure coverage` printed the total with the
+    # codec, 85.9 % "(goal 95.0)", and exited 0 while the report said 98.8 % pass)
+    "above": ((988, 913), {}, "98.8 % statements, 91.3 % branches (goal 95 % / 90 %)", "pass", 0),
+    # below the goal: FAIL and exit 1, in the report and alone (before: exit 0, and the report's FAIL beside
+    # "Gating checks: all pass")
+    "below": ((940, 913), {}, "94.0 % statements, 91.3 % branches (goal 95 % / 90 %)", "FAIL", 1),
+    # a layer-table bundle: measured, shown, not held to the goal
+    "layer-table": ((610, 496), {"layer_table": True}, "61.0 % statements, 49.6 % branches (layer-table bundle: "
+                    "measured, not held to the goal, which applies to SN-S bundles only", "—", 0),
+}
+
+
+@pytest.mark.parametrize("case", sorted(COVERAGE_CASES))
+def test_coverage_has_one_headline_in_the_report_and_alone(case, tmp_path, capsys, monkeypatch, fast_checks):
+    """`fleetlab assure coverage` and the report give the same figure, the same verdict and the same exit status."""
+    from fleetlab.assurance import coverage
+    from fleetlab.cli import main
+
+    (lines, branches), fields, text, verdict, status = COVERAGE_CASES[case]
+    monkeypatch.setattr(coverage, "measure", lambda build, bundle=None: _coverage_result(lines, branches, **fields))
+    assert main(["assure", "--bundle", str(BUNDLE), "coverage", "--build", str(tmp_path / "b")]) == status
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith(f"Coverage by the C tests (src/*.c): {text}"), last
+    assert last.endswith("" if verdict == "—" else f": {verdict}"), last
+    code, md, out, err = _report(tmp_path, capsys)
+    assert code == status and not err, err
+    row = next(l for l in md.splitlines() if l.startswith("| Coverage by the C tests (src/*.c) |"))
+    assert row.startswith(f"| Coverage by the C tests (src/*.c) | {text}") and row.endswith(f"| {verdict} |"), row
+    assert row in out  # the terminal shows the report's summary
+    assert ("Gating checks: all pass." in md) == (status == 0)
+
+
+def test_a_failing_check_is_a_row_of_the_report_and_the_others_are_kept(tmp_path, capsys, monkeypatch, fast_checks):
+    """A check whose tool fails (here the coverage build: a command exiting 8) and a failing C test are FAIL rows
+    with their reasons; every other check is still in the report; the command exits 1 with one summary line and
+    no traceback (before: the RuntimeError's traceback, and no report)."""
+    from fleetlab.assurance import coverage, sources
+
+    monkeypatch.setattr(coverage, "measure", lambda build, bundle=None: sources.run(
+        ["sh", "-c", "echo 'coverage.c:1: error: planted' >&2; exit 8"], check=True))
+    code, md, out, err = _report(tmp_path, capsys)
+    assert code == 1 and not err, err
+    assert ("| Coverage by the C tests (src/*.c) | did not finish: sh exited 8: coverage.c:1: error: planted | FAIL |"
+            in md)
+    assert "| MISRA C:2012 (cppcheck addon) | 0 findings in 0 rules, 0 unrecorded | pass |" in md
+    assert "| No recursion (call-graph cycle check) | acyclic | pass |" in md
+    assert "Gating checks: FAILED, 1 of 7: Coverage by the C tests (src/*.c)." in out.splitlines()
+
+    monkeypatch.setattr(coverage, "measure", lambda build, bundle=None: _coverage_result(
+        988, 913, ctest_failure="ctest: 1 of 18 tests failed: planted_failure"))
+    code, md, out, err = _report(tmp_path, capsys)
+    assert code == 1 and not err, err
+    assert "| C tests (ctest, host build with coverage) | ctest: 1 of 18 tests failed: planted_failure | FAIL |" in md
+    assert "| Coverage by the C tests (src/*.c) | 98.8 % statements, 91.3 % branches (goal 95 % / 90 %) | pass |" in md
+    assert "Gating checks: FAILED, 1 of 8: C tests (ctest, host build with coverage)." in out.splitlines()
+
+
+def _failing(stderr: str, stdout: str = ""):
+    """A stand-in for sources.run: every command exits 1 with this output."""
+    from fleetlab.host_tools.firmware.build import Result
+
+    return lambda cmd, **kwargs: Result([str(c) for c in cmd], 1, stdout, stderr)
+
+
+def test_a_tool_that_fails_is_one_line_not_a_traceback(tmp_path, capsys, monkeypatch):
+    """cppcheck, Frama-C, a build step, and a missing FPU-less target are the project's one-line error
+    (FleetlabError) with the line that says why; `fleetlab assure CHECK` prints that line and exits 2."""
+    from fleetlab.assurance import analysers, coverage, misra, report, sources
+    from fleetlab.cli import main
+    from fleetlab.errors import FleetlabError
+
+    with monkeypatch.context() as mp:
+        mp.setattr(misra, "run", _failing("cppcheck: error: unrecognized command line option\nmore"))
+        with pytest.raises(FleetlabError, match=r"^cppcheck exited 1: cppcheck: error: unrecognized command line "
+                                                r"option$"):
+            misra.run_cppcheck(BUNDLE)
+    with monkeypatch.context() as mp:
+        mp.setattr(analysers, "run", _failing("[kernel] User Error: stopping\n[kernel] Frama-C aborted: invalid user input."))
+        with pytest.raises(FleetlabError, match=r"^frama-c on eva_\w+ exited 1: \[kernel\] User Error: stopping$"):
+            analysers.frama_c_eva(BUNDLE, entries=["eva_features"])
+    with monkeypatch.context() as mp:
+        mp.setattr(report.target_registry, "discover", lambda: {})
+        with pytest.raises(FleetlabError, match="no ARM target without an FPU"):
+            report.soft_float_target()
+    with pytest.raises(FleetlabError, match=r"^python\S* exited 3: last words$"):
+        sources.run([sys.executable, "-c", "import sys; print('noise'); print('last words', file=sys.stderr); sys.exit(3)"],
+                    check=True)
+
+    monkeypatch.setattr(coverage, "measure", lambda build, bundle=None: sources.run(
+        ["cmake", "--build", str(tmp_path / "nowhere")], check=True))
+    assert main(["assure", "--bundle", str(BUNDLE), "coverage", "--build", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("fleetlab assure: error: cmake --build exited 1: "), err
 
 
 # --------------------------------------------------------------------------- 2 static analysers

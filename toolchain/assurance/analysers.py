@@ -12,7 +12,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .sources import concurrently, fw, generate_dbc, include_dirs, library_sources, need, rel, run
+from .sources import ToolFailed, concurrently, fw, generate_dbc, gist, include_dirs, library_sources, need, rel, run
 
 STRICT_WARNINGS = ["-Wall", "-Wextra", "-pedantic", "-Wconversion", "-Wsign-conversion", "-Wcast-align",
                    "-Wshadow", "-Wstrict-prototypes"]
@@ -113,7 +113,9 @@ def frama_c_eva(bundle: Path | None = None, entries: list[str] | None = None,
                    "-eva", "-main", entry], timeout=3600)
         text = res.stdout + res.stderr
         if res.returncode != 0 or f"done for function {entry}" not in text:
-            raise RuntimeError(f"frama-c failed on {entry}:\n{text[-3000:]}")
+            why = (f"exited {res.returncode}: {gist(res.stderr, res.stdout)}" if res.returncode
+                   else f"the analysis stopped before its end (no 'done for function {entry}')")
+            raise ToolFailed(f"frama-c on {entry} {why}", text[-3000:])
         alarms = []
         # each message starts with "[eva...]"; an alarm is "[eva:alarm] FILE:LINE: Warning:" + indented text
         for chunk in re.split(r"\n(?=\[)", text):

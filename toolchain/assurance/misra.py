@@ -18,7 +18,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .sources import fw, generate_dbc, include_dirs, library_sources, need, rel, run
+from .sources import ToolFailed, fw, generate_dbc, gist, include_dirs, library_sources, need, rel, run
 
 _FINDING = re.compile(r"^(?P<file>[^:\n]+):(?P<line>\d+):misra-c2012-(?P<rule>[\d.]+)$", re.M)
 # a counts-table row: | 15.5 | firmware_c/src/slipest_node.c | 12 | MD-15.5 |
@@ -72,7 +72,7 @@ def run_cppcheck(bundle: Path | None = None, work: Path | None = None,
                 file, ln, ident = line.rsplit(":", 2)
                 other.append(f"{rel(file, gen.parent)}:{ln}: {ident}")
         if "misra" not in res.stderr and res.returncode != 0:
-            raise RuntimeError(f"cppcheck failed:\n{res.stderr[-3000:]}")
+            raise ToolFailed(f"cppcheck exited {res.returncode}: {gist(res.stderr, res.stdout)}", res.stderr[-3000:])
         version = run([cppcheck, "--version"]).stdout.strip()
     return found, other, version
 

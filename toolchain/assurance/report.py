@@ -1,15 +1,21 @@
 """``fleetlab assure --bundle DIR --out DIR``: run every assurance check on one bundle and write
 one evidence report (OUT/assurance.md and OUT/assurance.html) built only from what the tools
 printed in this run (plus the statistics file of the last long fuzz campaign, named in the report).
-Exit status 1 when a gating check fails: bundle hashes, float-free archive, unrecorded MISRA
-findings, a finding of clang-tidy / gcc -fanalyzer / the strict warnings, recursion.
+Exit status 1 when a gating check fails, i.e. when any row of the report's summary says FAIL: bundle
+hashes, float-free archive, unrecorded MISRA findings, a finding of clang-tidy / gcc -fanalyzer / the strict
+warnings, an EVA alarm, recursion, a stack bound below the measured peak, coverage below its goal on an SN-S
+bundle or a failing C test, a crash in the last fuzz campaign. A check whose tool fails (a build, ctest, gcovr,
+cppcheck, Frama-C) is recorded as such a row with the line that says why; the other checks are still reported.
 """
 from __future__ import annotations
 
 import hashlib
 import json
 import re
+import subprocess
+import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from fleetlab.export.bundle import load_bundle
@@ -17,8 +23,9 @@ from fleetlab.host_tools.firmware import targets as target_registry
 from fleetlab.host_tools.firmware.measure import target_costs
 from fleetlab.host_tools.firmware.build import cmake_build
 from . import analysers, coverage, misra, stack, wcet
+from ..errors import FleetlabError, first_line
 from ..paths import build_root, default_bundle, in_clone, repo_root
-from .sources import concurrently, need, run, tool_version
+from .sources import concurrently, gist, need, run, tool_version
 
 
 def default_fuzz_stats() -> list[Path]:
@@ -52,13 +59,25 @@ def checked_bundle(bundle: Path) -> Path:
     return bundle
 
 
+COVERAGE_ROW = "Coverage by the C tests (src/*.c)"
+CTEST_ROW = "C tests (ctest, host build with coverage)"
+
+
+def gating_line(failing: list[str], rows: int) -> str:
+    """The report's verdict in one line: every row that says FAIL, named."""
+    if not failing:
+        return "Gating checks: all pass."
+    return f"Gating checks: FAILED, {len(failing)} of {rows}: {'; '.join(failing)}."
+
+
 def soft_float_target() -> target_registry.Target:
     """The ARM target without an FPU that builds both libraries (the issue's float-free check is on its
     fixed-point archive: a float helper there would reach a user who links it on an FPU-less core)."""
     for t in target_registry.discover().values():
         if not t.fpu and not t.integer_only and t.compiler == "arm-none-eabi-gcc":
             return t
-    raise RuntimeError("no ARM target without an FPU in firmware_c/cmake (the float-free check needs one)")
+    raise FleetlabError("no ARM target without an FPU in firmware_c/cmake (the float-free check needs one): "
+                        "reinstall fleetlab, or run `fleetlab assure --no-target`")
 
 
 def float_free(build_m3: Path, description: str) -> tuple[bool, str]:
@@ -96,11 +115,50 @@ def required_tools(eva: bool, target: bool) -> list[str]:
     return tools
 
 
+@dataclass
+class CheckFailed:
+    """A check that could not finish (its build, ctest, gcovr, cppcheck or Frama-C failed): the one line that
+    says why, and the tail of the tool's output for the report."""
+    check: str
+    reason: str
+    output: str = ""
+
+
+# what a check raises when one of its tools fails (sources.ToolFailed, the build driver's OSError, a parser's
+# ValueError); the report records it as a failed check and keeps the others. A bug still shows its traceback.
+CHECK_ERRORS = (FleetlabError, OSError, ValueError, RuntimeError, subprocess.SubprocessError)
+
+
+def guarded(name: str, call):
+    """`call`, returning CheckFailed instead of raising one of CHECK_ERRORS."""
+    def run_check():
+        try:
+            return call()
+        except CHECK_ERRORS as e:
+            rest = "\n".join(str(e).splitlines()[1:])
+            output = getattr(e, "output", "") or rest
+            reason = first_line(e)
+            if rest and not getattr(e, "output", ""):  # the build driver's OSError: its command, then the output
+                reason += f": {gist(rest)}"
+            return CheckFailed(name, reason, output[-3000:])
+    return run_check
+
+
+def _output_block(output: str) -> str:
+    """A failed tool's output as a code block after its reason ("" when it printed nothing)."""
+    return f"\n\n```\n{output.strip()}\n```\n" if output.strip() else ""
+
+
+def _failed_section(title: str, failed: CheckFailed) -> str:
+    return _section(title, f"**FAILED** (the check did not finish): {failed.reason}" + _output_block(failed.output))
+
+
 def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, eva: bool = True,
            target: bool = True) -> int:
     """Run every check on `bundle` (default: the example bundle), write OUT/assurance.md and .html; 1 when a
-    gating check fails. `eva=False` skips Frama-C EVA, `target=False` the cross builds (float-free archive,
-    measured cost)."""
+    gating check fails (every row of the summary that says FAIL). A check whose tool fails (a build, ctest,
+    cppcheck, Frama-C) is such a row, with its reason; the other checks are still run and reported. `eva=False`
+    skips Frama-C EVA, `target=False` the cross builds (float-free archive, measured cost)."""
     for tool in required_tools(eva, target):
         need(tool)
     if target:
@@ -109,19 +167,29 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
     bundle = checked_bundle((bundle or default_bundle()).resolve())  # a broken bundle: one line, before any tool
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
-    sections, summary, gating_ok = [], [], True
+    sections, summary, gated, failing = [], [], [], []
 
     def summary_row(item: str, result: str, ok: bool | None) -> None:
+        """One row of the summary; a row that says FAIL fails the report (ok None: shown, not gating)."""
+        result = result.replace("|", "\\|")  # a tool's line may hold one: it would split the table's cell
         summary.append(f"| {item} | {result} | {'pass' if ok else ('—' if ok is None else 'FAIL')} |")
+        if ok is not None:
+            gated.append(item)
+            if not ok:
+                failing.append(item)
+
+    def did_not_finish(item: str, title: str, failed: CheckFailed) -> None:
+        summary_row(item, f"did not finish: {failed.reason}", False)
+        sections.append(_failed_section(title, failed))
 
     # bundle
     ok, manifest_hash, rows = bundle_hashes(bundle)
-    gating_ok &= ok
     summary_row("Bundle hashes (manifest.json)", f"manifest sha256 `{manifest_hash[:16]}…`", ok)
     sections.append(_section("Bundle", f"Bundle: `{bundle}`\n\nmanifest.json sha256: `{manifest_hash}`\n\n{rows}"))
 
     # The checks are independent tools in their own folders: they run side by side (a 2-core machine takes
     # the report in about half the time), the longest first, and the report is written from their results.
+    # A check whose tool fails comes back as CheckFailed: the others are kept.
     checks = {"eva": lambda: analysers.frama_c_eva(bundle)} if eva else {}
     if target:
         checks["target"] = lambda: target_evidence(bundle)
@@ -133,45 +201,58 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
         "stack_q": lambda: stack.analyse(bundle, q_only=True),
         "stack_full": lambda: stack.analyse(bundle, q_only=False),
     })
-    done = dict(zip(checks, concurrently(list(checks.values()))))
+    done = dict(zip(checks, concurrently([guarded(name, call) for name, call in checks.items()])))
 
     # target builds: float-free archive, measured stack and cost
     measured, wcet_result = {}, None
     if target:
-        soft, (ok, body), measured, wcet_result = done["target"]
-        gating_ok &= ok
-        summary_row(f"Float-free fixed-point archive ({soft.description})", "0 soft-float symbols" if ok
-                    else "soft-float found", ok)
-        sections.append(_section("Float-free check", body))
+        if isinstance(done["target"], CheckFailed):
+            did_not_finish("Float-free fixed-point archive, measured stack and cost (CPU target builds)",
+                           "Float-free check", done["target"])
+        else:
+            soft, (ok, body), measured, wcet_result = done["target"]
+            summary_row(f"Float-free fixed-point archive ({soft.description})", "0 soft-float symbols" if ok
+                        else "soft-float found", ok)
+            sections.append(_section("Float-free check", body))
 
     # MISRA
     m = done["misra"]
-    gating_ok &= not m.unrecorded
-    summary_row("MISRA C:2012 (cppcheck addon)", f"{m.total} findings in {len(m.by_rule())} rules, "
-                f"{len(m.unrecorded)} unrecorded", not m.unrecorded)
-    by_rule = "\n".join(f"| {r} | {n} |" for r, n in sorted(m.by_rule().items(), key=lambda kv: misra._rule_key(kv[0])))
-    unrec = "\n".join(f"- rule {r} in {f}: {n} found, {rec} recorded" for r, f, n, rec in m.unrecorded) or "none"
-    sections.append(_section("MISRA C:2012", f"{m.version}; deviations: `firmware_c/MISRA_DEVIATIONS.md` "
-                             f"(one permit per rule).\n\n| Rule | Findings |\n|---|---:|\n{by_rule}\n\n"
-                             f"Unrecorded findings: {unrec}\n\nOther cppcheck findings (style, not gating): "
-                             f"{len(m.other)}\n\n" + "\n".join(f"- {o}" for o in m.other)))
+    if isinstance(m, CheckFailed):
+        did_not_finish("MISRA C:2012 (cppcheck addon)", "MISRA C:2012", m)
+    else:
+        summary_row("MISRA C:2012 (cppcheck addon)", f"{m.total} findings in {len(m.by_rule())} rules, "
+                    f"{len(m.unrecorded)} unrecorded", not m.unrecorded)
+        by_rule = "\n".join(f"| {r} | {n} |" for r, n in sorted(m.by_rule().items(), key=lambda kv: misra._rule_key(kv[0])))
+        unrec = "\n".join(f"- rule {r} in {f}: {n} found, {rec} recorded" for r, f, n, rec in m.unrecorded) or "none"
+        sections.append(_section("MISRA C:2012", f"{m.version}; deviations: `firmware_c/MISRA_DEVIATIONS.md` "
+                                 f"(one permit per rule).\n\n| Rule | Findings |\n|---|---:|\n{by_rule}\n\n"
+                                 f"Unrecorded findings: {unrec}\n\nOther cppcheck findings (style, not gating): "
+                                 f"{len(m.other)}\n\n" + "\n".join(f"- {o}" for o in m.other)))
 
     # analysers
     rows = ["| Analyser | Findings | Seconds |", "|---|---:|---:|"]
     details = []
-    for fn in (analysers.strict_warnings, analysers.gcc_analyzer, analysers.clang_tidy):
+    for fn, label in ((analysers.strict_warnings, "gcc strict warnings"), (analysers.gcc_analyzer, "gcc -fanalyzer"),
+                      (analysers.clang_tidy, "clang-tidy")):
         r = done[fn.__name__]
-        gating_ok &= r.clean
+        if isinstance(r, CheckFailed):
+            rows.append(f"| {label} | did not finish | |")
+            summary_row(label, f"did not finish: {r.reason}", False)
+            details.append(f"- {label} FAILED: {r.reason}" + _output_block(r.output))
+            continue
         rows.append(f"| {r.name} | {len(r.findings)} | {r.seconds:.1f} |")
         summary_row(r.name, f"{len(r.findings)} findings", r.clean)
         details += [f"- {f}" for f in r.findings]
     eva_text = "Frama-C EVA skipped (--no-eva)."
-    if eva:
+    if eva and isinstance(done["eva"], CheckFailed):
+        failed = done["eva"]
+        summary_row("Frama-C EVA", f"did not finish: {failed.reason}", False)
+        eva_text = f"**FAILED** (the analysis did not finish): {failed.reason}" + _output_block(failed.output)
+    elif eva:
         eva = done["eva"]
         eva_rows = ["| EVA entry (all int16 inputs) | Alarms | Seconds |", "|---|---:|---:|"]
         alarm_rows = [f"- {e.entry}: `{a}`" for e in eva for a in e.alarms]
         for e in eva:
-            gating_ok &= not e.alarms
             eva_rows.append(f"| {e.entry} | {len(e.alarms)} | {e.seconds:.1f} |")
             summary_row(f"Frama-C EVA {e.entry}", f"{len(e.alarms)} alarms", not e.alarms)
         options = "; ".join(f"{entry}: `{' '.join(analysers.EVA_OPTIONS + opts)}`"
@@ -183,28 +264,34 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
                              + "\n\n### Frama-C EVA\n\n" + eva_text))
 
     # stack
-    rows_q, cycles = done["stack_q"]
-    rows_full, cycles_full = done["stack_full"]
-    no_rec = not cycles and not cycles_full
-    gating_ok &= no_rec
-    summary_row("No recursion (call-graph cycle check)", "acyclic" if no_rec else f"cycles: {cycles + cycles_full}", no_rec)
-    worst = {r.function: r.bytes for r in rows_q}
-    body = "Frames from `-fstack-usage -fcallgraph-info=su` (arm-none-eabi-gcc, Cortex-M4 flags of the target build).\n\n"
-    if measured:
+    stack_failed = next((done[k] for k in ("stack_q", "stack_full") if isinstance(done[k], CheckFailed)), None)
+    if stack_failed:
+        did_not_finish("No recursion (call-graph cycle check)", "Worst-case stack", stack_failed)
+    else:
+        rows_q, cycles = done["stack_q"]
+        rows_full, cycles_full = done["stack_full"]
+        no_rec = not cycles and not cycles_full
+        summary_row("No recursion (call-graph cycle check)", "acyclic" if no_rec else f"cycles: {cycles + cycles_full}", no_rec)
+        worst = {r.function: r.bytes for r in rows_q}
+        body = "Frames from `-fstack-usage -fcallgraph-info=su` (arm-none-eabi-gcc, Cortex-M4 flags of the target build).\n\n"
         # the painter measures a wrapper in the cost image: compare the wrapper's bound with it
-        harness = stack.bench_bounds(bundle)
-        cmp_rows = ["| Entry (cost-image wrapper) | Entry bound | Wrapper bound (bytes) | Measured peak, painted (bytes) "
-                    "| bound >= measured |", "|---|---:|---:|---:|---|"]
-        for fn, key in (("slipest_infer_q", "stack_q"), ("slipest_node_handle", "stack_node_window")):
-            ok = harness[key] >= measured[key]
-            cmp_rows.append(f"| {fn} ({stack.BENCH_WRAPPERS[key]}) | {worst[fn]} | {harness[key]} | {measured[key]:.0f} "
-                            f"| {'yes' if ok else 'NO'} |")
-            summary_row(f"Stack bound {fn}", f"{worst[fn]} B; with the bench wrapper {harness[key]} B bound vs "
-                        f"{measured[key]:.0f} B measured", ok)
-        body += "\n".join(cmp_rows) + "\n\n"
-    body += "### Fixed-point library (slipest_q)\n\n" + stack.table(rows_q)
-    body += "\n\n### Full library (with the float path)\n\n" + stack.table(rows_full[:6])
-    sections.append(_section("Worst-case stack", body))
+        harness = guarded("stack_bench", lambda: stack.bench_bounds(bundle))() if measured else None
+        if isinstance(harness, CheckFailed):
+            summary_row("Stack bounds of the cost image's wrappers", f"did not finish: {harness.reason}", False)
+            body += f"**FAILED** (the wrappers' bounds): {harness.reason}" + _output_block(harness.output) + "\n\n"
+        elif measured:
+            cmp_rows = ["| Entry (cost-image wrapper) | Entry bound | Wrapper bound (bytes) | Measured peak, painted (bytes) "
+                        "| bound >= measured |", "|---|---:|---:|---:|---|"]
+            for fn, key in (("slipest_infer_q", "stack_q"), ("slipest_node_handle", "stack_node_window")):
+                ok = harness[key] >= measured[key]
+                cmp_rows.append(f"| {fn} ({stack.BENCH_WRAPPERS[key]}) | {worst[fn]} | {harness[key]} | {measured[key]:.0f} "
+                                f"| {'yes' if ok else 'NO'} |")
+                summary_row(f"Stack bound {fn}", f"{worst[fn]} B; with the bench wrapper {harness[key]} B bound vs "
+                            f"{measured[key]:.0f} B measured", ok)
+            body += "\n".join(cmp_rows) + "\n\n"
+        body += "### Fixed-point library (slipest_q)\n\n" + stack.table(rows_q)
+        body += "\n\n### Full library (with the float path)\n\n" + stack.table(rows_full[:6])
+        sections.append(_section("Worst-case stack", body))
     if measured:
         desc, wc = wcet_result
         worst_fn = wcet.per_function(wc)
@@ -219,14 +306,21 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
                                  f"{measured['q']:.0f} instructions per inference; SLCAN parsing + slipest_node_handle "
                                  f"{measured['node_instructions_per_sample']:.0f} instructions per telemetry sample (3 frames)."))
 
-    # coverage
+    # coverage: one figure, one verdict (coverage.headline), as `fleetlab assure coverage` prints them
     cov = done["coverage"]
-    hw = cov.handwritten()
-    cov_ok = hw.line_pct >= coverage.GOAL_LINES and hw.branch_pct >= coverage.GOAL_BRANCHES
-    summary_row("Coverage by the C tests (src/*.c)", f"{hw.line_pct:.1f} % statements, {hw.branch_pct:.1f} % branches "
-                f"(goal {coverage.GOAL_LINES:.0f} / {coverage.GOAL_BRANCHES:.0f})", cov_ok)
-    sections.append(_section("Coverage", f"{cov.gcovr_version}; ctest: {cov.ctest_summary.strip()}\n\n"
-                             + coverage.table(cov)))
+    if isinstance(cov, CheckFailed):
+        did_not_finish(COVERAGE_ROW, "Coverage", cov)
+        gcovr_version = tool_version([sys.executable, "-m", "gcovr", "--version"])
+    else:
+        summary_row(CTEST_ROW, *coverage.ctest_line(cov))
+        summary_row(COVERAGE_ROW, *coverage.headline(cov))
+        held = (f"The figure held to the goal ({coverage.goal()}) is the hand-written library's (src/*.c) on an "
+                f"SN-S bundle; the generated codec is listed apart."
+                if not cov.layer_table else f"This is a {coverage.LAYER_TABLE_NOTE}.")
+        sections.append(_section("Coverage", f"{cov.gcovr_version}; ctest: {cov.ctest_summary.strip()}"
+                                 + (f" ({cov.ctest_failure})" if cov.ctest_failure else "") + f"\n\n{held}\n\n"
+                                 + coverage.table(cov)))
+        gcovr_version = cov.gcovr_version
 
     # fuzzing
     stats_file = fuzz_stats or next((p for p in default_fuzz_stats() if p.exists()), None)
@@ -249,7 +343,7 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
         "gcc": tool_version(["gcc", "--version"]), "arm-none-eabi-gcc": tool_version(["arm-none-eabi-gcc", "--version"]),
         "clang": tool_version(["clang", "--version"]), "clang-tidy": tool_version(["clang-tidy", "--version"]).strip(),
         "cppcheck": tool_version(["cppcheck", "--version"]), "frama-c": tool_version(["frama-c", "-version"]),
-        "gcovr": cov.gcovr_version, "cmake": tool_version(["cmake", "--version"]),
+        "gcovr": gcovr_version, "cmake": tool_version(["cmake", "--version"]),
         "qemu-system-arm": tool_version(["qemu-system-arm", "--version"]),
     }
     sections.append(_section("Toolchain versions", "\n".join(f"- {k}: {v}" for k, v in versions.items())))
@@ -263,7 +357,7 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
     head = (f"# slipest assurance evidence\n\nGenerated by `fleetlab assure` in {time.perf_counter() - t_start:.0f} s "
             f"on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; source commit `{commit}`"
             f"{' (with uncommitted changes)' if dirty else ''}.\n\n## Summary\n\n| Check | Result | Status |\n|---|---|---|\n"
-            + "\n".join(summary) + f"\n\nGating checks: {'all pass' if gating_ok else 'FAILED'}.\n")
+            + "\n".join(summary) + f"\n\n{gating_line(failing, len(gated))}\n")
     md = head + "\n" + "\n".join(sections)
     (out / "assurance.md").write_text(md)
     import markdown
@@ -274,4 +368,4 @@ def assure(bundle: Path | None, out: Path, *, fuzz_stats: Path | None = None, ev
                                         f"</style>{html}")
     print(head)
     print(f"report: {out / 'assurance.md'} and assurance.html")
-    return 0 if gating_ok else 1
+    return 1 if failing else 0

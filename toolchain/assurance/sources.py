@@ -2,6 +2,7 @@
 CAN codec, include paths, and helpers that run tools (one, keeping its output; several at once)."""
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from collections.abc import Callable, Sequence
@@ -12,6 +13,7 @@ from typing import TypeVar
 from fleetlab.host_tools.firmware.build import Result, execute
 
 from ..cores import usable_cores
+from ..errors import FleetlabError
 from ..paths import default_bundle, repo_root
 from .. import system_tools
 
@@ -56,12 +58,50 @@ def need(tool: str) -> str:
     return system_tools.need(tool, "fleetlab assure")
 
 
+class ToolFailed(FleetlabError):
+    """A tool an assurance check runs failed (a build, ctest, gcovr, cppcheck, Frama-C): the message is one line
+    (the command and the line of its output that says why), `output` the tail of what it printed. `fleetlab
+    assure CHECK` prints the line; the report records the check as failed, with the output, and keeps the others."""
+
+    def __init__(self, message: str, output: str = ""):
+        super().__init__(message)
+        self.output = output
+
+
+_ERROR_LINE = re.compile(r"\b(error|failed|fatal)\b", re.I)
+
+
+def gist(*texts: str) -> str:
+    """The one line of a tool's output that says why it failed: the first line naming an error, else the last
+    non-empty line; the texts are searched in the order given (stderr first, then stdout)."""
+    outputs = [[l.strip() for l in (t or "").splitlines() if l.strip()] for t in texts]
+    hit = next((l for lines in outputs for l in lines if _ERROR_LINE.search(l)), None)
+    line = hit or next((lines[-1] for lines in outputs if lines), "no output")
+    return line if len(line) <= 300 else line[:300] + " …"
+
+
+def command_name(cmd: Sequence) -> str:
+    """How a failure names its command: the program, `python -m MODULE` for a module, cmake's step."""
+    argv = [str(c) for c in cmd]
+    name = Path(argv[0]).name
+    if name.startswith("python") and len(argv) > 2 and argv[1] == "-m":
+        return argv[2]
+    if name == "cmake":
+        return "cmake --build" if "--build" in argv else ("cmake -P " + Path(argv[-1]).name if "-P" in argv
+                                                          else "cmake configure")
+    return name
+
+
 def run(cmd: list[str], *, check: bool = False, cwd: Path | None = None, timeout: float = 1800) -> Result:
-    """A tool's full result (the analysers read exit codes and both streams); with check, RuntimeError
-    on a non-zero exit. Runs through the firmware driver's `execute`, like every build step."""
-    res = execute(cmd, timeout=timeout, cwd=cwd)
+    """A tool's full result (the analysers read exit codes and both streams); with check, ToolFailed (one line:
+    the command and why) on a non-zero exit. Runs through the firmware driver's `execute`, like every build step."""
+    try:
+        res = execute(cmd, timeout=timeout, cwd=cwd)
+    except subprocess.TimeoutExpired as e:
+        raise ToolFailed(f"{command_name(cmd)} ran past its {timeout:.0f} s limit") from e
     if check and res.returncode != 0:
-        raise RuntimeError(f"{Path(cmd[0]).name} exited {res.returncode}:\n{res.stdout[-3000:]}\n{res.stderr[-3000:]}")
+        raise ToolFailed(f"{command_name(cmd)} exited {res.returncode}: {gist(res.stderr, res.stdout)}",
+                         f"{res.stdout[-3000:]}\n{res.stderr[-3000:]}".strip())
     return res
 
 
@@ -96,7 +136,9 @@ def rel(path: str | Path, gen_dir: Path | None = None) -> str:
 def tool_version(cmd: list[str]) -> str:
     try:
         res = run(cmd, timeout=60)
-    except (OSError, subprocess.TimeoutExpired):
+    except OSError:
         return "not installed"
+    except ToolFailed:
+        return "did not answer"
     text = (res.stdout or res.stderr).strip().splitlines()
     return text[0] if text else "unknown"

@@ -13,7 +13,7 @@ from pathlib import Path
 from fleetlab.host_tools.firmware import targets as target_registry
 
 from ..assurance import analysers, coverage, misra, stack, wcet
-from ..assurance.report import assure, checked_bundle
+from ..assurance.report import COVERAGE_ROW, CTEST_ROW, assure, checked_bundle
 from ..paths import build_root, default_bundle
 
 __all__ = ["add_arguments", "run"]
@@ -54,9 +54,12 @@ def _analysers(args: argparse.Namespace) -> int:
 def _coverage(args: argparse.Namespace) -> int:
     res = coverage.measure(args.build or build_root() / "coverage", args.bundle)
     print(coverage.table(res))
-    print(f"statements {res.line_pct:.1f} % (goal {coverage.GOAL_LINES}), "
-          f"branches {res.branch_pct:.1f} % (goal {coverage.GOAL_BRANCHES})")
-    return 0
+    # the report's two rows: the same figures, the same verdicts, and the exit status that goes with them
+    tests, tests_ok = coverage.ctest_line(res)
+    print(f"{CTEST_ROW}: {tests}: {'pass' if tests_ok else 'FAIL'}")
+    text, ok = coverage.headline(res)
+    print(f"{COVERAGE_ROW}: {text}" + ("" if ok is None else f": {'pass' if ok else 'FAIL'}"))
+    return 1 if ok is False or not tests_ok else 0
 
 
 def _stack(args: argparse.Namespace) -> int:
@@ -81,7 +84,8 @@ def _wcet(args: argparse.Namespace) -> int:
 CHECKS = {
     "misra": (_misra, "MISRA C:2012 (cppcheck addon) against firmware_c/MISRA_DEVIATIONS.md; exit 1 on an unrecorded finding", misra),
     "analysers": (_analysers, "clang-tidy, gcc -fanalyzer and the strict warnings (and Frama-C EVA with --eva); exit 1 on a finding", analysers),
-    "coverage": (_coverage, "statement and branch coverage of the C library by ctest (gcov)", coverage),
+    "coverage": (_coverage, "statement and branch coverage of the C library by ctest (gcov); exit 1 below the goal or on "
+                            "a failing C test", coverage),
     "stack": (_stack, "worst-case stack of every public entry point and the no-recursion proof; exit 1 on recursion", stack),
     "wcet": (_wcet, "worst-case instruction counts under qemu -icount on a SysTick CPU target", wcet),
 }

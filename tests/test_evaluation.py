@@ -14,10 +14,11 @@ from fleetlab.cli import main
 from fleetlab.cores import usable_cores
 from fleetlab.data.dataset import load_dataset
 from fleetlab.evaluation.mccv import EvalSettings, run_mccv
-from fleetlab.evaluation.methods import parse_methods, selectable
+from fleetlab.evaluation.methods import default_methods, parse_methods, selectable
 from fleetlab.evaluation.metrics import balanced_accuracy, classification_metrics
 from fleetlab.evaluation.tables import markdown_table
 from fleetlab.fusion.bench import table_figures
+from fleetlab.fusion import registry
 from fleetlab.fusion.registry import Budget
 from required import need_module
 
@@ -104,7 +105,8 @@ def test_balanced_accuracy_alone_is_the_same_number_without_a_warning():
 
 
 def test_method_parsing():
-    assert parse_methods(None) == list(selectable()) == parse_methods("all")
+    assert parse_methods(None) == list(default_methods()) == parse_methods("all")
+    assert set(selectable()) - set(default_methods()) == set(registry.in_group("Noise-robust"))  # opt-in only
     assert parse_methods("distill, acomerge") == ["acomerge", "distill"]  # table order
     with pytest.raises(ValueError, match="unknown method"):
         parse_methods("acomerge,telepathy")
@@ -228,7 +230,7 @@ def test_evaluate_cli_end_to_end(real_data_dir, tmp_path, capsys):
                "--jobs", "2", "--json", str(js), "--out", str(out), "--no-progress"])
     assert rc == 0
     result = json.loads(js.read_text())
-    assert set(result["results"]) == set(selectable()) | {"buffer-centroid-random", "buffer-random",
+    assert set(result["results"]) == set(default_methods()) | {"buffer-centroid-random", "buffer-random",
                                                      "acomerge-earth-only", "acomerge-fleet-only"}
     for by_size in result["results"].values():
         assert set(by_size["150"]["balanced_accuracy"]) >= {"mean", "std"}

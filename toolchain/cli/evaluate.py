@@ -41,12 +41,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="Adam learning rate of Earth + FullFinetune and Joint + FullFinetune (default: "
                    f"{EXPERT_LR:g}, the experts' rate; the paper grid-searched it, so try a few)")
     p.add_argument("--methods", default="all", metavar="LIST",
-                   help=f"comma-separated methods out of: {', '.join(selectable())} (default: all)")
+                   help=f"comma-separated methods out of: {', '.join(selectable())} (default: all, which leaves "
+                        "out the noise-robust group: name those to run them)")
     p.add_argument("--buffer-ablation", action="store_true",
                    help="also run AcoMerge on the ablation buffers (experts×3 + centroid-random×45, random×48)")
     p.add_argument("--fleet-ablation", action="store_true",
                    help="also run AcoMerge with the Earth expert only and with the fleet experts only (same "
                    "buffer size): what the fleet adds beyond the Earth expert and the search itself")
+    p.add_argument("--label-noise", default="", metavar="KIND:RATE",
+                   help="corrupt D_Cal's labels (only; the test rows keep exact labels), per run and seeded: "
+                        "symmetric:RATE (any other class), adjacent:RATE (low<->moderate, moderate<->high, the "
+                        "confusion visual odometry makes), vo:SCALE (the slip measured again by a visual-odometry "
+                        "model, SCALE times its default errors). The table says how many labels were changed")
+    p.add_argument("--label-noise-sweep", metavar="KIND:R1,R2,...",
+                   help="run the whole evaluation at each rate (source models trained once), e.g. "
+                        "adjacent:0,0.1,0.2,0.3,0.4; prints one table of balanced accuracy per rate and, with "
+                        "--out, writes sweep.json, sweep.md and sweep.png (accuracy against the rate)")
     options.jobs(p)
     p.add_argument("--backend", choices=BACKENDS, default="loky",
                    help="where MCCV jobs run: local processes (loky) or an existing Dask cluster (default: loky)")
@@ -73,7 +83,7 @@ def settings_from_args(args: argparse.Namespace) -> EvalSettings:
         budget=Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, finetune_lr=args.finetune_lr,
                       device=options.resolved_device(args), rng=args.rng),
         methods=tuple(parse_methods(args.methods)), buffer_ablation=args.buffer_ablation,
-        fleet_ablation=args.fleet_ablation,
+        fleet_ablation=args.fleet_ablation, label_noise=args.label_noise,
     )
 
 
@@ -86,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--resume DIR writes into DIR: give no other --out")
     args.out = args.resume or args.out
     dataset = dataset_input.load(args.data)
+    if args.label_noise_sweep:
+        return _sweep(args, settings, dataset)
     result = run_mccv(dataset, settings, n_jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
                       progress=not args.no_progress, results_dir=args.out, resume=args.resume is not None)
     result["config"]["data"] = str(args.data)
@@ -98,5 +110,29 @@ def run(args: argparse.Namespace) -> int:
         write_atomic(args.out / "table.md", table)
         written = write_plots(result, args.out)
         print(f"wrote {args.out / 'table.md'}, results.json and {len(written)} plots", file=sys.stderr)
+    sys.stdout.write(table)
+    return 0
+
+
+def _sweep(args: argparse.Namespace, settings: EvalSettings, dataset) -> int:
+    from ..evaluation import noise_sweep
+
+    if args.label_noise:
+        raise ValueError("--label-noise-sweep runs every rate itself: give no --label-noise")
+    kind, rates = noise_sweep.parse_sweep(args.label_noise_sweep)
+    sweep = noise_sweep.run_sweep(dataset, settings, kind, rates, n_jobs=args.jobs, backend=args.backend,
+                                  scheduler=args.scheduler, progress=not args.no_progress, results_dir=args.out,
+                                  resume=args.resume is not None)
+    sweep["config"] = {"data": str(args.data), "arch": settings.arch, "protocol": settings.protocol,
+                       "runs": settings.runs, "seed": settings.seed, "methods": list(settings.all_methods)}
+    table = noise_sweep.markdown(sweep)
+    text = json.dumps(sweep, indent=1)
+    if args.json:
+        write_atomic(args.json, text)
+    if args.out:
+        write_atomic(args.out / "sweep.json", text)
+        write_atomic(args.out / "sweep.md", table)
+        noise_sweep.plot(sweep, args.out / "sweep.png")
+        print(f"wrote {args.out / 'sweep.md'}, sweep.json and sweep.png", file=sys.stderr)
     sys.stdout.write(table)
     return 0

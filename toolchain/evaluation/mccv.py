@@ -16,8 +16,10 @@ do not depend on the backend, the number of workers or the order of completion.
 Dask workers should run one thread each (`dask worker ADDRESS --nthreads 1`): torch
 draws dropout masks from a per-process global RNG, which threads would share. On Dask the
 source models and the target rows are scattered once to every worker (`broadcast`), and
-each task carries only (cal size, run, method); a task whose worker is lost is run again
-on another one (`TASK_RETRIES`).
+each task carries only (cal size, run, method). A worker lost at any moment loses nothing: the
+scheduler runs its task again elsewhere, and a task whose scattered inputs died with it (the only
+copy: Dask's memory manager drops the others) is submitted again with its inputs scattered again
+(`dask_backend`), in the source models' training as in the MCCV jobs.
 
 On a GPU (`budget.device` not 'cpu'), the methods that can batch their runs (the AcoMerge
 family, `registry.fit_many`) run all the draws of one calibration size in one lockstep
@@ -35,7 +37,6 @@ import concurrent.futures
 import contextlib
 import json
 import os
-import sys
 import tempfile
 import threading
 import time
@@ -49,6 +50,7 @@ import torch
 from tqdm.auto import tqdm
 
 from ..data.dataset import TARGET, Dataset
+from ..data.label_noise import LabelNoise
 from ..data.splits import PROTOCOLS, make_split
 from ..models import batched_logits, canonical_arch
 from ..fusion import registry
@@ -57,12 +59,11 @@ from ..fusion.pipeline import (Sources, align_sources, fuse_many, needs_joint, s
                                train_joint_flat)
 from ..fusion.registry import Budget
 from ..models.train import EXPERT_EPOCHS
-from .methods import UNRANKED_GROUPS, buffer_methods, fleet_methods, selectable, table_groups
+from .methods import UNRANKED_GROUPS, buffer_methods, default_methods, fleet_methods, selectable, table_groups
 from .metrics import SCALAR_METRICS, classification_metrics
 from .stats import FORMS, corrected_resampled_ttest
 
 BACKENDS = ("loky", "dask")
-TASK_RETRIES = 3  # a Dask task is run again this often when its worker is lost
 RUNS_DIR = "runs"  # per-job results inside an evaluation's results folder
 ALPHA = 0.05  # significance level of the best-vs-second t-test
 
@@ -76,9 +77,10 @@ class EvalSettings:
     seed: int = 0
     epochs: int = EXPERT_EPOCHS  # expert (and joint model) epochs
     budget: Budget = field(default_factory=Budget)
-    methods: tuple[str, ...] = field(default_factory=selectable)
+    methods: tuple[str, ...] = field(default_factory=default_methods)
     buffer_ablation: bool = False
     fleet_ablation: bool = False
+    label_noise: str = ""  # KIND:RATE corrupting D_Cal's labels (data/label_noise.py); "" = exact labels
 
     def __post_init__(self):
         if self.protocol not in PROTOCOLS:
@@ -90,6 +92,8 @@ class EvalSettings:
                              "the fine-tuning rate positive")
         if not self.cal_sizes or min(self.cal_sizes) < 3:
             raise ValueError(f"calibration sizes must be at least 3 rows, got {list(self.cal_sizes)}")
+        if self.label_noise:
+            object.__setattr__(self, "label_noise", str(LabelNoise.parse(self.label_noise)))
         unknown = set(self.methods) - set(selectable())
         if unknown or not self.methods:
             raise ValueError(f"unknown or no methods: {sorted(unknown)}")
@@ -170,6 +174,27 @@ class Target:
     x: np.ndarray
     y: np.ndarray
     groups: np.ndarray
+    d_actual: np.ndarray | None = None  # per row: what the VO label model measures again (label_noise vo)
+    d_commanded: np.ndarray | None = None
+    duration_s: np.ndarray | None = None
+
+
+NOISE_CODE = zlib.crc32(b"label-noise")  # the noise of a draw is seeded apart from every method's own seed
+
+
+def calibration_labels(settings: EvalSettings, cal_size: int, run: int, target: Target,
+                       cal: np.ndarray) -> tuple[np.ndarray, dict | None]:
+    """D_Cal's labels as the methods see them: exact, or corrupted by `settings.label_noise` (the test
+    rows keep their exact labels). Seeded by (seed, cal size, run), not the method: every method of a
+    draw sees the same noisy labels, so the comparison stays paired."""
+    y = target.y[cal]
+    if not settings.label_noise:
+        return y, None
+    noise = LabelNoise.parse(settings.label_noise)
+    rng = np.random.default_rng(derive_seed(settings.seed, cal_size, run, NOISE_CODE))
+    # every target row is measured (VO's lag reaches the window before, which may be a test row); D_Cal's are kept
+    noisy = noise.apply(target.y, rng, target.d_actual, target.d_commanded, target.groups, target.duration_s)[cal]
+    return noisy, noise.record(y, noisy)
 
 
 def run_job(cal_size: int, run: int, method: str, src: Sources, target: Target, settings: EvalSettings) -> dict:
@@ -187,14 +212,15 @@ def run_jobs(cal_size: int, runs: list[int], method: str, src: Sources, target: 
     c0, f0 = time.process_time(), fitness_seconds()[1]
     with single_threaded_torch():
         splits = [make_split(settings.protocol, target.y, target.groups, cal_size, seed=r) for r in runs]
-        draws = [(target.x[sp.cal], target.y[sp.cal], derive_seed(settings.seed, cal_size, r, method_code(method)),
-                  derive_seed(settings.seed, cal_size, r)) for r, sp in zip(runs, splits)]
+        labels = [calibration_labels(settings, cal_size, r, target, sp.cal) for r, sp in zip(runs, splits)]
+        draws = [(target.x[sp.cal], y_cal, derive_seed(settings.seed, cal_size, r, method_code(method)),
+                  derive_seed(settings.seed, cal_size, r)) for r, sp, (y_cal, _) in zip(runs, splits, labels)]
         t0 = time.perf_counter()
         fused_all = fuse_many(method, src, draws, budget=settings.budget)
         seconds = (time.perf_counter() - t0) / len(runs)
         out = []
-        for run, split, fused in zip(runs, splits, fused_all):
-            x_cal, y_cal = target.x[split.cal], target.y[split.cal]
+        for run, split, fused, (y_cal, noise) in zip(runs, splits, fused_all, labels):
+            x_cal = target.x[split.cal]
             x_test, y_test = target.x[split.test], target.y[split.test]
             flat = fused.flat.cpu()
             with torch.no_grad():
@@ -205,8 +231,10 @@ def run_jobs(cal_size: int, runs: list[int], method: str, src: Sources, target: 
                 "method": method, "cal_size": cal_size, "run": run, "n_cal": int(len(split.cal)),
                 "n_test": int(len(split.test)), "seconds": seconds, "history": fused.curve,
                 **classification_metrics(y_test, pred),
-                # the same scores on D_Cal itself: the fit the method reached, beside what it generalises to
+                # the same scores on D_Cal itself (its labels as the method saw them): the fit the method
+                # reached, beside what it generalises to
                 "calibration_fit": {k: fit[k] for k in SCALAR_METRICS},
+                **({"label_noise": noise} if noise else {}),
             })
     cpu_seconds = (time.process_time() - c0) / len(runs)
     fitness_cpu_seconds = (fitness_seconds()[1] - f0) / len(runs)
@@ -284,8 +312,8 @@ def execute(
     """Run joblib `delayed` tasks locally (loky) or on a Dask cluster; results in completion
     order, or in task order with `ordered`. `on_result(result)` is called as each one finishes.
 
-    On Dask, arguments shared by the tasks (the sources, the target rows) are scattered once
-    to every worker; a task whose worker dies is retried on another (TASK_RETRIES)."""
+    On Dask (`dask_backend`), arguments shared by the tasks (the sources, the target rows) are scattered
+    once to every worker; a task lost with a worker, or whose inputs were, runs again on another."""
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
     if not tasks:
@@ -308,46 +336,17 @@ def execute(
             return done
         if not scheduler:
             raise ValueError("--backend dask needs --scheduler ADDRESS of a running Dask scheduler")
-        return _execute_dask(tasks, scheduler, ordered, finished)
+        from .dask_backend import run_on_dask
+
+        return run_on_dask(tasks, scheduler, ordered, finished)
     finally:
         bar.close()
-
-
-def _execute_dask(tasks: list, scheduler: str, ordered: bool, finished) -> list:
-    from dask.distributed import Client, as_completed
-
-    with Client(scheduler, timeout="30s") as client:
-        workers = client.scheduler_info()["workers"]
-        if not workers:
-            raise ValueError(f"the Dask scheduler at {scheduler} has no workers; start some with "
-                             f"'dask worker {scheduler} --nthreads 1'")
-        if any(w["nthreads"] > 1 for w in workers.values()):
-            # torch seeds dropout through its per-process global RNG: two jobs in threads of one
-            # worker would interleave their draws and the numbers would depend on timing.
-            print("warning: Dask workers with more than one thread; start them with --nthreads 1 "
-                  "for results identical to the local backend", file=sys.stderr)
-        # Arguments that are not plain numbers or strings (sources, target rows, settings) are the same
-        # objects in every task: send each to every worker once, and let the tasks refer to it.
-        shared: dict[int, object] = {}
-        for _, args, _ in tasks:
-            for a in args:
-                if not isinstance(a, (int, float, str, type(None))) and id(a) not in shared:
-                    shared[id(a)] = client.scatter(a, broadcast=True, hash=False)
-        futures = [client.submit(fn, *[shared.get(id(a), a) for a in args], pure=False, retries=TASK_RETRIES, **kw)
-                   for fn, args, kw in tasks]
-        order = {f.key: i for i, f in enumerate(futures)}
-        results: list = [None] * len(futures)
-        for future in as_completed(futures):
-            result = future.result()
-            results[order[future.key]] = result
-            finished(result)
-        return results if ordered else [r for r in results if r is not None]
 
 
 def run_mccv(
     dataset: Dataset, settings: EvalSettings, n_jobs: int = 1, backend: str = "loky",
     scheduler: str | None = None, progress: bool = True, results_dir: Path | None = None, resume: bool = False,
-    batch_runs: bool | None = None,
+    batch_runs: bool | None = None, sources: Sources | None = None,
 ) -> dict:
     """The whole evaluation; returns the JSON-ready result (see `summarise`).
 
@@ -357,7 +356,9 @@ def run_mccv(
     beside the other jobs."""
     dataset.check_roles()
     x, y = dataset.xy(TARGET)
-    target = Target(x=x, y=y, groups=dataset.groups(TARGET))
+    table = dataset.table(TARGET)
+    target = Target(x=x, y=y, groups=dataset.groups(TARGET), d_actual=table.d_actual, d_commanded=table.d_commanded,
+                    duration_s=table.duration_s)
     too_big = [c for c in settings.cal_sizes if c >= len(y)]
     if too_big:
         raise ValueError(f"{dataset.root}: calibration size(s) {too_big} leave no test rows ({len(y)} target rows)")
@@ -372,7 +373,8 @@ def run_mccv(
     if results_dir is not None:
         write_atomic(Path(results_dir) / RUNS_DIR / "settings.json", json.dumps(_settings_key(settings)))
     t0 = time.perf_counter()
-    src = prepare_sources(dataset, settings, n_jobs, backend, scheduler, progress)
+    # `sources`: trained by the caller for these settings (a noise sweep trains them once for every rate)
+    src = sources or prepare_sources(dataset, settings, n_jobs, backend, scheduler, progress)
     todo = [(c, r, m) for c in settings.cal_sizes for r in range(settings.runs) for m in settings.all_methods
             if (c, r, m) not in done]
     count = lambda keys: {m: sum(1 for k in keys if k[2] == m) for m in settings.all_methods}  # noqa: E731
@@ -489,6 +491,11 @@ def summarise(jobs: list[dict], settings: EvalSettings) -> dict:
             entry["calibration_fit"] = {k: _mean_std([r["calibration_fit"][k] for r in rs]) for k in SCALAR_METRICS}
             entry["n_runs"] = len(rs)
             entry["n_cal"] = int(rs[0]["n_cal"])
+            if "label_noise" in rs[0]:  # the same corrupted labels for every method of a draw
+                corrupted = [r["label_noise"]["corrupted"] for r in rs]
+                entry["label_noise"] = {"model": settings.label_noise, "corrupted_mean": float(np.mean(corrupted)),
+                                        "corrupted_fraction": float(np.sum(corrupted) / np.sum(
+                                            [r["label_noise"]["of"] for r in rs]))}
             entry["n_test_mean"] = float(np.mean([r["n_test"] for r in rs]))
             results[m][str(c)] = entry
             if rs[0]["history"]:  # methods that keep a convergence curve

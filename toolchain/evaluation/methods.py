@@ -20,6 +20,11 @@ def selectable() -> tuple[str, ...]:
     return registry.selectable()
 
 
+def default_methods() -> tuple[str, ...]:
+    """What `--methods all` (and no --methods) runs: the selectable methods but the opt-in groups'."""
+    return registry.default_methods()
+
+
 def buffer_methods() -> tuple[str, ...]:
     return registry.in_group(BUFFER_ABLATION)
 
@@ -57,10 +62,10 @@ LABELS: Mapping[str, str] = _Labels()
 
 
 def parse_methods(text: str | None) -> list[str]:
-    """Comma list -> method names in table order; None/'all' -> every selectable method."""
+    """Comma list -> method names in table order; None/'all' -> `default_methods()`."""
     methods = selectable()
     if text is None or text.strip() == "all":
-        return list(methods)
+        return list(default_methods())
     names = [t.strip() for t in text.split(",") if t.strip()]
     unknown = [n for n in names if n not in methods]
     if unknown or not names:

@@ -46,6 +46,7 @@ def markdown_table(result: dict) -> str:
         f"{cfg.get('arch', '?').upper()}, protocol `{cfg.get('protocol', '?')}`, mean ± std (ddof=1) over "
         f"{cfg.get('runs', '?')} MCCV runs; best **bold**, second <u>underlined</u>; † best significantly better "
         "than second (corrected resampled t-test, p < 0.05).",
+        *_noise_note(result),
         "",
         "Best vs second (t-test, df = runs − 1; p with the Nadeau-Bengio factor 1/n + n_test/n_train, and with "
         "the reference notes' factor 1/n + n_train/n_test):",
@@ -99,3 +100,15 @@ def fit_table(result: dict) -> list[str]:
             cells += [f"{fit:.3f}", f"{test:.3f}", f"{fit - test:+.3f}"]
         lines.append("| " + " | ".join(cells) + " |")
     return lines + [""]
+
+
+def _noise_note(result: dict) -> list[str]:
+    """What the methods were calibrated on, when D_Cal's labels were corrupted (the test labels never are)."""
+    noise = result.get("config", {}).get("label_noise")
+    if not noise:
+        return []
+    first = next(iter(result["results"].values()))
+    parts = [f"|D_Cal| = {c}: {e['label_noise']['corrupted_mean']:.1f} labels changed per run "
+             f"({100 * e['label_noise']['corrupted_fraction']:.1f} %)" for c, e in first.items() if "label_noise" in e]
+    return ["", f"D_Cal's labels corrupted by `{noise}` (seeded per run, the same for every method; the test rows' "
+            f"labels exact): {'; '.join(parts)}."]

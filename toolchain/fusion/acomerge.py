@@ -91,6 +91,7 @@ from tqdm.auto import tqdm
 
 from ..cores import usable_cores
 from ..models import n_params
+from ..models.train import LOSSES
 from .buffer import BUFFER_KINDS, make_buffer
 from .fitness import CalibrationFitness
 
@@ -125,6 +126,7 @@ class AcoMergeConfig:
     spiral_b: float = 1.0  # b, the logarithmic-spiral shape constant
     clip: float | None = None  # optional |value| bound on IWOA positions (paper: none)
     # execution
+    loss: str = "ce"  # the fitness: weighted CE, or 'gce' (noise-robust; CPU search only, see methods.py)
     chunk: int = 150  # ants per forward chunk of a deeper net (bounds its activations' memory; SN-S bounds its own)
     # torch intra-op threads during the run (0: chosen at its start from the cores free then, see
     # default_threads); the result is deterministic for a seed and a thread count
@@ -154,6 +156,8 @@ class AcoMergeConfig:
             raise ValueError(f"buffer_kind must be one of {BUFFER_KINDS}")
         if self.iwoa_every < 1 or self.gb_every < 0 or self.deposit <= 0 or self.tau_init <= 0:
             raise ValueError("iwoa_every ≥ 1, gb_every ≥ 0, deposit > 0 and tau_init > 0 are required")
+        if self.loss not in LOSSES or (self.loss != "ce" and self.device != "cpu"):
+            raise ValueError(f"loss must be one of {LOSSES}, and 'ce' on a GPU (the lockstep engine's fitness)")
         if self.chunk < 1 or self.threads < 0:
             raise ValueError("chunk must be at least 1 and threads at least 0 (0: chosen from the free cores)")
         if self.device != "cpu" and not self.device.startswith("cuda"):
@@ -468,7 +472,7 @@ def acomerge(
     The whole-model IWOA ablation records only the first three.
     """
     cfg, experts, cand = checked_inputs(experts_flat, arch, config, seed, buffer)
-    fitness = CalibrationFitness(arch, x_cal, y_cal, chunk=cfg.chunk)
+    fitness = CalibrationFitness(arch, x_cal, y_cal, chunk=cfg.chunk, loss=cfg.loss)
     return search(experts, cand, fitness, cfg, seed=seed, progress=progress)
 
 

@@ -25,8 +25,9 @@ def finetune(
     lr: float = EXPERT_LR,
     batch_size: int = EXPERT_BATCH,
     seed: int = 0,
+    loss: str = "ce",
 ) -> SlipNet:
-    """A fine-tuned COPY of `model`: `steps` Adam updates on class-weighted CE over (x, y).
+    """A fine-tuned COPY of `model`: `steps` Adam updates on class-weighted CE (or `loss` 'gce') over (x, y).
 
     The input model is left untouched. Seeded (batch order and dropout masks).
     """
@@ -36,4 +37,4 @@ def finetune(
         raise ValueError("cannot fine-tune on an empty calibration set")
     tuned = copy.deepcopy(model)
     return train_classifier(tuned, x, y, epochs=None, steps=steps, lr=lr, batch_size=batch_size, seed=seed,
-                            fused_adam=True)  # per-run work: the fast Adam (models/train.py, adam)
+                            fused_adam=True, loss=loss)  # per-run work: the fast Adam (models/train.py, adam)

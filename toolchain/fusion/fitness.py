@@ -25,7 +25,7 @@ import torch
 from ..data.contracts import N_CLASSES
 from ..models import batched_logits
 from ..models.mlp import LN_EPS, hidden_sizes, param_shapes
-from ..models.train import class_weights
+from ..models.train import GCE_Q, LOSSES, class_weights
 
 
 class _Clock(threading.local):
@@ -74,7 +74,7 @@ class CalibrationFitness:
     `chunk` bounds the models per forward pass of the generic (deeper) path; the SN-S path takes
     any number at once and bounds its activations itself (piece_size)."""
 
-    def __init__(self, arch: str, x: np.ndarray, y: np.ndarray, chunk: int = 100):
+    def __init__(self, arch: str, x: np.ndarray, y: np.ndarray, chunk: int = 100, loss: str = "ce"):
         x = np.asarray(x, dtype=np.float32)
         y = np.asarray(y, dtype=np.int64)
         if x.ndim != 2 or x.shape[0] != y.shape[0] or x.shape[0] == 0:
@@ -83,8 +83,11 @@ class CalibrationFitness:
             raise ValueError("calibration features contain NaN or infinity")
         if y.min() < 0 or y.max() >= N_CLASSES:
             raise ValueError(f"calibration labels must be classes 0..{N_CLASSES - 1}, found {y.min()}..{y.max()}")
+        if loss not in LOSSES:
+            raise ValueError(f"unknown fitness loss {loss!r}; choose one of {', '.join(LOSSES)}")
         self.arch = arch
         self.chunk = chunk
+        self.loss = loss  # 'ce', or 'gce' (bounded, for noisy labels: models/train.py, weighted_gce)
         self.x = torch.from_numpy(x)
         self.y = torch.from_numpy(y)
         self.class_weight = class_weights(y)
@@ -132,8 +135,10 @@ class CalibrationFitness:
         over the classes, then the picked value times −w), so the same bits; picking with one
         `index_select` instead of the 2-D NLL kernel takes 40 % less time (issue 30)."""
         p = logits_t.shape[0]
-        log_p = torch.log_softmax(logits_t, dim=1).view(p, -1)
-        return log_p.index_select(1, self.picked).mul_(self.neg_row_weight).sum(dim=1).div_(self.weight_total)
+        log_p = torch.log_softmax(logits_t, dim=1).view(p, -1).index_select(1, self.picked)
+        if self.loss == "gce":  # w (1 − p^q) / q = −w (exp(q log p) − 1) / q
+            log_p = log_p.mul_(GCE_Q).exp_().sub_(1.0).div_(GCE_Q)
+        return log_p.mul_(self.neg_row_weight).sum(dim=1).div_(self.weight_total)
 
     def _snS(self, vals: torch.Tensor) -> torch.Tensor:
         p, h = vals.shape[0], hidden_sizes(self.arch)[0]

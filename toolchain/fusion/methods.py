@@ -14,6 +14,7 @@ from ..models import flatten
 from . import baselines as bl
 from .acomerge import AcoMergeConfig
 from .buffer import make_buffer
+from .label_audit import expert_probabilities, flag_labels
 from .lockstep import run_acomerge_many
 from .registry import Budget, FusedModel, FusionInputs, register
 from .robust import fit_acomerge_robust_many
@@ -38,11 +39,11 @@ def fleet_ablation_buffer(method: str, aligned: torch.Tensor, seed: int, sigma: 
     return kept, make_buffer(kept, copies=kept_copies, sigma=sigma, seed=seed)
 
 
-def aco_config(budget: Budget, phases: tuple[str, ...] | None = None) -> AcoMergeConfig:
+def aco_config(budget: Budget, phases: tuple[str, ...] | None = None, loss: str = "ce") -> AcoMergeConfig:
     """AcoMerge's configuration under `budget` (the paper's values for everything else)."""
     cfg = dataclasses.replace(AcoMergeConfig(), generations=budget.steps, n_ants=budget.ants, copies=budget.copies,
                               sigma=budget.sigma, threads=budget.threads, device=budget.device,
-                              rng=budget.rng)
+                              rng=budget.rng, loss=loss)
     return dataclasses.replace(cfg, phases=phases) if phases else cfg
 
 
@@ -95,8 +96,8 @@ def _distill(inp: FusionInputs) -> FusedModel:
 # Each is a `fit_many` (several calibration draws of one budget at once: on a GPU their
 # generations share one batched fitness call, see lockstep.py); `fit` is the one-draw case.
 def _aco_runs(name: str, inps: list[FusionInputs], kept_buffers: list[tuple[torch.Tensor, torch.Tensor]],
-              phases: tuple[str, ...] | None = None) -> list[FusedModel]:
-    cfg = aco_config(inps[0].budget, phases)
+              phases: tuple[str, ...] | None = None, loss: str = "ce") -> list[FusedModel]:
+    cfg = aco_config(inps[0].budget, phases, loss)
     runs = [(kept, inp.x_cal, inp.y_cal, inp.seed, buffer) for inp, (kept, buffer) in zip(inps, kept_buffers)]
     out = []
     for inp, res in zip(inps, run_acomerge_many(runs, inps[0].arch, cfg, desc=name)):
@@ -115,11 +116,11 @@ def _one(fit_many):
     return fit
 
 
-def _aco_on_buffer(name: str, kind: str = "experts", phases: tuple[str, ...] | None = None):
+def _aco_on_buffer(name: str, kind: str = "experts", phases: tuple[str, ...] | None = None, loss: str = "ce"):
     def fit_many(inps: list[FusionInputs]) -> list[FusedModel]:
         b = inps[0].budget
         return _aco_runs(name, inps, [(inp.aligned, make_run_buffer(inp.aligned, kind, inp.buffer_seed, b.sigma, b.copies))
-                                      for inp in inps], phases)
+                                      for inp in inps], phases, loss)
     fit_many.__name__ = fit_many.__qualname__ = f"fit_{name.replace('-', '_')}_many"
     return fit_many
 
@@ -135,6 +136,33 @@ def _aco_fleet_ablation(name: str):
                                       for inp in inps])
     fit_many.__name__ = fit_many.__qualname__ = f"fit_{name.replace('-', '_')}_many"
     return fit_many
+
+
+# --- noise-robust variants (issue 46; docs/paper_table.md, "Noisy calibration labels") ---
+def _earth_ft_gce(inp: FusionInputs) -> FusedModel:
+    earth = bl.model_from_flat(inp.arch, inp.experts[0])
+    tuned = bl.earth_finetune(earth, inp.x_cal, inp.y_cal, inp.seed, steps=inp.budget.steps, lr=inp.budget.finetune_lr,
+                              loss="gce")
+    return _flat("earth-ft-gce", inp, flatten(tuned))
+
+
+def _acomerge_gce(inp: FusionInputs) -> FusedModel:
+    """AcoMerge whose fitness is the bounded GCE: the CPU search (the GPU engine's fitness is CE only)."""
+    return _aco_on_buffer("acomerge-gce", loss="gce")([dataclasses.replace(inp, budget=dataclasses.replace(
+        inp.budget, device="cpu"))])[0]
+
+
+def _acomerge_audit_many(inps: list[FusionInputs]) -> list[FusedModel]:
+    """AcoMerge on D_Cal without the labels a confident-learning audit flags (fusion/label_audit.py)."""
+    kept, flagged = [], []
+    for inp in inps:
+        bad = flag_labels(inp.y_cal, expert_probabilities(inp.arch, inp.experts, inp.x_cal))
+        kept.append(dataclasses.replace(inp, x_cal=inp.x_cal[~bad], y_cal=inp.y_cal[~bad]))
+        flagged.append(int(bad.sum()))
+    out = _aco_on_buffer("acomerge-audit")(kept)
+    for fused, n, inp in zip(out, flagged, inps):
+        fused.details["audit"] = {"flagged": n, "of": int(len(inp.y_cal))}
+    return out
 
 
 def _register_many(name: str, fit_many, label: str, group: str) -> None:
@@ -165,3 +193,7 @@ _register_many("acomerge-earth-only", _aco_fleet_ablation("acomerge-earth-only")
                "Fleet ablation")
 _register_many("acomerge-fleet-only", _aco_fleet_ablation("acomerge-fleet-only"), "AcoMerge, fleet experts only",
                "Fleet ablation")
+# Noise-robust variants: opt-in (registry.OPT_IN_GROUPS), for calibration labels from visual odometry.
+register("earth-ft-gce", _earth_ft_gce, "Earth + FullFinetune (GCE)", "Noise-robust")
+register("acomerge-gce", _acomerge_gce, "AcoMerge (GCE fitness)", "Noise-robust")
+_register_many("acomerge-audit", _acomerge_audit_many, "AcoMerge (label audit)", "Noise-robust")

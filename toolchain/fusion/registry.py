@@ -85,6 +85,9 @@ class MethodSpec:
 
 # Groups that only run through their ablation switch, never through `--methods all`.
 ABLATION_GROUPS = ("Buffer ablation", "Fleet ablation")
+# Groups that `--methods` may name but `--methods all` leaves out: variants for a question of their own
+# (noise-robust fusion, issue 46), which would lengthen the paper's table without answering it.
+OPT_IN_GROUPS = ("Noise-robust",)
 _REGISTRY: dict[str, MethodSpec] = {}
 
 
@@ -119,6 +122,11 @@ def all_methods() -> dict[str, MethodSpec]:
 def selectable() -> tuple[str, ...]:
     """Names that `--methods` / `--method` accept: every method outside the ablation groups."""
     return tuple(n for n, s in all_methods().items() if s.group not in ABLATION_GROUPS)
+
+
+def default_methods() -> tuple[str, ...]:
+    """What `--methods all` runs: every selectable method outside the opt-in groups."""
+    return tuple(n for n in selectable() if all_methods()[n].group not in OPT_IN_GROUPS)
 
 
 def in_group(group: str) -> tuple[str, ...]:

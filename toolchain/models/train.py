@@ -41,6 +41,31 @@ def weighted_ce(logits: torch.Tensor, y: torch.Tensor, weights: torch.Tensor) ->
     return F.cross_entropy(logits, y, weight=weights)
 
 
+# The losses a calibration step can use: cross-entropy, or the generalised cross-entropy of Zhang & Sabuncu
+# (NeurIPS 2018), L_q = (1 − p_y^q) / q. Why GCE for noisy calibration labels (issue 46): it is bounded (a
+# confidently "wrong" label, often a mislabelled one, costs at most 1/q instead of an unbounded −log p), it
+# needs no estimate of the noise rate or of a transition matrix (D_Cal's 150 rows could not give one), and
+# with q = 0.7 (the paper's choice) it keeps most of CE's gradient on rows the model is unsure of.
+LOSSES = ("ce", "gce")
+GCE_Q = 0.7
+
+
+def weighted_gce(logits: torch.Tensor, y: torch.Tensor, weights: torch.Tensor, q: float = GCE_Q) -> torch.Tensor:
+    """Class-weighted generalised cross-entropy: Σ w_y (1 − p_y^q) / q / Σ w_y (p_y^q as exp(q log p_y))."""
+    log_p = torch.log_softmax(logits, dim=1).gather(1, y.unsqueeze(1)).squeeze(1)
+    w = weights[y]
+    return (w * (1.0 - torch.exp(q * log_p)) / q).sum() / w.sum()
+
+
+def weighted_loss(name: str, logits: torch.Tensor, y: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    """`name` in LOSSES."""
+    if name == "gce":
+        return weighted_gce(logits, y, weights)
+    if name == "ce":
+        return weighted_ce(logits, y, weights)
+    raise ValueError(f"unknown loss {name!r}; choose one of {', '.join(LOSSES)}")
+
+
 def train_classifier(
     model: torch.nn.Module,
     x: np.ndarray,
@@ -55,8 +80,10 @@ def train_classifier(
     desc: str | None = None,
     fused_adam: bool = False,
     device: str = "cpu",
+    loss: str = "ce",
 ) -> torch.nn.Module:
-    """Adam on weighted CE. Give `epochs` (full passes) or `steps` (optimiser updates); `fused_adam`: see `adam`.
+    """Adam on weighted CE (or `loss` 'gce'). Give `epochs` (full passes) or `steps` (optimiser updates);
+    `fused_adam`: see `adam`.
 
     Seeded: the same seed, data and initial model give the same result. `device`: 'cpu' (the
     reference) or a CUDA device, where each step is one replayed CUDA graph (`_CapturedSteps`); the
@@ -72,6 +99,8 @@ def train_classifier(
     batch_size = min(batch_size, n)
     per_epoch = (n + batch_size - 1) // batch_size
     total = steps if steps is not None else epochs * per_epoch
+    if loss not in LOSSES or (loss != "ce" and device != "cpu"):
+        raise ValueError(f"loss {loss!r}: one of {', '.join(LOSSES)}, and only 'ce' on a GPU")
     model.train()
     gpu = None if device == "cpu" else torch.device(device)
     forked = None if gpu is None else [gpu.index if gpu.index is not None else torch.cuda.current_device()]
@@ -82,8 +111,7 @@ def train_classifier(
             opt = adam(model.parameters(), lr, fused=fused_adam)
             for idx in _batches(n, batch_size, total, gen):
                 opt.zero_grad()
-                loss = weighted_ce(model(xt[idx]), yt[idx], w)
-                loss.backward()
+                weighted_loss(loss, model(xt[idx]), yt[idx], w).backward()
                 opt.step()
                 bar.update(1)
         else:

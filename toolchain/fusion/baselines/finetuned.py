@@ -31,10 +31,11 @@ def model_base(
 
 def earth_finetune(
     earth_expert: SlipNet, x_cal: np.ndarray, y_cal: np.ndarray, seed: int, steps: int = BUDGET_STEPS,
-    lr: float = EXPERT_LR, batch_size: int = EXPERT_BATCH,
+    lr: float = EXPERT_LR, batch_size: int = EXPERT_BATCH, loss: str = "ce",
 ) -> SlipNet:
-    """Earth + FullFinetune: every weight of the Earth expert fine-tuned on D_Cal (a copy)."""
-    return finetune(earth_expert, x_cal, y_cal, steps=steps, lr=lr, batch_size=batch_size, seed=seed)
+    """Earth + FullFinetune: every weight of the Earth expert fine-tuned on D_Cal (a copy); `loss` 'gce'
+    for noisy labels (models/train.py)."""
+    return finetune(earth_expert, x_cal, y_cal, steps=steps, lr=lr, batch_size=batch_size, seed=seed, loss=loss)
 
 
 def joint_sources(dataset: Dataset) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,190 @@
+"""Noisy calibration labels (issue 46): the noise models, that they touch D_Cal only and are reproducible by
+seed, the noise-robust methods and the sweep's table."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from fleetlab.cli import main
+from fleetlab.data.label_noise import LabelNoise, VoModel
+from fleetlab.data.labels import slip_class, slip_ratio
+from fleetlab.evaluation import noise_sweep
+from fleetlab.evaluation.mccv import EvalSettings, Target, run_jobs
+from fleetlab.fusion import registry
+from fleetlab.fusion.fitness import CalibrationFitness
+from fleetlab.fusion.label_audit import flag_labels
+from fleetlab.fusion.pipeline import Sources
+from fleetlab.fusion.registry import Budget, FusedModel
+from fleetlab.models import build, flatten
+from fleetlab.models.train import weighted_gce
+
+N = 20000
+
+
+def _labels(seed=0, n=N):
+    return np.random.default_rng(seed).integers(0, 3, n)
+
+
+@pytest.mark.parametrize("kind", ["symmetric", "adjacent"])
+def test_rate_is_the_share_of_labels_changed(kind):
+    y = _labels()
+    for rate in (0.0, 0.1, 0.3):
+        noisy = LabelNoise(kind, rate).apply(y, np.random.default_rng(1))
+        assert abs(np.mean(noisy != y) - rate) < 0.012, (kind, rate)
+    noisy = LabelNoise(kind, 1.0).apply(y, np.random.default_rng(1))
+    assert np.all(noisy != y)
+    if kind == "adjacent":  # only to a neighbouring class: low and high never swap
+        assert np.all(np.abs(noisy - y) == 1)
+    else:  # both other classes, about equally often
+        for c in range(3):
+            to = noisy[y == c]
+            counts = np.bincount(to, minlength=3)
+            assert counts[c] == 0 and abs(counts[(c + 1) % 3] - counts[(c + 2) % 3]) < 0.1 * len(to)
+
+
+def test_noise_is_reproducible_by_seed():
+    y = _labels(n=500)
+    a = LabelNoise("symmetric", 0.2).apply(y, np.random.default_rng(7))
+    b = LabelNoise("symmetric", 0.2).apply(y, np.random.default_rng(7))
+    c = LabelNoise("symmetric", 0.2).apply(y, np.random.default_rng(8))
+    assert np.array_equal(a, b) and not np.array_equal(a, c)
+
+
+def _windows(n=4000, seed=0):
+    rng = np.random.default_rng(seed)
+    d_cmd = rng.uniform(0.2, 0.6, n)
+    d_act = d_cmd * (1 - rng.uniform(-0.1, 0.9, n))
+    groups = np.repeat(np.arange(n // 100), 100)
+    return d_act, d_cmd, groups, slip_class(slip_ratio(d_act, d_cmd))
+
+
+def test_vo_at_scale_zero_gives_the_exact_labels_and_at_one_mostly_neighbours():
+    d_act, d_cmd, groups, y = _windows()
+    exact = LabelNoise("vo", 0.0).apply(y, np.random.default_rng(0), d_act, d_cmd, groups)
+    assert np.array_equal(exact, y)
+    noisy = LabelNoise("vo", 1.0).apply(y, np.random.default_rng(0), d_act, d_cmd, groups)
+    changed = noisy != y
+    assert 0.02 < changed.mean() < 0.5
+    # a dropout keeps the wheel odometry (no slip: low); otherwise VO errs by a few percent: a neighbour
+    assert np.mean(np.abs(noisy - y)[changed] == 1) > 0.6
+    more = LabelNoise("vo", 3.0).apply(y, np.random.default_rng(0), d_act, d_cmd, groups)
+    assert (more != y).mean() > changed.mean()
+
+
+def test_vo_dropouts_keep_the_wheel_odometry():
+    d_act, d_cmd, groups, y = _windows()
+    always = VoModel(drift=0, scale_sigma=0, dropout=1.0, lag_s=0, resolution_m=0)
+    noisy = LabelNoise("vo", 1.0).apply(y, np.random.default_rng(0), d_act, d_cmd, groups, vo=always)
+    assert np.all(noisy == 0)  # VO never converged: the rover believes its wheels, slip 0
+
+
+def test_vo_needs_the_distances():
+    with pytest.raises(ValueError, match="travelled and commanded distance"):
+        LabelNoise("vo", 1.0).apply(_labels(n=10), np.random.default_rng(0))
+
+
+@pytest.mark.parametrize("text", ["adjacent", "telepathy:0.1", "adjacent:x", "symmetric:1.5", "vo:-1"])
+def test_bad_noise_option_is_one_clear_error(text):
+    with pytest.raises(ValueError, match="label noise"):
+        LabelNoise.parse(text)
+
+
+def _target(n=600, seed=3):
+    rng = np.random.default_rng(seed)
+    d_act, d_cmd, groups, y = _windows(n, seed)
+    x = rng.normal(size=(n, 12)).astype(np.float32)
+    return Target(x=x, y=y, groups=groups, d_actual=d_act, d_commanded=d_cmd, duration_s=np.full(n, 2.0))
+
+
+@pytest.fixture()
+def spy():
+    """A throw-away method that records the labels it was given; its model predicts from the inputs."""
+    seen = []
+
+    def fit(inp):
+        seen.append(inp.y_cal.copy())
+        return FusedModel("spy", inp.arch, flatten(build("sn-s", seed=0)))
+
+    registry.register("spy-noise", fit, group="Test")
+    yield seen
+    registry.unregister("spy-noise")
+
+
+def _sources():
+    flats = torch.stack([flatten(build("sn-s", seed=s)) for s in range(3)]).numpy()
+    return Sources("sn-s", ["earth", "fleet_a", "fleet_b"], flats, flats, None, {})
+
+
+@pytest.mark.parametrize("noise", ["adjacent:0.3", "symmetric:0.2", "vo:2"])
+def test_noise_reaches_d_cal_only_and_is_the_same_for_every_method_of_a_draw(spy, noise):
+    target, src = _target(), _sources()
+    exact = EvalSettings(cal_sizes=(150,), runs=1, methods=("earth-ft",), budget=Budget(steps=1, ants=2))
+    noisy = EvalSettings(cal_sizes=(150,), runs=1, methods=("earth-ft",), budget=Budget(steps=1, ants=2),
+                         label_noise=noise)
+    clean_job = run_jobs(150, [0], "spy-noise", src, target, exact)[0]
+    job = run_jobs(150, [0], "spy-noise", src, target, noisy)[0]
+    again = run_jobs(150, [0], "spy-noise", src, target, noisy)[0]
+    run1 = run_jobs(150, [1], "spy-noise", src, target, noisy)[0]
+    y_exact, y_noisy, y_again, y_run1 = spy
+    assert np.array_equal(y_noisy, y_again)  # reproducible: the same seed, the same labels
+    changed = int((y_noisy != y_exact).sum())
+    assert changed > 0 and job["label_noise"]["corrupted"] == changed and job["label_noise"]["of"] == 150
+    assert "label_noise" not in clean_job and "label_noise" in run1
+    # the test rows are scored against their exact labels: the same scores as without noise (same model)
+    for key in ("balanced_accuracy", "macro_f1", "confusion_matrix"):
+        assert job[key] == clean_job[key], key
+
+
+def test_gce_loss_matches_its_formula_and_the_fitness_uses_it():
+    gen = torch.Generator().manual_seed(0)
+    logits, y = torch.randn(50, 3, generator=gen), torch.randint(0, 3, (50,), generator=gen)
+    w = torch.tensor([1.0, 2.0, 0.5])
+    p = torch.softmax(logits, 1)[torch.arange(50), y]
+    expected = (w[y] * (1 - p**0.7) / 0.7).sum() / w[y].sum()
+    torch.testing.assert_close(weighted_gce(logits, y, w), expected)
+    x = np.random.default_rng(0).normal(size=(60, 12)).astype(np.float32)
+    yy = np.random.default_rng(1).integers(0, 3, 60)
+    flats = torch.stack([flatten(build("sn-s", seed=s)) for s in range(4)])
+    ce, gce = CalibrationFitness("sn-s", x, yy)(flats), CalibrationFitness("sn-s", x, yy, loss="gce")(flats)
+    assert not torch.allclose(ce, gce) and torch.all(gce <= 1 / 0.7)  # bounded, unlike CE
+
+
+def test_audit_flags_labels_the_predictions_contradict():
+    rng = np.random.default_rng(0)
+    y = rng.integers(0, 3, 300)
+    probs = np.full((300, 3), 0.05)
+    probs[np.arange(300), y] = 0.9  # confident, right predictions of the true labels
+    noisy = y.copy()
+    wrong = rng.choice(300, 30, replace=False)
+    noisy[wrong] = (y[wrong] + 1) % 3
+    flagged = flag_labels(noisy, probs)
+    assert set(np.flatnonzero(flagged)) == set(wrong)
+
+
+def test_robust_methods_are_opt_in():
+    for name in ("earth-ft-gce", "acomerge-gce", "acomerge-audit"):
+        assert name in registry.selectable() and name not in registry.default_methods()
+
+
+def test_sweep_parsing():
+    assert noise_sweep.parse_sweep("adjacent:0,0.1,0.2") == ("adjacent", [0.0, 0.1, 0.2])
+    for bad in ("adjacent", "x:0.1", "vo:a,b", "adjacent:0.1,0.1"):
+        with pytest.raises(ValueError, match="label-noise-sweep"):
+            noise_sweep.parse_sweep(bad)
+
+
+def test_sweep_cli_writes_table_plot_and_json(real_data_dir, tmp_path, capsys):
+    out = tmp_path / "sweep"
+    rc = main(["evaluate", "--data", str(real_data_dir), "--runs", "2", "--cal-size", "150", "--epochs", "1",
+               "--generations", "3", "--ants", "6", "--methods", "acomerge,earth-ft,earth-ft-gce",
+               "--label-noise-sweep", "adjacent:0,0.3", "--jobs", "2", "--out", str(out), "--no-progress"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "| Method | adjacent 0 | adjacent 0.3 |" in text
+    corrupted = [float(c.strip(" %")) for c in text.split("| labels corrupted |")[1].splitlines()[0].split("|")[:-1]]
+    assert corrupted[0] == 0.0 and 20.0 < corrupted[1] < 40.0  # about 30 % of 2 x 150 labels
+    assert (out / "sweep.png").stat().st_size > 10_000 and (out / "sweep.json").is_file()
+    assert (out / "adjacent-0.3" / "runs").is_dir()
+

@@ -373,5 +373,12 @@ def soak_source(frames: int, seed: int, scale: float, base: TelemetrySource | No
 
 def first_windows(source: TelemetrySource | FeatureSource, n: int) -> TelemetrySource | FeatureSource:
     if isinstance(source, TelemetrySource):
-        return TelemetrySource(f"{source.name}[:{n} windows]", source.samples_q[: n * SAMPLES_PER_WINDOW], [])
+        traces, left = [], n
+        for name, k in source.traces:
+            if left > 0:
+                traces.append((name, min(k, left)))
+            left -= k
+        starts = None if source.window_start_ns is None else source.window_start_ns[:n]
+        return TelemetrySource(f"{source.name}[:{n} windows]", source.samples_q[: n * SAMPLES_PER_WINDOW], traces,
+                               starts, source.trace_files)
     return FeatureSource(f"{source.name}[:{n} windows]", source.feat_q[:n])

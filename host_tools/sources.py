@@ -8,7 +8,7 @@ feature vectors in raw LSB units (`quantize_features`).
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
 
@@ -25,6 +25,8 @@ class TelemetrySource:
     name: str
     samples_q: np.ndarray  # (n,7) int16, n a multiple of 100
     traces: list[tuple[str, int]]  # (trace name, windows it contributes)
+    window_start_ns: np.ndarray | None = None  # (n_windows,) time of each window's first sample (imported logs)
+    trace_files: dict[str, str] = field(default_factory=dict)  # trace name -> the log it came from (imported logs)
 
     @property
     def n_windows(self) -> int:
@@ -98,7 +100,7 @@ def imported_source(path: Path | str) -> TelemetrySource:
     from fleetlab.data.log_import import RAW_SUFFIX, raw_files, read_raw
 
     root = Path(path)
-    parts, traces = [], []
+    parts, traces, starts = [], [], []
     for f in raw_files(root):
         samples, rate = read_raw(f)
         if rate != DEFAULT_RATE_HZ or len(samples) % SAMPLES_PER_WINDOW:
@@ -107,9 +109,22 @@ def imported_source(path: Path | str) -> TelemetrySource:
         if len(samples):
             parts.append(quantize_samples(samples))
             traces.append((f.name[: -len(RAW_SUFFIX)], len(samples) // SAMPLES_PER_WINDOW))
+            with np.load(f) as z:
+                starts.append(np.asarray(z["window_start_ns"], dtype=np.int64))
     if not parts:
         raise ValueError(f"{root}: no imported raw samples (*{RAW_SUFFIX}); make them with 'fleetlab data import'")
-    return TelemetrySource(f"import({root}, {len(parts)} files)", np.concatenate(parts).astype(np.int16), traces)
+    return TelemetrySource(f"import({root}, {len(parts)} files)", np.concatenate(parts).astype(np.int16), traces,
+                           np.concatenate(starts), _imported_logs(root))
+
+
+def _imported_logs(root: Path) -> dict[str, str]:
+    """File stem -> the log (bag, CSV folder) it was imported from, by the folder's import report."""
+    import json
+
+    from fleetlab.data.log_import import REPORT_NAME
+
+    logs = json.loads((root / REPORT_NAME).read_text())["logs"]
+    return {stem: log["source"] for log in logs for stem in log["files"]}
 
 
 def log_messages(path: Path | str) -> Iterator:

@@ -188,3 +188,22 @@ def test_sweep_cli_writes_table_plot_and_json(real_data_dir, tmp_path, capsys):
     assert (out / "sweep.png").stat().st_size > 10_000 and (out / "sweep.json").is_file()
     assert (out / "adjacent-0.3" / "runs").is_dir()
 
+
+def test_simulate_writes_vo_labels_beside_the_true_ones(tmp_path, capsys):
+    from fleetlab.data.csvio import read_windows_csv
+
+    for run in ("a", "b"):
+        assert main(["simulate", "--out", str(tmp_path / run), "--scale", "0.05", "--labels", "vo"]) == 0
+    assert "visual odometry gives another class" in capsys.readouterr().out
+    files = sorted((tmp_path / "a").glob("*.vo_labels.csv"))
+    assert files and len(files) == len(list((tmp_path / "a").glob("*.csv"))) - len(files)
+    wrong = 0
+    for f in files:
+        assert f.read_bytes() == (tmp_path / "b" / f.name).read_bytes()  # reproducible by seed
+        vo = np.genfromtxt(f, delimiter=",", names=True)
+        table = read_windows_csv(f.with_name(f.name.replace(".vo_labels", "")))
+        assert np.array_equal(vo["slip_class"].astype(int), table.label)  # the true label beside the VO one
+        wrong += int((vo["slip_class"] != vo["slip_class_vo"]).sum())
+        dropped = vo["vo_dropout"] == 1
+        assert np.all(vo["slip_class_vo"][dropped] == 0)  # no VO: the wheels' own distance, no slip seen
+    assert wrong > 0

@@ -21,7 +21,8 @@ from ..errors import FleetlabError
 # name -> (module, one-line help): the one table of subcommands
 COMMANDS: dict[str, tuple[str, str]] = {
     "simulate": ("fleetlab.cli.simulate", "simulate rover telemetry and write window CSVs (built-in fleet scenario)"),
-    "data": ("fleetlab.cli.data", "inspect a dataset folder (info) or compare two of them (compare: realism report)"),
+    "data": ("fleetlab.cli.data", "import your rover's logs (import: rosbag2 or time-series CSV), inspect a dataset "
+             "folder (info) or compare two of them (compare: realism report)"),
     "fuse": ("fleetlab.cli.fuse", "train the experts and fuse them into one model (AcoMerge or any registered method)"),
     "evaluate": ("fleetlab.cli.evaluate", "Monte Carlo cross-validation of AcoMerge against the paper's baselines"),
     "export": ("fleetlab.cli.export", "export a model to ONNX, fixed-point C headers and test vectors"),

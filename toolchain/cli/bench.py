@@ -14,6 +14,8 @@ from . import options
 KINDS: dict[str, tuple[str, str]] = {
     "data": ("fleetlab.data.bench", "featurisation (raw samples/s) and simulation speed (simulated s per wall s)"),
     "import": ("fleetlab.data.import_bench", "data import: windows/s from a 10-minute rosbag2 (vs in-memory featurisation, real time)"),
+    "attitude": ("fleetlab.cli.bench_attitude", "roll and pitch from the IMU ([attitude] source = \"imu\"): error in "
+                 "degrees vs the truth on the simulator's traverses, flat and sloped, Earth and Moon"),
     "fusion": ("fleetlab.fusion.bench", "AcoMerge: batched vs one-ant-at-a-time generation, full-run time"),
     "link": ("fleetlab.host_tools.bench_link", "host emulation loop over a link: frames/s vs the rover's 150, estimator latency at 50 Hz"),
     "c": ("fleetlab.host_tools.firmware.bench", "C estimator: host ns/inference vs onnxruntime and torch, Cortex-M4 cost and size"),

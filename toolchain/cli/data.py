@@ -15,7 +15,7 @@ from ..data.compare import compare_statistics
 from ..data.contracts import CLASS_NAMES, FEATURE_NAMES
 from ..data.dataset import ROLE_PATTERN, load_dataset
 from ..data.info import plot_histograms, summarise
-from ..data.log_import import UNASSIGNED, drop_summary, import_log, write_import
+from ..data.log_import import UNASSIGNED, drop_summary, import_source, range_warnings, write_import
 from ..data.rover_profile import load_profile
 from . import dataset_input
 
@@ -46,7 +46,9 @@ def add_info_arguments(sub) -> None:
         "info",
         help="summarise a dataset folder",
         description="Rows and class counts per role and per file, and per-feature summary statistics, of a "
-        "dataset folder (one made by 'fleetlab simulate' or a folder of the original Fleet-To-Lab CSV files).",
+        "dataset folder (one made by 'fleetlab simulate' or 'fleetlab data import', a folder of the original "
+        "Fleet-To-Lab CSV files, or a roles .toml file). Windows without labels count in the rows and the "
+        "feature statistics; the class mix is shown where labels exist.",
     )
     p.add_argument("path", type=Path, help="dataset folder")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
@@ -61,6 +63,9 @@ def add_import_arguments(sub) -> None:
         "CSVs) as the rover profile describes it, put every stream on one time base from the header stamps at "
         "the estimator's raw rate (linear interpolation, no extrapolation, cut at gaps), take gravity out of the "
         "IMU if it is in, and cut 2 s windows with the 12 features and the slip label by the pipeline's own code. "
+        "A folder of time-series CSVs may hold several drives (files paired by their common suffix, else by "
+        "time): each is its own log. A log without orientation gets roll and pitch from the IMU's gyro and "
+        "accelerometer ([attitude] source = \"imu\"). "
         "Writes one Fleet-To-Lab CSV per log (or per gap-free segment), the raw 7-channel samples beside it "
         "(<name>.raw.npz, for 'fleetlab emulate --source DIR'), dataset.json and import_report.json with every "
         "drop counted. See docs/your_rover.md.",
@@ -81,23 +86,40 @@ def run_import(args: argparse.Namespace) -> int:
         raise ValueError(f"--role {args.role!r}: expected earth, target or fleet_<rover>")
     profile = load_profile(args.rover)
     t0 = time.perf_counter()
-    results = [import_log(src, profile, progress=not args.no_progress) for src in args.sources]
+    results = [r for src in args.sources for r in import_source(src, profile, progress=not args.no_progress)]
     elapsed = time.perf_counter() - t0
     if not any(r.segments for r in results):
         raise ValueError("no window survived the import: " + "; ".join(
-            f"{r.source}: {drop_summary(r.drops)}" for r in results))
+            f"{r.name}: {drop_summary(r.drops)}" for r in results))
     write_import(args.out, results, profile, args.role)
     kept = sum(r.windows_kept for r in results)
-    print(f"{'source':40s} {'files':>5s} {'windows':>8s} {'kept':>6s}  dropped")
+    imu = profile.attitude_source == "imu"
+    print(f"{'source':40s} {'files':>5s} {'windows':>8s} {'kept':>6s}  " + ("att?  " if imu else "") + "dropped")
     for r in results:
-        print(f"{str(r.source)[-40:]:40s} {len(r.segments):5d} {r.windows_total:8d} {r.windows_kept:6d}  "
+        untrusted = f"{r.attitude_untrusted:4d}  " if imu and r.attitude_untrusted is not None else ("   -  " if imu else "")
+        print(f"{r.name[-40:]:40s} {len(r.segments):5d} {r.windows_total:8d} {r.windows_kept:6d}  {untrusted}"
               f"{drop_summary(r.drops)}")
+    if imu:
+        n = sum(r.attitude_untrusted or 0 for r in results)
+        print(f"attitude from the IMU (gyro + accelerometer): {n} of {kept} windows kept are high-dynamic (att?: the "
+              "rover turned fast or accelerated in over a quarter of the window, so roll and pitch there lean on the "
+              "gyro alone; docs/your_rover.md gives the estimate's accuracy)")
+    if profile.attitude_source == "level":
+        print(f'warning: {profile.path}: [attitude] source = "level": roll and pitch are taken as 0 and gravity is '
+              "taken out as on flat ground; on a slope acc_x and acc_y keep g sin(slope) and the pitch and roll "
+              'features say nothing: use source = "imu" (with [imu] gyro_columns) unless the rover only drives flat')
+    if profile.linear_wheel_speed:
+        print(f"{profile.path}: wheels.velocity_unit = {profile.velocity_unit!r}: the wheel-speed features are the rim "
+              "speed in m/s, not rad/s; compare and fuse with data in the same unit")
     for r in results:
         for warning in r.warnings():
             print(f"warning: {warning}")
+    for warning in range_warnings(results):
+        print(f"warning: {warning}")
     if profile.ground_truth is None:
-        print(f"{profile.path}: no [ground_truth]: the windows are UNLABELLED (*.unlabelled.csv, not in dataset.json); "
-              "they replay through 'fleetlab emulate --source' but cannot train or evaluate a model")
+        print(f"{profile.path}: no [ground_truth]: the windows are UNLABELLED (*.unlabelled.csv, listed apart in "
+              "dataset.json); 'fleetlab data info' and 'data compare' show their statistics and they replay through "
+              "'fleetlab emulate --source', but they cannot train or evaluate a model")
     print(f"imported {kept} windows from {len(results)} log(s) into {args.out} in {elapsed:.1f} s "
           f"({kept / max(elapsed, 1e-9):.0f} windows/s); role {args.role}")
     return 0
@@ -116,7 +138,7 @@ def print_report(rep: dict) -> None:
         print(f"\n== {role} ==")
         rows = [("files / rows", lambda r: f"{r['files']} / {r['rows']}")]
         rows.append(("class mix " + "/".join(CLASS_NAMES),
-                     lambda r: " / ".join(f"{100 * m:.1f}" for m in r["class_mix"])))
+                     lambda r: " / ".join(f"{100 * m:.1f}" for m in r["class_mix"]) if r["class_mix"] else "no labels"))
         rows.append(("slip lag-1 autocorr (mean)", lambda r: _fmt(r["persistence"]["slip_lag1_autocorr_mean"])))
         rows.append(("slip lag-1 autocorr (min..max)", lambda r: f"{_fmt(r['persistence']['slip_lag1_autocorr_min'], '.2f')}"
                      f"..{_fmt(r['persistence']['slip_lag1_autocorr_max'], '.2f')}"))
@@ -128,6 +150,10 @@ def print_report(rep: dict) -> None:
         print(f"{'':32s} {'A':>30s} {'B':>30s}")
         for label, get in rows:
             print(f"{label:32s} {get(ra) if ra else '—':>30s} {get(rb) if rb else '—':>30s}")
+    if rep.get("warnings"):
+        print("\n== features far outside B's range (all windows of each side) ==")
+        for line in rep["warnings"]:
+            print(f"warning: {line}")
     if "learnability" in rep:
         la, lb = rep["learnability"]["a"], rep["learnability"]["b"]
         print("\n== learnability on the target (SN-S, balanced accuracy) ==")
@@ -147,7 +173,7 @@ def plot_report(rep: dict, path: Path) -> None:
     roles = list(dict.fromkeys([*rep["a"]["roles"], *rep["b"]["roles"]]))
     fig, axes = plt.subplots(1, 2, figsize=(14, 5))
     for k, side in enumerate(("a", "b")):
-        mix = np.array([rep[side]["roles"].get(r, {"class_mix": [0, 0, 0]})["class_mix"] for r in roles])
+        mix = np.array([rep[side]["roles"].get(r, {}).get("class_mix") or [0, 0, 0] for r in roles])
         axes[0].bar(np.arange(len(roles)) + 0.4 * k, mix[:, 0], 0.38, label=f"{side.upper()} {CLASS_NAMES[0]}")
         axes[0].bar(np.arange(len(roles)) + 0.4 * k, mix[:, 1], 0.38, bottom=mix[:, 0], label=f"{side.upper()} {CLASS_NAMES[1]}")
         axes[0].bar(np.arange(len(roles)) + 0.4 * k, mix[:, 2], 0.38, bottom=mix[:, :2].sum(1), label=f"{side.upper()} {CLASS_NAMES[2]}")
@@ -172,8 +198,11 @@ def run_compare(args: argparse.Namespace) -> int:
     if not args.no_learnability:
         from ..evaluation.realism import learnability
 
-        rep["learnability"] = {side: learnability(ds, seed=args.seed, runs=args.runs).as_dict()
-                               for side, ds in (("a", ds_a), ("b", ds_b))}
+        try:
+            rep["learnability"] = {side: learnability(ds, seed=args.seed, runs=args.runs).as_dict()
+                                   for side, ds in (("a", ds_a), ("b", ds_b))}
+        except ValueError as e:
+            raise ValueError(f"{e}; add --no-learnability for the statistics alone") from None
     return _output(rep, args, print_report, lambda path: plot_report(rep, path))
 
 
@@ -183,16 +212,21 @@ def _mix(counts: list[int]) -> str:
 
 
 def print_info(s: dict) -> None:
-    print(f"{s['path']}: {s['total_rows']} rows in {len(s['files'])} files (roles from {s['recognised_by']})")
+    unlabelled = s["total_rows"] - s["labelled_rows"]
+    print(f"{s['path']}: {s['total_rows']} rows in {len(s['files'])} files (roles from {s['recognised_by']})"
+          + (f"; {unlabelled} rows without labels (statistics only)" if unlabelled else ""))
     if s["rejected_nonfinite_rows"]:
         print(f"  rejected {s['rejected_nonfinite_rows']} rows holding NaN/Inf")
     print(f"\n{'role':<16}{'files':>6}{'rows':>7}   low / moderate / high")
     for role, r in s["roles"].items():
-        print(f"{role:<16}{r['files']:>6}{r['rows']:>7}   {_mix(r['classes'])}")
+        mix = _mix(r["classes"]) if r["classes"] is not None else "no labels"
+        if r["classes"] is not None and r.get("unlabelled_rows"):
+            mix += f" (and {r['unlabelled_rows']} rows without labels)"
+        print(f"{role:<16}{r['files']:>6}{r['rows']:>7}   {mix}")
     print(f"\n{'file':<70}{'role':<14}{'rows':>6}   classes")
     for f in s["files"]:
         name = f["file"] if len(f["file"]) < 70 else "…" + f["file"][-68:]
-        print(f"{name:<70}{f['role']:<14}{f['rows']:>6}   {f['classes']}")
+        print(f"{name:<70}{f['role']:<14}{f['rows']:>6}   {f['classes'] if f['classes'] is not None else 'no labels'}")
     print(f"\n{'feature':<20}{'mean':>12}{'std':>12}{'min':>12}{'max':>12}")
     for name, st in s["features"].items():
         print(f"{name:<20}{st['mean']:>12.4g}{st['std']:>12.4g}{st['min']:>12.4g}{st['max']:>12.4g}")

@@ -16,6 +16,7 @@ from fleetlab.host_tools.emulate import (
     first_windows,
     soak_source,
 )
+from fleetlab.host_tools.estimates import check_path, write_estimates
 from fleetlab.host_tools.sources import FeatureSource, TelemetrySource, resolve
 from fleetlab.host_tools.verify import stream_faults as fault_mod
 from .dbc_option import add_dbc_option, apply_dbc_option
@@ -65,6 +66,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scale", type=float, default=DEFAULT_SCALE,
                    help=f"simulator scenario scale (default {DEFAULT_SCALE}, >= 500 windows)")
     p.add_argument("--json", type=Path, default=None, metavar="FILE", help="write the summary as JSON")
+    p.add_argument("--estimates", type=Path, default=None, metavar="FILE",
+                   help="write each window's estimate (start and end time, class, logits, saturations, source file): "
+                        "FILE.csv, or FILE.mcap, a rosbag2 in the input log's time base with /slipest/estimate and "
+                        "/diagnostics that opens beside the input bag (docs/your_rover.md)")
     p.add_argument("--timeout", type=float, default=20.0,
                    help="seconds to wait for the estimator's answers at the end of a lifetime (default 20)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -93,6 +98,11 @@ def print_summary(s: dict) -> None:
 def run(args: argparse.Namespace) -> int:
     apply_dbc_option(args)
     bundle = args.bundle or default_bundle()
+    if args.estimates is not None:
+        check_path(args.estimates)
+        if args.restart_every:
+            raise ValueError("--estimates writes the estimates of a plain replay (one estimator lifetime); "
+                             "drop --restart-every")
     if args.soak:
         if args.source != "sim":
             raise ValueError("--soak streams simulator telemetry; drop --source")
@@ -110,6 +120,9 @@ def run(args: argparse.Namespace) -> int:
                      args.timeout, progress=not args.no_progress, realtime=args.realtime)
     s = result.summary()
     print_summary(s)
+    if args.estimates is not None:
+        rows = write_estimates(args.estimates, result, source)
+        print(f"  wrote {len(rows)} window estimates to {args.estimates}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(s, indent=2) + "\n")

@@ -14,7 +14,7 @@ from ..data.dataset import load_dataset
 from ..data.simulator.bag import STORAGES
 from ..data.simulator.engine import ACCEL_CONVENTIONS, ACCEL_LINEAR
 from ..data.simulator.rovers import ROVERS
-from ..data.simulator.scenario import DEFAULT_FLEET, SCENARIO, write_scenario
+from ..data.simulator.scenario import DEFAULT_FLEET, LABEL_SOURCES, SCENARIO, write_scenario
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -42,6 +42,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also write each traverse as a rosbag2 in DIR (topics and types of a ROS 2 collector: "
                         "JointState, Imu with gravity, Odometry, PoseStamped ground truth) with the rover profiles "
                         "beside them, ready for 'fleetlab data import'")
+    parser.add_argument("--labels", choices=LABEL_SOURCES, default="exact",
+                        help="'vo': also write NAME.vo_labels.csv beside each traverse: the slip and class a rover's "
+                        "visual odometry would measure (scale error per traverse, error growing with distance, "
+                        "dropouts more frequent on smooth low-texture ground, a time lag; docs/paper_table.md), "
+                        "next to the true ones (default: exact only)")
+    parser.add_argument("--csv-logs", type=Path, metavar="DIR",
+                        help="also write each traverse as time-series CSV logs without attitude, as a rover without "
+                        "ROS logs them: DIR/<rover>_<earth|moon>/imu_<traverse>.csv (specific force and gyro, 100 Hz), "
+                        "wheels_<traverse>.csv, pose_<traverse>.csv (ground truth), with a rover profile per folder "
+                        "beside them ([attitude] source = \"imu\"), ready for 'fleetlab data import'")
     parser.add_argument("--bag-storage", choices=STORAGES, default="mcap",
                         help="storage of the --bag files: mcap (default) or sqlite3 (.db3)")
 
@@ -51,13 +61,14 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--rate must be a positive number of Hz, got {args.rate}")
     if not np.isfinite(args.scale) or not 0 < args.scale <= 10:
         raise ValueError(f"--scale must be in (0, 10], got {args.scale}")
-    if args.bag and args.accel != ACCEL_LINEAR:
-        raise ValueError("--bag writes the IMU as a raw accelerometer (gravity added from the attitude) itself; "
+    if (args.bag or args.csv_logs) and args.accel != ACCEL_LINEAR:
+        raise ValueError("--bag and --csv-logs write the IMU as a raw accelerometer (gravity added from the attitude) itself; "
                          f"keep the default --accel {ACCEL_LINEAR}")
     fleet = tuple(r.strip() for r in args.fleet.split(",") if r.strip())
     t0 = time.perf_counter()
     out = write_scenario(args.out, args.seed, args.scale, args.rate, raw=args.raw, progress=True, fleet=fleet,
-                          accel=args.accel, bag=args.bag, bag_storage=args.bag_storage)
+                          accel=args.accel, bag=args.bag, bag_storage=args.bag_storage, labels=args.labels,
+                          csv_logs=args.csv_logs)
     elapsed = time.perf_counter() - t0
     ds = load_dataset(out)
     print(f"wrote {len(ds.files)} traverses to {out} in {elapsed:.1f} s (seed {args.seed}, scale {args.scale:g})")
@@ -68,7 +79,17 @@ def run(args: argparse.Namespace) -> int:
         counts = t.class_counts()
         mix = "  ".join(f"{c:6d} ({100 * c / max(1, len(t)):4.1f}%)" for c in counts)
         print(f"{role:14s} {len(ds.files_of(role)):5d} {len(t):6d}  {mix}")
+    if args.labels == "vo":
+        vo = [f["vo_labels"] for f in json.loads((out / "dataset.json").read_text())["files"].values()]
+        wrong, windows = sum(v["wrong"] for v in vo), sum(len(ds.files[i].table) for i in range(len(ds.files)))
+        print(f"wrote {len(vo)} NAME.vo_labels.csv: visual odometry gives another class than the truth in {wrong} of "
+              f"{windows} windows ({100 * wrong / max(1, windows):.1f} %), {sum(v['dropouts'] for v in vo)} dropouts")
     if args.bag:
         profiles = sorted({f["bag"]["profile"] for f in json.loads((out / "dataset.json").read_text())["files"].values()})
         print(f"wrote {len(ds.files)} {args.bag_storage} bags and the rover profiles {', '.join(profiles)} to {args.bag}")
+    if args.csv_logs:
+        logs = [f["csv_logs"] for f in json.loads((out / "dataset.json").read_text())["files"].values()]
+        folders = sorted({(c["folder"], c["profile"]) for c in logs})
+        print(f"wrote {len(logs)} traverses as time-series CSV logs to {args.csv_logs}: "
+              + ", ".join(f"{f}/ ({p})" for f, p in folders))
     return 0

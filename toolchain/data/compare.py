@@ -7,6 +7,11 @@ the data) lives in `fleetlab.evaluation.realism`.
 
 Persistence is measured inside each file (one file = one traverse), never across
 a file boundary, because consecutive files need not be consecutive in time.
+
+Windows without labels (an import without ground truth) count in a role's rows, feature
+statistics and acceleration convention; the class mix and persistence exist only where labels
+do (None otherwise). `range_warnings` lists the features whose range in A is far outside B's
+(all windows of each side pooled), with the likely causes (`reference_ranges`).
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import numpy as np
 from .contracts import CLASS_NAMES, FEATURE_NAMES
 from .csvio import WindowTable
 from .dataset import Dataset
+from .reference_ranges import compare_range_warnings, feature_ranges
 
 # A window's mean acc_z near g means the accelerometer reports specific force with
 # gravity in it; near 0 means gravity was removed (linear acceleration). The Moon's
@@ -68,35 +74,52 @@ def persistence(tables: list[WindowTable]) -> dict:
     }
 
 
-def feature_stats(table: WindowTable) -> dict[str, dict[str, float]]:
-    x = table.features
+def feature_stats(table: WindowTable | np.ndarray) -> dict[str, dict[str, float]]:
+    x = table.features if isinstance(table, WindowTable) else table
     return {name: {"mean": float(x[:, i].mean()), "std": float(x[:, i].std())} for i, name in enumerate(FEATURE_NAMES)}
 
 
-def acceleration_convention(table: WindowTable) -> dict:
+def acceleration_convention(table: WindowTable | np.ndarray) -> dict:
     """Detect whether gravity is in the acceleration features, from the mean of feat_acc_z_mean."""
-    mean_z = float(table.features[:, _ACC_Z].mean()) if len(table) else float("nan")
+    x = table.features if isinstance(table, WindowTable) else table
+    mean_z = float(x[:, _ACC_Z].mean()) if len(x) else float("nan")
     return {"mean_acc_z": mean_z,
             "convention": GRAVITY_PRESENT if abs(mean_z) > GRAVITY_THRESHOLD else GRAVITY_REMOVED}
 
 
+def _features(ds: Dataset, role: str | None = None) -> np.ndarray:
+    parts = [f.table.features for f in ds.files if role in (None, f.role)]
+    parts += [f.features for f in ds.unlabelled if role in (None, f.role)]
+    return np.concatenate(parts) if parts else np.empty((0, len(FEATURE_NAMES)))
+
+
 def role_statistics(ds: Dataset) -> dict[str, dict]:
-    """Every statistic of every role of one dataset."""
+    """Every statistic of every role of one dataset (unlabelled windows: no class mix, no persistence)."""
     out = {}
-    for role in ds.roles:
-        table = ds.table(role)
+    for role in dict.fromkeys([*ds.roles, *(f.role for f in ds.unlabelled)]):
+        labelled = ds.files_of(role)
+        x = _features(ds, role)
         out[role] = {
-            "files": len(ds.files_of(role)),
-            "rows": len(table),
-            "class_mix": class_mix(table),
-            "persistence": persistence([f.table for f in ds.files_of(role)]),
-            "acceleration": acceleration_convention(table),
-            "features": feature_stats(table),
+            "files": len(labelled) + sum(f.role == role for f in ds.unlabelled),
+            "rows": len(x),
+            "labelled_rows": sum(len(f.table) for f in labelled),
+            "class_mix": class_mix(ds.table(role)) if labelled else None,
+            "persistence": persistence([f.table for f in labelled]) if labelled else persistence([]),
+            "acceleration": acceleration_convention(x),
+            "features": feature_stats(x),
         }
     return out
+
+
+def range_warnings(a: Dataset, b: Dataset) -> list[str]:
+    """Features whose range over all of A's windows is far outside their range over all of B's."""
+    xa, xb = _features(a), _features(b)
+    if not len(xa) or not len(xb):
+        return []
+    return compare_range_warnings(feature_ranges(xa), feature_ranges(xb))
 
 
 def compare_statistics(a: Dataset, b: Dataset) -> dict:
     """Side-by-side statistics of two datasets; roles present in only one side are kept."""
     return {"class_names": list(CLASS_NAMES), "a": {"path": str(a.root), "roles": role_statistics(a)},
-            "b": {"path": str(b.root), "roles": role_statistics(b)}}
+            "b": {"path": str(b.root), "roles": role_statistics(b)}, "warnings": range_warnings(a, b)}

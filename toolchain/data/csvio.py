@@ -154,3 +154,25 @@ def write_windows_csv(path: Path | str, table: WindowTable, line_ending: str = "
                 ",".join(str(int(v)) if i in int_cols else repr(float(v)) for i, v in enumerate(row))
                 + line_ending
             )
+
+
+# Windows without ground truth (`fleetlab data import` without [ground_truth]): the features and what the
+# wheels say, no label columns at all, so that no reader takes them for labelled windows.
+UNLABELLED_SUFFIX = ".unlabelled.csv"
+UNLABELLED_COLUMNS: tuple[str, ...] = CSV_COLUMNS[:N_FEATURES] + ("total_dist_cmd", "n_samples", "win_duration_s")
+
+
+def read_unlabelled_csv(path: Path | str) -> np.ndarray:
+    """The features (n, 12) of an unlabelled window file; rows holding NaN/Inf are left out."""
+    path = Path(path)
+    lines = path.read_text(encoding="utf-8-sig").splitlines()
+    header = tuple(h.strip() for h in lines[0].split(",")) if lines else ()
+    if header != UNLABELLED_COLUMNS:
+        raise CsvFormatError(path, 1, f"header is not the {len(UNLABELLED_COLUMNS)} columns of an unlabelled window "
+                             "file (the 12 features, total_dist_cmd, n_samples, win_duration_s)")
+    rows = [ln for ln in lines[1:] if ln.strip()]
+    try:
+        a = np.array([[float(v) for v in ln.split(",")] for ln in rows], dtype=np.float64).reshape(-1, len(header))
+    except ValueError as e:
+        raise CsvFormatError(path, None, f"not a number: {e}") from None
+    return a[np.isfinite(a).all(axis=1), :N_FEATURES]

@@ -5,19 +5,24 @@ per fleet rover on the Moon), `target` (target rover on the Moon: D_Cal and test
 A folder made by `fleetlab simulate` or `fleetlab data import` carries `dataset.json`; a folder
 of the original Fleet-To-Lab files is recognised by the file names alone; a roles file
 (TOML, `load_roles_file`) names several folders and gives each a role, so one dataset can
-mix imported logs with Fleet-To-Lab CSVs.
+mix imported logs with Fleet-To-Lab CSVs. A roles file that gives a folder a role also takes a
+folder without `dataset.json`: every window CSV in it (Fleet-To-Lab layout) then has that role.
+
+Windows without labels (`fleetlab data import` without ground truth) are listed apart
+(`unlabelled_files` in dataset.json, `Dataset.unlabelled`): `data info` and `data compare` show
+their feature statistics, and nothing trains or evaluates on them.
 """
 
 from __future__ import annotations
 
 import json
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .csvio import CsvFormatError, WindowTable, read_windows_csv
+from .csvio import UNLABELLED_SUFFIX, CsvFormatError, WindowTable, read_unlabelled_csv, read_windows_csv
 
 MANIFEST_NAME = "dataset.json"
 MANIFEST_FORMAT = "fleetlab-dataset/1"
@@ -55,10 +60,18 @@ class DataFile:
 
 
 @dataclass
+class UnlabelledFile:
+    path: Path
+    role: str
+    features: np.ndarray  # (n, 12)
+
+
+@dataclass
 class Dataset:
     root: Path
     files: list[DataFile]
-    source: str  # "manifest" or "fleet-to-lab names"
+    source: str  # "manifest", "fleet-to-lab names", "roles file" or "role given by a roles file"
+    unlabelled: list[UnlabelledFile] = field(default_factory=list)  # windows without labels: statistics only
 
     @property
     def roles(self) -> list[str]:
@@ -123,6 +136,7 @@ def load_roles_file(path: Path) -> Dataset:
         raise ValueError(f"{path}: a roles file holds only [[folder]] tables (path, optional role)"
                          + (f"; unknown key {extra[0]!r}" if extra else ""))
     files: list[DataFile] = []
+    unlabelled: list[UnlabelledFile] = []
     for k, entry in enumerate(data["folder"], start=1):
         bad = [key for key in entry if key not in ROLES_KEYS]
         if bad or not isinstance(entry.get("path"), str):
@@ -131,13 +145,17 @@ def load_roles_file(path: Path) -> Dataset:
         role = entry.get("role")
         if role is not None and not (isinstance(role, str) and ROLE_PATTERN.match(role)):
             raise ValueError(f"{path}: folder {k}: role {role!r} is not {EARTH}, {TARGET} or {FLEET_PREFIX}<rover>")
-        folder = load_dataset(path.parent / entry["path"], roles_file=False)
+        folder = load_dataset(path.parent / entry["path"], roles_file=False, role=role)
         files += [DataFile(f.path, role or f.role, f.table) for f in folder.files]
-    return Dataset(root=path, files=files, source="roles file")
+        unlabelled += [UnlabelledFile(f.path, role or f.role, f.features) for f in folder.unlabelled]
+    return Dataset(root=path, files=files, source="roles file", unlabelled=unlabelled)
 
 
-def load_dataset(root: Path | str, roles_file: bool = True) -> Dataset:
-    """Load every window file of a dataset folder (or of the folders a roles .toml file names) with its role."""
+def load_dataset(root: Path | str, roles_file: bool = True, role: str | None = None) -> Dataset:
+    """Load every window file of a dataset folder (or of the folders a roles .toml file names) with its role.
+
+    `role` (a roles file's): a folder without dataset.json nor Fleet-To-Lab names is then every window CSV
+    in it (and every *.unlabelled.csv), all with that role."""
     root = Path(root)
     if roles_file and root.is_file() and root.suffix == ".toml":
         return load_roles_file(root)
@@ -152,25 +170,36 @@ def load_dataset(root: Path | str, roles_file: bool = True) -> Dataset:
         if meta.get("format") != MANIFEST_FORMAT:
             raise ValueError(f"{manifest}: unknown format {meta.get('format')!r}, expected {MANIFEST_FORMAT!r}")
         entries = [(root / name, info["role"]) for name, info in meta["files"].items()]
+        loose = [(root / name, info.get("role", role or "unassigned"))
+                 for name, info in meta.get("unlabelled_files", {}).items()]
         source = "manifest"
     else:
+        loose = []
         entries = []
         for p in sorted(root.glob("*.csv"), key=lambda p: (p.name.split("_part")[0], _part_number(p.name))):
-            role = role_of_fleet_to_lab_file(p.name)
-            if role is not None:
-                entries.append((p, role))
+            f2l_role = role_of_fleet_to_lab_file(p.name)
+            if f2l_role is not None:
+                entries.append((p, f2l_role))
         source = "fleet-to-lab names"
-        if not entries:
+        if not entries and role is not None:
+            entries = [(p, role) for p in sorted(root.glob("*.csv")) if not p.name.endswith(UNLABELLED_SUFFIX)]
+            loose = [(p, role) for p in sorted(root.glob("*" + UNLABELLED_SUFFIX))]
+            source = "role given by a roles file"
+        if not entries and not loose:
             raise ValueError(
                 f"{root}: no {MANIFEST_NAME} and no files named like the Fleet-To-Lab originals "
-                "(training_data_<leo_rover|cadre|husky>_<lunalab|default_moon>_..._partN.csv)"
+                "(training_data_<leo_rover|cadre|husky>_<lunalab|default_moon>_..._partN.csv); a roles file that "
+                "gives the folder a role takes every window CSV in it"
             )
-    files = []
-    for path, role in entries:
+    files, unlabelled = [], []
+    for (path, file_role), out in [(e, files) for e in entries] + [(e, unlabelled) for e in loose]:
         if not path.exists():
             raise CsvFormatError(path, None, f"listed in {MANIFEST_NAME} but missing")
-        files.append(DataFile(path=path, role=role, table=read_windows_csv(path)))
-    return Dataset(root=root, files=files, source=source)
+        if out is files:
+            files.append(DataFile(path=path, role=file_role, table=read_windows_csv(path)))
+        else:
+            unlabelled.append(UnlabelledFile(path=path, role=file_role, features=read_unlabelled_csv(path)))
+    return Dataset(root=root, files=files, source=source, unlabelled=unlabelled)
 
 
 def write_manifest(root: Path, files: dict[str, dict], extra: dict) -> Path:

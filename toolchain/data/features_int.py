@@ -64,10 +64,15 @@ def _quantize(x: np.ndarray, lsb: np.ndarray, what: str, width: int) -> tuple[np
     return np.clip(q, INT16_MIN, INT16_MAX).astype(np.int16), saturated
 
 
+def saturated_values(x_float: np.ndarray) -> np.ndarray:
+    """(n, 7) bool: the values of raw samples (n,7) that int16 CAN units cannot carry (quantize_samples clips them)."""
+    q = _round_half_away(np.asarray(x_float, dtype=np.float64) / CHANNEL_LSB)
+    return (q < INT16_MIN) | (q > INT16_MAX)
+
+
 def saturated_rows(x_float: np.ndarray) -> np.ndarray:
     """(n,) bool: rows of raw samples (n,7) holding a value that int16 CAN units cannot carry (quantize_samples clips it)."""
-    q = _round_half_away(np.asarray(x_float, dtype=np.float64) / CHANNEL_LSB)
-    return ((q < INT16_MIN) | (q > INT16_MAX)).any(axis=1)
+    return saturated_values(x_float).any(axis=1)
 
 
 def quantize_features(x_float: np.ndarray, return_saturations: bool = False):

@@ -31,6 +31,7 @@ class Stream:
     section: str
     t_ns: np.ndarray  # (n,) int64
     values: np.ndarray  # (n, k) float64
+    group: str | None = None  # streams of one group come from the same messages (rows of one CSV file)
 
     def __len__(self) -> int:
         return len(self.t_ns)

@@ -1,6 +1,7 @@
 """`fleetlab simulate --bag`: each traverse as a rosbag2 (MCAP, or sqlite3), as a ROS 2 collector logs it.
 
-Topics (message types of the Fleet-To-Lab collector), all stamped on the sample grid:
+Topics (message types of the Fleet-To-Lab collector), all stamped (and logged) on the sample grid, written
+in time order as a recorder writes them:
   /joint_states       sensor_msgs/JointState  one joint per wheel; velocity = that side's measured
                                               speed (rad/s), effort = the motor current (A)
   /imu/data           sensor_msgs/Imu         specific force: linear acceleration WITH gravity
@@ -148,6 +149,10 @@ def write_traverse_bag(path: Path, trace: Trace, rover: str, gravity: float, sto
         def put(key: str, i: int, msg) -> None:
             w.write(conn[key], int(stamps[i]), ts.serialize_cdr(msg, TOPICS[key][1]))
 
+        def truth(i: int):
+            return T[POSE_STAMPED](header(i, "map"), Pose(Point(*pos[i]), Quat(0.0, 0.0, 0.0, 1.0)))
+
+        # in time order, as a recorder writes what it receives: a bag cut short holds every topic up to the cut
         names = list(left + right)
         for i in range(n):
             vel = np.array([trace.truth["wheel_left"][i]] * len(left) + [trace.truth["wheel_right"][i]] * len(right))
@@ -160,7 +165,6 @@ def write_traverse_bag(path: Path, trace: Trace, rover: str, gravity: float, sto
             twist = T["geometry_msgs/msg/TwistWithCovariance"](
                 T["geometry_msgs/msg/Twist"](Vec(0.0, 0.0, 0.0), Vec(0.0, 0.0, 0.0)), zeros36)
             put("attitude", i, T[ODOMETRY](header(i, "odom"), "base_link", odom_pose, twist))
-        for i in range(n + 1):
-            put("ground_truth", i, T[POSE_STAMPED](
-                header(i, "map"), Pose(Point(*pos[i]), Quat(0.0, 0.0, 0.0, 1.0))))
+            put("ground_truth", i, truth(i))
+        put("ground_truth", n, truth(n))
     return path

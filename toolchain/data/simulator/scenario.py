@@ -28,8 +28,10 @@ from ..contracts import DEFAULT_RATE_HZ, RAW_CHANNELS
 from ..csvio import WindowTable, write_windows_csv
 from ..dataset import EARTH, FLEET_PREFIX, TARGET, write_manifest
 from ..features import WindowSpec
+from ..label_noise import VO_LABEL_COLUMNS, vo_labels
 from .engine import ACCEL_LINEAR, Trace, TraverseSpec, simulate_batch
 from .rovers import GRAVITY_EARTH, GRAVITY_MOON, ROVERS
+from .terrain import TERRAINS
 
 GENERATOR = "fleetlab.data.simulator/1"
 
@@ -111,23 +113,31 @@ def scenario_traces(seed: int, scale: float = 1.0, rate_hz: float = DEFAULT_RATE
 
 def write_scenario(out_dir: Path | str, seed: int, scale: float = 1.0, rate_hz: float = DEFAULT_RATE_HZ,
                    raw: bool = False, progress: bool = False, fleet: tuple[str, ...] | None = None,
-                   accel: str = ACCEL_LINEAR, bag: Path | str | None = None, bag_storage: str = "mcap") -> Path:
+                   accel: str = ACCEL_LINEAR, bag: Path | str | None = None, bag_storage: str = "mcap",
+                   labels: str = "exact", csv_logs: Path | str | None = None) -> Path:
     """Write one window CSV per traverse and dataset.json into out_dir (created); returns out_dir.
 
     With `raw`, also one .npz per traverse with the raw samples and distance increments.
     With `bag`, also one rosbag2 per traverse in that folder, and the rover profiles beside them
-    (`simulator.bag`).
+    (`simulator.bag`). With `csv_logs`, also each traverse as time-series CSV logs without attitude, one
+    folder per rover profile, with the profiles beside them (`simulator.csv_logs`). With `labels` 'vo', also NAME.vo_labels.csv beside each traverse's CSV: every window's
+    slip and class as a rover's visual odometry would measure them (`label_noise.vo_labels`), next to the true ones.
     """
+    if labels not in LABEL_SOURCES:
+        raise ValueError(f"labels {labels!r}: one of {', '.join(LABEL_SOURCES)}")
     WindowSpec.for_rate(rate_hz)  # refuse a rate too low for 2 s windows before simulating
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, dict] = {}
-    for role, name, trace in scenario_traces(seed, scale, rate_hz, progress, fleet, accel):
+    for index, (role, name, trace) in enumerate(scenario_traces(seed, scale, rate_hz, progress, fleet, accel)):
         table = WindowTable.from_windows(trace.windows())
         write_windows_csv(out / f"{name}.csv", table)
         entry = {"role": role, **{k: trace.meta[k] for k in ("rover", "terrain", "soils", "gravity", "seed")},
                  "duration_s": trace.meta["duration_s"], "windows": len(table),
                  "class_counts": table.class_counts()}
+        if labels == "vo":
+            entry["vo_labels"] = _write_vo_labels(out / f"{name}.vo_labels.csv", table, trace.meta["terrain"],
+                                                  np.random.default_rng([seed, index, VO_STREAM]))
         if raw:
             np.savez_compressed(out / f"{name}.npz", samples=trace.samples, d_actual_step=trace.d_actual_step,
                                 d_cmd_step=trace.d_cmd_step, rate_hz=trace.rate_hz,
@@ -141,7 +151,36 @@ def write_scenario(out_dir: Path | str, seed: int, scale: float = 1.0, rate_hz: 
             profile = Path(bag) / profile_name(trace.meta["rover"], trace.meta["gravity"])
             profile.write_text(profile_toml(trace.meta["rover"], trace.meta["gravity"]))
             entry["bag"] = {"path": name, "profile": profile.name}
+        if csv_logs is not None:
+            from .csv_logs import folder_name, write_traverse_csv_logs
+
+            profile = write_traverse_csv_logs(Path(csv_logs), name, trace, trace.meta["rover"], trace.meta["gravity"])
+            entry["csv_logs"] = {"folder": folder_name(trace.meta["rover"], trace.meta["gravity"]),
+                                 "suffix": name, "profile": profile.name}
         files[f"{name}.csv"] = entry
     write_manifest(out, files, {"generator": GENERATOR, "seed": seed, "scale": scale, "rate_hz": rate_hz,
                                 "fleet": list(DEFAULT_FLEET if fleet is None else fleet), "accel": accel})
     return out
+
+
+LABEL_SOURCES = ("exact", "vo")
+VO_STREAM = 0x564F  # the VO labels' own random stream, apart from the traverses'
+
+
+def low_texture(terrain: str) -> bool:
+    """Terrain where visual odometry loses track more often: smooth ground without rocks (roughness <= 1)
+    gives its cameras few features to follow."""
+    return TERRAINS[terrain].roughness <= 1.0
+
+
+def _write_vo_labels(path: Path, table: WindowTable, terrain: str, rng: np.random.Generator) -> dict:
+    cols = vo_labels(table.d_actual, table.d_commanded, table.duration_s, rng, low_texture(terrain))
+    ints = {"slip_class", "slip_class_vo", "vo_dropout"}
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        fh.write(",".join(VO_LABEL_COLUMNS) + "\r\n")
+        for row in zip(*(cols[c] for c in VO_LABEL_COLUMNS)):
+            fh.write(",".join(str(int(v)) if c in ints else repr(float(v)) for c, v in zip(VO_LABEL_COLUMNS, row))
+                     + "\r\n")
+    wrong = int((cols["slip_class"] != cols["slip_class_vo"]).sum())
+    return {"file": path.name, "low_texture": low_texture(terrain), "wrong": wrong,
+            "dropouts": int(cols["vo_dropout"].sum())}

@@ -14,7 +14,7 @@ from ..models import flatten
 from . import baselines as bl
 from .acomerge import AcoMergeConfig
 from .buffer import make_buffer
-from .label_audit import expert_probabilities, flag_labels
+from .label_audit import crossval_probabilities, flag_labels
 from .lockstep import run_acomerge_many
 from .registry import Budget, FusedModel, FusionInputs, register
 from .robust import fit_acomerge_robust_many
@@ -156,7 +156,9 @@ def _acomerge_audit_many(inps: list[FusionInputs]) -> list[FusedModel]:
     """AcoMerge on D_Cal without the labels a confident-learning audit flags (fusion/label_audit.py)."""
     kept, flagged = [], []
     for inp in inps:
-        bad = flag_labels(inp.y_cal, expert_probabilities(inp.arch, inp.experts, inp.x_cal))
+        probs = crossval_probabilities(inp.arch, inp.experts[0], inp.x_cal, inp.y_cal, inp.seed, inp.budget.steps,
+                                       inp.budget.finetune_lr)
+        bad = flag_labels(inp.y_cal, probs)
         kept.append(dataclasses.replace(inp, x_cal=inp.x_cal[~bad], y_cal=inp.y_cal[~bad]))
         flagged.append(int(bad.sum()))
     out = _aco_on_buffer("acomerge-audit")(kept)

@@ -18,7 +18,7 @@ else:  # run as a script by CMake
     import objects as od  # type: ignore[no-redef]
 
 KINDS = ("const", "hb_time", "err_reg", "serial", "pdo", "model", "counter", "slot", "store_cnt", "upload",
-         "command", "domain")
+         "command", "domain", "params")
 ACCESS_BITS = {"const": 1, "ro": 1, "wo": 2, "rw": 3, "rww": 3, "rwr": 3}
 
 
@@ -53,6 +53,9 @@ def c_header() -> str:
         f"#define SLIPEST_CO_N_COUNTERS {len(od.COUNTERS)}u",
         f"#define SLIPEST_CO_IDX_MODEL_IMAGE 0x{od.IDX_MODEL_IMAGE:04X}u",
         f"#define SLIPEST_CO_IDX_HEARTBEAT 0x1017u",
+        f"#define SLIPEST_CO_SIGNATURE_SAVE 0x{od.SIGNATURE_SAVE:08X}u /**< \"save\": 0x1010 stores */",
+        f"#define SLIPEST_CO_SIGNATURE_LOAD 0x{od.SIGNATURE_LOAD:08X}u /**< \"load\": 0x1011 restores the defaults */",
+        f"#define SLIPEST_CO_PARAMS_BYTES {_stored_params_bytes()}u /**< the stored communication parameters */",
         "",
         "/* EMCY error codes (CiA 301) the node sends */",
     ]
@@ -77,6 +80,7 @@ def c_header() -> str:
     lines += [f"#define SLIPEST_CO_MODEL_{n.upper()} {i}u" for i, n in enumerate(od.MODEL_ARGS)]
     lines += [f"#define SLIPEST_CO_CMD_{n.upper()} {od.command_arg(n)}u" for n in od.COMMAND_ARGS]
     lines += [f"#define SLIPEST_CO_UPLOAD_{n.upper()} {i}u" for i, n in enumerate(od.UPLOAD_ARGS)]
+    lines += [f"#define SLIPEST_CO_PARAMS_{n.upper()} {i}u" for i, n in enumerate(od.PARAM_ARGS)]
     lines += [f"#define SLIPEST_CO_SLOT_{n.upper()} {i}u" for i, (n, _) in enumerate(od.SLOT_FIELDS)]
     lines += [f"#define SLIPEST_CO_SLOT_SHIFT {od.SLOT_SHIFT}u",
               f"#define SLIPEST_CO_SLOT_FIELD_MASK 0x{(1 << od.SLOT_SHIFT) - 1:X}u",
@@ -178,6 +182,21 @@ def _check_rpdo_layouts() -> None:
                              "(UNSIGNED16 counter, then 2..3 INTEGER16)")
 
 
+# The C node packs the stored communication parameters itself (slipest_co_od_access.c: the heartbeat time, 2 bytes):
+# objects.STORED_PARAMS must name exactly the writable communication objects, and only those it packs.
+_C_STORED = (0x1017,)
+
+
+def _stored_params_bytes() -> int:
+    writable = sorted({e.index for e in od.objects() if e.index < 0x2000 and e.kind not in ("params",)
+                       and ACCESS_BITS[e.access] & 2})
+    if tuple(od.STORED_PARAMS) != _C_STORED or writable != sorted(od.STORED_PARAMS):
+        raise ValueError(f"0x1010 stores {[hex(i) for i in od.STORED_PARAMS]}, the writable communication objects are "
+                         f"{[hex(i) for i in writable]} and the C node packs {[hex(i) for i in _C_STORED]}: "
+                         "they must agree (extend slipest_co_od_access.c's record with the new parameter)")
+    return sum(od.TYPE_BYTES[e.dtype] for e in od.objects() if e.index in od.STORED_PARAMS)
+
+
 # the size codes of the packed sub-index row: bytes = (1 << code) >> 1
 _SIZE_CODES = {0: 0, 1: 1, 2: 2, 4: 3, 32: 6}
 
@@ -235,8 +254,10 @@ def c_source() -> str:
 _ACCESS_EDS = {"const": "const", "ro": "ro", "wo": "wo", "rw": "rw", "rww": "rww", "rwr": "rwr"}
 
 
-def eds_text(creation_date: str = "11-24-2026") -> str:
-    """The EDS (CiA 306, version 4.0). Node-id-relative defaults are written as $NODEID+..."""
+def eds_text() -> str:
+    """The EDS (CiA 306, version 4.0). Node-id-relative defaults are written as $NODEID+... Its [FileInfo] dates
+    and version are the object dictionary's own (objects.OD_VERSION, OD_CREATED, OD_VERSION_DATE): the same bytes
+    whenever and wherever it is generated."""
     ents = od.objects()
     by_index: dict[int, list] = {}
     for e in ents:
@@ -248,13 +269,16 @@ def eds_text(creation_date: str = "11-24-2026") -> str:
     out = [
         "[FileInfo]",
         "FileName=slipest.eds",
-        "FileVersion=1",
-        "FileRevision=0",
+        f"FileVersion={od.OD_VERSION[0]}",
+        f"FileRevision={od.OD_VERSION[1]}",
         "EDSVersion=4.0",
         "Description=slipest wheel-slip estimator node (CiA 301 subset), generated from canopen_od/objects.py",
-        "CreationTime=12:00PM",
-        f"CreationDate={creation_date}",
+        f"CreationTime={od.OD_CREATED[1]}",
+        f"CreationDate={od.OD_CREATED[0]}",
         "CreatedBy=fleetlab canopen_od/generate.py",
+        f"ModificationTime={od.OD_VERSION_DATE[1]}",
+        f"ModificationDate={od.OD_VERSION_DATE[0]}",
+        "ModifiedBy=fleetlab canopen_od/generate.py",
         "",
         "[DeviceInfo]",
         "VendorName=unassigned (integrator sets the vendor ID)",
@@ -318,7 +342,8 @@ _MEANING = {"hb_time": "0 = off", "err_reg": "bit 0 generic, 4 communication, 7 
             "serial": "given to slipest_co_init()", "pdo": "last PDO payload", "model": "the active model",
             "counter": "node counter", "slot": "from the store", "store_cnt": "store counter",
             "upload": "upload progress", "command": "write 1 to execute",
-            "domain": "model.img, written into the inactive slot"}
+            "domain": "model.img, written into the inactive slot",
+            "params": "reads 1; write the signature"}
 
 
 def markdown_table() -> str:

@@ -17,6 +17,8 @@ Each entry: (index, sub, name, data type, access, default, kind, arg, pdo_mappab
   upload     arg = position in UPLOAD_ARGS (upload state, last store status, bytes received)
   command    write-only command arg = command_arg(name) for COMMAND_ARGS (activate, rollback, abort)
   domain     the model image (DOMAIN, written into the inactive slot)
+  params     CiA 301 store (0x1010) / restore (0x1011) parameters: arg = position in PARAM_ARGS; reads 1 (the
+             node saves / restores on command; 0 without a store), a write needs the signature
 PDO communication and mapping objects (0x1400/0x1600/0x1800/0x1A00) are derived from PDOS.
 """
 
@@ -37,6 +39,25 @@ REVISION = 0x00010000  # major 1, minor 0 (slipest library 1.0)
 DEVICE_TYPE = 0x00000000  # no CiA device profile
 HEARTBEAT_MS = 1000
 DEVICE_NAME = "slipest"
+
+# The object dictionary's own version: the EDS's FileVersion / FileRevision, and the date of that version as its
+# ModificationDate (CiA 306 [FileInfo]). Written here, never taken from the clock, so the generated EDS is the same
+# bytes on every machine and every day (tests/test_determinism.py). Raise OD_VERSION and set OD_VERSION_DATE
+# whenever an object changes. CiA 306 dates are mm-dd-yyyy, times hh:mm(AM|PM).
+OD_VERSION = (2, 0)  # 2.0: 0x1010 / 0x1011 (store and restore parameters); 0x2001 sub 3 readable in every state
+OD_CREATED = ("11-24-2026", "12:00PM")  # the first version of this dictionary
+OD_VERSION_DATE = ("12-01-2026", "12:00PM")
+
+# CiA 301 store / restore parameters (0x1010 / 0x1011 sub 1): the signatures a master writes, "save" and "load" as
+# four ASCII bytes in SDO (little-endian) order
+SIGNATURE_SAVE = int.from_bytes(b"save", "little")  # 0x65766173
+SIGNATURE_LOAD = int.from_bytes(b"load", "little")  # 0x64616F6C
+IDX_STORE_PARAMS = 0x1010
+IDX_RESTORE_PARAMS = 0x1011
+# The writable communication parameters 0x1010 stores (in the parameter record's order, each little-endian in its
+# type's size) and 0x1011 restores to their defaults, after a reset. generate.py refuses a writable communication
+# object that is not here: the C node packs exactly these (slipest_co_od_access.c).
+STORED_PARAMS = (0x1017,)
 
 # Manufacturer objects
 IDX_MODEL_IMAGE = 0x2000
@@ -68,7 +89,7 @@ ABORT_CODES = (
     ("GENERAL", 0x08000000, "general error"),
     ("STORE", 0x08000020, "data cannot be stored (image refused)"),
     ("STATE", 0x08000022, "not in the present device state (no store, nothing to activate)"),
-    ("NO_DATA", 0x08000024, "no data available (the built-in model's sha256, no store)"),
+    ("NO_DATA", 0x08000024, "no data available (not sent since OD 2.0: every readable object answers)"),
 )
 # EMCY error codes (CiA 301) the node sends: (C name, code, meaning), the source of SLIPEST_CO_EMCY_*.
 EMCY_CODES = (
@@ -86,6 +107,7 @@ EMCY = {name: code for name, code, _ in EMCY_CODES}
 MODEL_ARGS = ("version", "hash32", "sha256", "slot", "library_version")
 COMMAND_ARGS = ("activate", "rollback", "abort")  # arg = 1 + position (the value written must be 1)
 UPLOAD_ARGS = ("state", "last_status", "received")
+PARAM_ARGS = ("save", "restore")  # 0x1010 sub 1, 0x1011 sub 1
 SLOT_SHIFT = 4  # slot arg: slot << SLOT_SHIFT | position of the field in SLOT_FIELDS
 PDO_SHIFT = 3  # pdo arg: payload buffer << PDO_SHIFT | byte offset
 
@@ -170,6 +192,13 @@ def objects() -> list[Entry]:
         Entry(0x1001, 0, "Error register", UNSIGNED8, "ro", 0, "err_reg"),
         Entry(0x1017, 0, "Producer heartbeat time", UNSIGNED16, "rw", HEARTBEAT_MS, "hb_time"),
     ]
+    # default 1: what a read answers (saves / restores on command); a write takes the signature only
+    e += _record(IDX_STORE_PARAMS, "Store parameters", [
+        ("Save all parameters", UNSIGNED32, "rw", 1, "params", PARAM_ARGS.index("save")),
+    ])
+    e += _record(IDX_RESTORE_PARAMS, "Restore default parameters", [
+        ("Restore all default parameters", UNSIGNED32, "rw", 1, "params", PARAM_ARGS.index("restore")),
+    ])
     e += _record(0x1018, "Identity object", [
         ("Vendor-ID", UNSIGNED32, "ro", VENDOR_ID),
         ("Product code", UNSIGNED32, "ro", PRODUCT_CODE),

@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import platform
+import shutil
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,7 +26,7 @@ from fleetlab.data.contracts import CLASS_NAMES, FEATURE_NAMES
 from fleetlab.data.features_int import FEATURE_LSB, quantize_features
 from fleetlab.models.mlp import arch_of
 
-from . import headers, manifest, model_image, onnx_export, vectors
+from . import f32_bound, headers, manifest, model_image, onnx_export, vectors
 from .quant import FloatNet, FloatParams, QNet, QParams, quantize, quantize_net
 
 ONNX_FILE = "model.onnx"
@@ -96,25 +99,69 @@ def export_bundle(
     c_name: str = headers.DEFAULT_C_NAME,
     model_version: int = 1,
     hmac_key: bytes | None = None,
+    progress: bool = True,
 ) -> Bundle:
-    """Export `model` into directory `out` (created; existing bundle files are replaced). With hmac_key,
-    model.img carries an HMAC-SHA256 tag (for a flight build provisioned with the same key)."""
+    """Export `model` into directory `out` (created; existing bundle files are replaced, other files kept). With
+    hmac_key, model.img carries an HMAC-SHA256 tag (for a flight build provisioned with the same key).
+
+    The files are written into a temporary folder beside `out` and moved into `out` only when every step and
+    check passed, so a failed export leaves no half-written bundle (and a bundle already in `out` untouched)."""
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"{out}: exists and is not a folder")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
+    steps = tqdm(total=5, desc="export", leave=False, disable=not progress)
+    try:
+        m, fp, qp = _write_bundle(model, work, steps, inputs=inputs, meta=meta, model_path=model_path,
+                                  data_dirs=data_dirs, onnx_only=onnx_only, vector_sources=vector_sources,
+                                  c_name=c_name, model_version=model_version, hmac_key=hmac_key)
+        _install(work, out)
+    except (ValueError, OSError) as e:
+        try:  # the message names the bundle, not the temporary folder
+            renamed = type(e)(str(e).replace(str(work), str(out))) if str(work) in str(e) else None
+        except TypeError:  # an error type that takes other arguments: its own message, then
+            renamed = None
+        if renamed is None:
+            raise
+        raise renamed from None
+    finally:
+        steps.close()  # before the caller prints an error: a bar cleared after it would blank that line
+        shutil.rmtree(work, ignore_errors=True)
+    return Bundle(out, m, fp, qp)
+
+
+def _install(work: Path, out: Path) -> None:
+    """Move the finished bundle files from `work` into `out`: the old manifest goes first and the new one comes
+    last, so that a folder caught in between holds no manifest (load_bundle refuses it) rather than a wrong one."""
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"{out}: exists and is not a folder")
+    out.mkdir(exist_ok=True)
+    (out / manifest.MANIFEST).unlink(missing_ok=True)
     for name in BUNDLE_FILES:
         (out / name).unlink(missing_ok=True)
+    for f in sorted(work.iterdir(), key=lambda p: p.name == manifest.MANIFEST):
+        os.replace(f, out / f.name)
+
+
+def _write_bundle(model: torch.nn.Module, out: Path, steps, *, inputs: np.ndarray, meta: dict | None,
+                  model_path: Path | None, data_dirs: list[Path] | None, onnx_only: bool, vector_sources: dict | None,
+                  c_name: str, model_version: int, hmac_key: bytes | None) -> tuple[dict, Any, Any]:
+    """Every bundle file written into the (empty) folder `out`; returns the manifest and the float and
+    fixed-point parameters (None, None for an ONNX-only bundle)."""
     arch = arch_of(model)
     model.eval()
-    steps = tqdm(total=5, desc="export", leave=False)
     names = [ONNX_FILE]
     opset = onnx_export.export_onnx(model, out / ONNX_FILE)
     steps.update()
 
     fp = qp = None
     if onnx_only:
+        x = np.asarray(inputs, np.float32)
         with torch.no_grad():
-            tl = model(torch.from_numpy(np.asarray(inputs, np.float32))).numpy()
-        onnx_diff = onnx_export.check_onnx(out / ONNX_FILE, inputs, tl)
+            tl = model(torch.from_numpy(x)).numpy()
+        ftol = f32_bound.float_tolerance(model, x)
+        onnx_diff, onnx_excess = onnx_export.check_onnx(out / ONNX_FILE, x, tl, ftol["tolerance"])
         content = _flat_hash(model)
         vec_info = None
     else:
@@ -132,7 +179,8 @@ def export_bundle(
     if not onnx_only:
         v = vectors.make_vectors(model, qp, inputs)
         names += [p.name for p in vectors.write_vectors(out, v)]
-        onnx_diff = onnx_export.check_onnx(out / ONNX_FILE, v.inputs, v.torch_logits)
+        ftol = f32_bound.float_tolerance(model, v.inputs)
+        onnx_diff, onnx_excess = onnx_export.check_onnx(out / ONNX_FILE, v.inputs, v.torch_logits, ftol["tolerance"])
         steps.update()
         vec_info = {
             "n": len(v), "npz": "vectors.npz", "bin": vectors.bin_layout(len(v)),
@@ -160,9 +208,11 @@ def export_bundle(
         "class_names": list(CLASS_NAMES),
         "onnx": {
             "file": ONNX_FILE, "opset": opset, "input": onnx_export.INPUT_NAME, "output": onnx_export.OUTPUT_NAME,
-            "dynamic_batch": True, "max_abs_diff_vs_torch": onnx_diff, "tolerance": onnx_export.ONNX_TOLERANCE,
-            "tolerance_rule": "|onnx - torch| <= tolerance * max(1, |torch|); the C float path is checked the same way",
+            "dynamic_batch": True, "max_abs_diff_vs_torch": onnx_diff, "max_scaled_diff_vs_torch": onnx_excess,
+            "checked_with": "float_tolerance",
         },
+        # the one tolerance of every float check (ONNX, the C float path, the Python checks): export/f32_bound.py
+        "float_tolerance": ftol,
         "versions": _versions(),
         "content_hash": content,
         "content_hash32": f"0x{content[:8]}",
@@ -191,8 +241,7 @@ def export_bundle(
     m["files"] = manifest.file_entries(out, names)
     manifest.write_manifest(out, m)
     steps.update()
-    steps.close()
-    return Bundle(out, m, fp, qp)
+    return m, fp, qp
 
 
 def load_bundle(path: Path | str) -> Bundle:
@@ -259,6 +308,21 @@ def _load_net_bundle(path: Path, m: dict) -> Bundle:
     return Bundle(path, m, fn, net)
 
 
+def _check_tolerance(b: Bundle, model: torch.nn.Module, inputs: np.ndarray, tol: float) -> str:
+    """The recorded float tolerance is the bound export/f32_bound.py computes for the bundle's network and vectors
+    (recomputed here: a hand-edited manifest cannot loosen the float checks). A bundle written before the bound
+    keeps the 1e-5 it recorded."""
+    bound = f32_bound.float_tolerance(model, inputs)["tolerance"]
+    if "float_tolerance" not in b.manifest:
+        return (f"float tolerance {tol:.2e} recorded by a bundle older than the float32 bound "
+                f"(the bound for this network and its vectors: {bound:.2e})")
+    # the same 3 significant digits, rounded up; a last float64 bit of another machine may move it by one step
+    if not bound / 1.01 <= tol <= bound * 1.01:
+        raise ValueError(f"{b.path / manifest.MANIFEST}: float_tolerance {tol:.6g} is not the float32 bound of this "
+                         f"network on its vectors ({bound:.6g})")
+    return f"float tolerance {tol:.2e} x max(1, |logit|) = the float32 error bound of this network on its vectors"
+
+
 def check_bundle(path: Path | str, model: torch.nn.Module | None = None) -> list[str]:
     """Re-run every check of a bundle; return one line per passed check, raise ValueError on failure."""
     from .intref import argmax_lowest, run
@@ -270,16 +334,19 @@ def check_bundle(path: Path | str, model: torch.nn.Module | None = None) -> list
     v = vectors.read_vectors(b.path)
     onnx_file = b.path / ONNX_FILE
     ref_model = b.fparams.to_model()
+    tol = f32_bound.recorded_tolerance(b.manifest)
+    done.append(_check_tolerance(b, ref_model, v.inputs, tol))
     with torch.no_grad():
         tl = ref_model(torch.from_numpy(v.inputs)).numpy()
         if model is not None:
             tl_given = model.eval()(torch.from_numpy(v.inputs)).numpy()
-            if not np.allclose(tl_given, tl, atol=1e-6, rtol=0):
+            if not f32_bound.excess(tl_given, tl) <= tol:
                 raise ValueError(f"{b.path}: the given model is not the model in this bundle")
-    if not np.allclose(tl, v.torch_logits, atol=1e-5, rtol=0):
+    if not f32_bound.excess(tl, v.torch_logits) <= tol:
         raise ValueError(f"{b.path}: torch_logits in vectors.npz do not match the float header parameters")
-    diff = onnx_export.check_onnx(onnx_file, v.inputs, v.torch_logits)
-    done.append(f"ONNX: checker passed, onnxruntime vs torch max |diff| {diff:.2e} on {len(v)} vectors")
+    diff, scaled = onnx_export.check_onnx(onnx_file, v.inputs, v.torch_logits, tol)
+    done.append(f"ONNX: checker passed, onnxruntime vs torch max |diff| {diff:.2e} on {len(v)} vectors "
+                f"({scaled:.2e} x max(1, |logit|), tolerance {tol:.2e})")
     if not np.array_equal(quantize_features(v.inputs), v.q_inputs):
         raise ValueError(f"{b.path}: q_inputs in vectors.npz are not quantize_features(inputs)")
     ql, sat = run(b.qparams, v.q_inputs)

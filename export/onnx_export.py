@@ -11,7 +11,6 @@ import torch
 
 OPSET = 17  # first opset with a native LayerNormalization
 INPUT_NAME, OUTPUT_NAME = "features", "logits"
-ONNX_TOLERANCE = 1e-5
 
 
 def export_onnx(model: torch.nn.Module, path: Path, opset: int = OPSET) -> int:
@@ -47,10 +46,13 @@ def onnx_logits(path: Path, inputs: np.ndarray) -> np.ndarray:
     return sess.run([OUTPUT_NAME], {INPUT_NAME: np.asarray(inputs, dtype=np.float32)})[0]
 
 
-def check_onnx(path: Path, inputs: np.ndarray, torch_logits: np.ndarray, tol: float = ONNX_TOLERANCE) -> float:
-    """onnx.checker + onnxruntime outputs within tol·max(1, |torch logit|) of the torch logits (float32
-    keeps about 7 digits, so large logits get a relative bound); returns the max |diff|."""
+def check_onnx(path: Path, inputs: np.ndarray, torch_logits: np.ndarray, tol: float) -> tuple[float, float]:
+    """onnx.checker + onnxruntime outputs within tol * max(1, |torch logit|) of the torch logits, tol being the
+    bundle's float tolerance (export/f32_bound.py: what float32 rounding allows for this network on these inputs);
+    returns the max |diff| and the max |diff| / max(1, |torch logit|)."""
     import onnx
+
+    from .f32_bound import excess
 
     path = Path(path)
     try:
@@ -61,8 +63,8 @@ def check_onnx(path: Path, inputs: np.ndarray, torch_logits: np.ndarray, tol: fl
     if out.shape != np.shape(torch_logits):
         raise ValueError(f"{path}: onnxruntime output shape {out.shape}, expected {np.shape(torch_logits)}")
     diff = float(np.abs(out - torch_logits).max(initial=0.0))
-    excess = float((np.abs(out - torch_logits) / np.maximum(1.0, np.abs(torch_logits))).max(initial=0.0))
-    if not excess <= tol:
+    scaled = excess(out, torch_logits)
+    if not scaled <= tol:
         raise ValueError(f"{path}: onnxruntime logits differ from torch by {diff:.3g} "
-                         f"(> {tol:g} x max(1, |logit|))")
-    return diff
+                         f"({scaled:.3g} x max(1, |logit|) > the bundle's float tolerance {tol:.3g})")
+    return diff, scaled

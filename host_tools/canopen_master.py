@@ -122,13 +122,16 @@ class SlipestMaster:
         return {"vendor_id": rec[1].raw, "product_code": rec[2].raw, "revision": rec[3].raw, "serial": rec[4].raw}
 
     def active_model(self) -> dict:
+        """version, hash32, sha256 (hex; None when the node has no model or does not know it: 32 zero bytes, or
+        the "no data" abort of a node older than OD 2.0) and slot (None for the built-in model; 0xFE: none)."""
         rec = self.node.sdo[ACTIVE_MODEL]
         try:
-            sha = bytes(rec[3].raw).hex()
+            raw = bytes(rec[3].raw)
+            sha = raw.hex() if any(raw) else None
         except canopen.SdoAbortedError as e:
             if e.code != od.ABORT["NO_DATA"]:
                 raise
-            sha = None  # the built-in model: its sha256 is not compiled into the node
+            sha = None
         slot = rec[4].raw
         return {"version": rec[1].raw, "hash32": rec[2].raw, "sha256": sha, "slot": None if slot == 0xFF else slot}
 
@@ -173,6 +176,17 @@ class SlipestMaster:
 
     def abort_upload(self) -> None:
         self.node.sdo[COMMAND][3].raw = 1
+
+    # -- CiA 301 store / restore parameters ---------------------------------------------------
+    def store_parameters(self) -> None:
+        """0x1010 sub 1 = "save": the writable communication parameters (objects.STORED_PARAMS: the heartbeat
+        time) are kept in the node's NVM and are in force after every reset and power cycle."""
+        self.node.sdo[od.IDX_STORE_PARAMS][1].raw = od.SIGNATURE_SAVE
+
+    def restore_defaults(self) -> None:
+        """0x1011 sub 1 = "load": the defaults are in force again after the next reset (until then the values
+        stay as they are)."""
+        self.node.sdo[od.IDX_RESTORE_PARAMS][1].raw = od.SIGNATURE_LOAD
 
     def close(self) -> None:
         self.network.disconnect()

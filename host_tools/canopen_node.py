@@ -97,7 +97,10 @@ def now_ms() -> int:
 class CCanopenNode:
     """One CANopen node (slipest_co_t) with its model store on a RamNvm."""
 
-    def __init__(self, lib_path: Path | str, node_id: int = 5, serial: int = 1, nvm: RamNvm | None = None) -> None:
+    def __init__(self, lib_path: Path | str, node_id: int = 5, serial: int = 1, nvm: RamNvm | None = None,
+                 builtin: bool = True) -> None:
+        """`builtin`: the node gets the library's built-in model (as the emulator); False: none, as a flight image
+        that links no model (it then runs the store's active slot, or no model at all)."""
         lib = ctypes.CDLL(str(lib_path))
         vp, fp = ctypes.c_void_p, ctypes.POINTER(CFrame)
         for name, res, args in (
@@ -105,6 +108,8 @@ class CCanopenNode:
             ("slipest_co_store_size", ctypes.c_size_t, []),
             ("slipest_bundle_model_q", vp, []),
             ("slipest_bundle_model_f32", vp, []),
+            ("slipest_bundle_sha256", vp, []),
+            ("slipest_co_set_builtin_sha256", None, [vp, vp]),
             ("slipest_store_open", ctypes.c_int, [vp, ctypes.POINTER(CNvm), vp]),
             ("slipest_co_init", ctypes.c_int, [vp, ctypes.c_uint8, ctypes.c_uint32, vp, vp, vp, ctypes.c_uint32, fp,
                                                ctypes.c_size_t]),
@@ -116,7 +121,7 @@ class CCanopenNode:
         ):
             f = getattr(lib, name)
             f.restype, f.argtypes = res, args
-        self.lib, self.node_id, self.serial = lib, node_id, serial
+        self.lib, self.node_id, self.serial, self.builtin = lib, node_id, serial, builtin
         self.nvm = nvm
         self.max_out = int(lib.slipest_co_max_out())
         self._out = (CFrame * self.max_out)()
@@ -135,11 +140,15 @@ class CCanopenNode:
                 st = self.lib.slipest_store_open(self._store, ctypes.byref(self.nvm.struct), None)
                 if st not in (status()["SLIPEST_OK"], status()["SLIPEST_E_STATE"], status()["SLIPEST_E_NVM"]):
                     raise OSError(f"slipest_store_open failed ({st})")
-            n = self.lib.slipest_co_init(self._co, self.node_id, self.serial, self._store,
-                                         self.lib.slipest_bundle_model_q(), self.lib.slipest_bundle_model_f32(),
-                                         now_ms(), self._out, self.max_out)
+            mq, mf = ((self.lib.slipest_bundle_model_q(), self.lib.slipest_bundle_model_f32()) if self.builtin
+                      else (None, None))
+            n = self.lib.slipest_co_init(self._co, self.node_id, self.serial, self._store, mq, mf, now_ms(),
+                                         self._out, self.max_out)
             if n < 0:
                 raise OSError(f"slipest_co_init failed ({n})")
+            # the built-in model's sha256, known at build time (0x2001 sub 3 while it runs)
+            if self.builtin:
+                self.lib.slipest_co_set_builtin_sha256(self._co, self.lib.slipest_bundle_sha256())
             return self._frames(n)
 
     def _frames(self, n: int) -> list[Frame]:

@@ -87,7 +87,10 @@ class CanopenSession:
 
     def __init__(self, link: str, eds: Path, node_id: int = 5, lib: Path | None = None, emulator: Path | None = None,
                  nvm_file: Path | None = None, builtin_image: Path | None = None, bus: can.BusABC | None = None,
-                 nvm: RamNvm | None = None, wrap_bus: Callable[[can.BusABC], can.BusABC] | None = None) -> None:
+                 nvm: RamNvm | None = None, wrap_bus: Callable[[can.BusABC], can.BusABC] | None = None,
+                 builtin_model: bool = True, emulator_args: tuple[str, ...] = ()) -> None:
+        """`builtin_model` (inproc): False boots the node without a built-in model, as a flight image;
+        `emulator_args` (slcan, cobs): more options for slipest_emu (e.g. its NVM cut hook)."""
         self.link, self.node_id = link, node_id
         self.bridge: CanopenBridge | None = None
         self.proc: subprocess.Popen | None = None
@@ -96,7 +99,7 @@ class CanopenSession:
                 raise ValueError("the inproc link needs the host library (libslipest_host.so)")
             channel = f"fleetlab-canopen-{os.getpid()}-{next(_channels)}"
             self.nvm = nvm if nvm is not None else RamNvm(nvm_sectors(lib))
-            self.node = CCanopenNode(lib, node_id, nvm=self.nvm)
+            self.node = CCanopenNode(lib, node_id, nvm=self.nvm, builtin=builtin_model)
             self.bridge = CanopenBridge(self.node, can.Bus(interface="virtual", channel=channel))
             master_bus = can.Bus(interface="virtual", channel=channel)
         elif link in ("slcan", "cobs"):
@@ -107,6 +110,7 @@ class CanopenSession:
                 args += ["--nvm", str(nvm_file)]
             if builtin_image is not None:
                 args += ["--model", str(builtin_image)]
+            args += list(emulator_args)
             self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
             line = self.proc.stdout.readline().decode() if self.proc.stdout else ""
             if not line.startswith("PTY "):
@@ -170,6 +174,10 @@ class CanopenSession:
     def close(self) -> None:
         try:
             self.master.close()
+        except (can.CanError, OSError):
+            # closing the adapter writes to the pty: gone when the emulator process died (a power-cut test)
+            if self.proc is None or self.proc.poll() is None:
+                raise
         finally:
             if self.bridge is not None:
                 self.bridge.close()

@@ -27,3 +27,18 @@ def status() -> dict[str, int]:
         raise ValueError(f"{header()}: cannot read slipest_status_t")
     return codes
 
+
+
+_MEANING = re.compile(r"^\s*(SLIPEST_(?:OK|E_[A-Z_]+))\s*=\s*(-?\d+)\s*,?\s*/\*\*<\s*(.*?)\s*\*/", re.MULTILINE)
+
+
+@cache
+def meanings() -> dict[int, tuple[str, str]]:
+    """value -> (name, meaning) of each status code, the meaning being its comment in slipest_status.h
+    (`meanings()[-16] == ("SLIPEST_E_STALE", "model version not newer than the active one (not a rollback)")`)."""
+    text = header().read_text(encoding="utf-8")
+    body = text[text.index("typedef enum {"):text.index("} slipest_status_t;")]
+    out = {int(value): (name, doc) for name, value, doc in _MEANING.findall(body)}
+    if set(out) != set(status().values()):
+        raise ValueError(f"{header()}: a status code without its /**< meaning */ comment")
+    return out

@@ -22,8 +22,10 @@ from typing import Callable
 import can
 import canopen
 
-from .canopen_master import ABORT_NAMES
+from fleetlab.canopen_od import objects as od
+from .canopen_master import ABORT_NAMES, SlipestMaster
 from .canopen_session import CanopenSession
+from .status_codes import meanings
 from .wire.can_bits import frame_bits
 
 
@@ -84,30 +86,90 @@ def counters_since(now: dict[str, int], start: dict[str, int]) -> dict[str, int]
     return {k: (v - start.get(k, 0)) % (1 << 32) for k, v in now.items()}
 
 
-def explain(e: Exception) -> str:
-    """One line for an SDO failure: the abort code and its meaning."""
-    if isinstance(e, canopen.SdoAbortedError):
-        return f"the node refused: SDO abort 0x{e.code:08X} ({ABORT_NAMES.get(e.code, 'see CiA 301')})"
-    return f"no answer from the node: {e}"
+# The kind of a refusal, by the slipest status the node gives it (byte 3 of its EMCY 0x6300 / 0x5000, or 0x2006
+# sub 2); the status codes and their meanings are read from slipest_status.h (status_codes.meanings()).
+REFUSAL_KINDS = {"STALE": "stale version", "AUTH": "authentication", "FORMAT": "format", "VERSION": "format",
+                 "LENGTH": "size", "ARCH": "architecture", "CRC": "corrupted image", "HASH": "corrupted image",
+                 "RANGE": "model check", "NONFINITE": "model check", "NVM": "the node's NVM failed"}
+# the SDO aborts after which the node says why by EMCY and in 0x2006 sub 2 (a store call failed)
+_STORE_ABORTS = (od.ABORT["STORE"], od.ABORT["LENGTH"], od.ABORT["HARDWARE"])
+_EMCY_STORE = (od.EMCY["DATA_SET"], od.EMCY["HARDWARE"])
+
+
+def refusal_status(master: SlipestMaster | None, emcy_from: int = 0) -> int | None:
+    """The slipest status of the node's last refusal: byte 3 of its newest EMCY 0x6300 / 0x5000 in the master's
+    EMCY log (from entry `emcy_from` on), else 0x2006 sub 2 (last store status) read by SDO; None when neither
+    says (no master, or the node does not answer)."""
+    if master is None:
+        return None
+    log = master.node.emcy.log[emcy_from:]
+    for entry in reversed(log):
+        if entry.code in _EMCY_STORE and entry.data:
+            return int.from_bytes(entry.data[:1], "little", signed=True)
+    try:
+        st = master.upload_status()["last_store_status"]
+    except (canopen.SdoAbortedError, canopen.SdoCommunicationError):
+        return None
+    return st or None
+
+
+def explain(e: Exception, master: SlipestMaster | None = None, emcy_from: int = 0,
+            image_bytes: int | None = None) -> str:
+    """One line for an SDO failure: why the node refused (the kind and the meaning of the slipest status it gives
+    by EMCY or in 0x2006 sub 2, when there is a master to ask), then the abort code and its meaning."""
+    if not isinstance(e, canopen.SdoAbortedError):
+        return f"no answer from the node: {e}"
+    abort = f"SDO abort 0x{e.code:08X} ({ABORT_NAMES.get(e.code, 'see CiA 301')})"
+    if e.code == od.ABORT["TOO_HIGH"] and image_bytes is not None:
+        return (f"the node refused the image: size: {image_bytes} bytes is more than its slots take "
+                f"(SLIPEST_STORE_IMAGE_MAX of its build); {abort}")
+    st = refusal_status(master, emcy_from) if e.code in _STORE_ABORTS else None
+    if st is not None and st in meanings():
+        name, meaning = meanings()[st]
+        kind = REFUSAL_KINDS.get(name.removeprefix("SLIPEST_E_"), "refused")
+        return f"the node refused the image: {kind}: {meaning} ({name} {st}); {abort}"
+    return f"the node refused: {abort}"
 
 
 def upload_image(session: CanopenSession, tap: SdoTap, image: bytes, activate: bool, block: bool = True,
                  progress: Callable[[int], None] | None = None) -> UploadReport:
-    """Upload (and activate) on an open session whose master bus is `tap`."""
+    """Upload (and activate) on an open session whose master bus is `tap`. A refusal is an OSError whose one line
+    says why (explain())."""
     m = session.master
     tap.reset()
+    emcy_from = len(m.node.emcy.log)
     t0 = time.perf_counter()
     try:
         m.upload(image, block=block, progress=progress)
         if activate:
             m.activate()
     except (canopen.SdoAbortedError, canopen.SdoCommunicationError) as e:
-        raise OSError(explain(e)) from None
+        raise OSError(explain(e, m, emcy_from, len(image))) from None
     wall = time.perf_counter() - t0
     frames, bits = tap.frames, tap.bits
     model = m.active_model()
     return UploadReport(len(image), frames, bits, bits / 500_000, wall, activate, model["version"],
                         f"{model['hash32']:08x}", model["sha256"])
+
+
+NO_PREVIOUS_MODEL = ("no previous model to roll back to (none was active before this one, or an upload since has "
+                     "taken its slot, even one the node then refused)")
+
+
+def rollback_model(session: CanopenSession) -> dict:
+    """0x2002 sub 2: the node re-activates its previous model. Returns the active model after it (active_model());
+    OSError with one line when there is none (NO_PREVIOUS_MODEL) or the node refuses otherwise."""
+    m = session.master
+    emcy_from = len(m.node.emcy.log)
+    try:
+        m.rollback()
+    except canopen.SdoAbortedError as e:
+        if e.code == od.ABORT["STATE"]:
+            raise OSError(NO_PREVIOUS_MODEL) from None
+        raise OSError(explain(e, m, emcy_from)) from None
+    except canopen.SdoCommunicationError as e:
+        raise OSError(explain(e)) from None
+    return m.active_model()
 
 
 def open_tapped(link: str, eds: Path, node_id: int, **kwargs) -> tuple[CanopenSession, SdoTap]:
@@ -179,7 +241,7 @@ def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Pat
     try:
         m.activate()  # between two frames: the next window is the new model's
     except canopen.SdoAbortedError as e:
-        raise OSError(explain(e)) from None
+        raise OSError(explain(e, m)) from None
     after = m.active_model()
     n1 = col.count()
     n = stream_telemetry(session, second, col, first_counter=len(first))

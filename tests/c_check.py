@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 from pathlib import Path
 
@@ -25,3 +26,13 @@ def build_check(bundle: Path, out: Path, cc: str, flags: list[str]) -> Path:
     res = subprocess.run(cmd, capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     return exe
+
+
+def check_argv(exe: Path, bundle: Path, tol: float | None = None) -> list[str]:
+    """argv of the checker on `bundle`'s vectors.bin with the bundle's float tolerance (manifest.json
+    float_tolerance, export/f32_bound.py), or `tol` for a folder without a manifest."""
+    from fleetlab.export.f32_bound import recorded_tolerance
+
+    if tol is None:
+        tol = recorded_tolerance(json.loads((Path(bundle) / "manifest.json").read_text()))
+    return [str(exe), str(Path(bundle) / "vectors.bin"), repr(float(tol))]

@@ -11,7 +11,7 @@ import pytest
 from fleetlab.export.bundle import export_bundle
 from fleetlab.export.vectors import draw_inputs
 
-from c_check import INCLUDE, KERNELS, STRICT, SUPPORT, build_check
+from c_check import INCLUDE, KERNELS, STRICT, SUPPORT, build_check, check_argv
 from required import need_tool as need
 from small_models import small_model
 
@@ -31,7 +31,7 @@ def fresh_bundle(tmp_path_factory) -> Path:
 def test_kernels_match_vectors_gcc_sanitized(which, fresh_bundle, tmp_path) -> None:
     bundle = fresh_bundle if which == "fresh" else EXAMPLE
     exe = build_check(bundle, tmp_path, need("gcc"), ["-fsanitize=undefined,address", "-fno-sanitize-recover=all"])
-    res = subprocess.run([str(exe), str(bundle / "vectors.bin")], capture_output=True, text=True, timeout=120)
+    res = subprocess.run(check_argv(exe, bundle), capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stdout + res.stderr
     assert re.search(r"q mismatches 0 .*f32 > tol 0", res.stdout)
     man = (bundle / "manifest.json").read_text()
@@ -40,7 +40,7 @@ def test_kernels_match_vectors_gcc_sanitized(which, fresh_bundle, tmp_path) -> N
 
 def test_kernels_match_vectors_clang(fresh_bundle, tmp_path) -> None:
     exe = build_check(fresh_bundle, tmp_path, need("clang"), ["-fsanitize=undefined", "-fsanitize-trap=undefined"])
-    res = subprocess.run([str(exe), str(fresh_bundle / "vectors.bin")], capture_output=True, text=True, timeout=120)
+    res = subprocess.run(check_argv(exe, fresh_bundle), capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stdout + res.stderr
 
 
@@ -54,7 +54,9 @@ def test_check_program_detects_a_wrong_logit(fresh_bundle, tmp_path) -> None:
     data[arrays["q_logits"]["offset"] + 4 * 10] ^= 1
     bad = tmp_path / "bad.bin"
     bad.write_bytes(bytes(data))
-    res = subprocess.run([str(exe), str(bad)], capture_output=True, text=True, timeout=60)
+    argv = check_argv(exe, fresh_bundle)
+    argv[1] = str(bad)
+    res = subprocess.run(argv, capture_output=True, text=True, timeout=60)
     assert res.returncode == 1 and "q mismatches 1" in res.stdout
 
 
@@ -125,7 +127,10 @@ def test_c_counts_saturations_and_breaks_ties_like_the_reference(tmp_path) -> No
     assert (v.q_logits[:, 1] == v.q_logits[:, 2]).all() and not (v.q_class == 2).any()
     vectors.write_vectors(tmp_path, v)
     exe = build_check(tmp_path, tmp_path, need("gcc"), ["-fsanitize=undefined", "-fno-sanitize-recover=all"])
-    res = subprocess.run([str(exe), str(tmp_path / "vectors.bin")], capture_output=True, text=True, timeout=120)
+    from fleetlab.export.f32_bound import float_tolerance
+
+    tol = float_tolerance(fp.to_model(), v.inputs)["tolerance"]
+    res = subprocess.run(check_argv(exe, tmp_path, tol), capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stdout + res.stderr
 
 

@@ -207,3 +207,30 @@ def test_simulate_writes_vo_labels_beside_the_true_ones(tmp_path, capsys):
         dropped = vo["vo_dropout"] == 1
         assert np.all(vo["slip_class_vo"][dropped] == 0)  # no VO: the wheels' own distance, no slip seen
     assert wrong > 0
+
+
+def test_a_model_fused_on_noisy_labels_exports_and_runs_bit_exact(tmp_path):
+    """Onboard nothing changes: AcoMerge with the GCE fitness on adjacent-noisy labels gives an ordinary SN-S
+    that exports and whose C kernels match the torch integer reference on every vector."""
+    import subprocess
+
+    from c_check import build_check, check_argv
+    from required import need_tool
+
+    from fleetlab.export.bundle import export_bundle
+    from fleetlab.fusion.registry import FusionInputs
+    from fleetlab.models import load_flat
+
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(150, 12)).astype(np.float32) * np.float32(0.5) + np.float32(1.0)
+    y = np.digitize(x[:, 3], [0.8, 1.3]).astype(np.int64)
+    y_noisy = LabelNoise("adjacent", 0.2).apply(y, np.random.default_rng(6))
+    flats = torch.stack([flatten(build("sn-s", seed=s)) for s in range(3)])
+    inp = FusionInputs("sn-s", ("earth", "a", "b"), flats, flats, None, x, y_noisy, seed=1, buffer_seed=2,
+                       budget=Budget(steps=4, ants=8))
+    fused = registry.fit("acomerge-gce", inp)
+    bundle = tmp_path / "bundle"
+    export_bundle(load_flat(build("sn-s"), fused.flat).eval(), bundle, inputs=x)
+    exe = build_check(bundle, tmp_path, need_tool("gcc"), [])
+    res = subprocess.run(check_argv(exe, bundle), capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0 and "q mismatches 0" in res.stdout, res.stdout + res.stderr

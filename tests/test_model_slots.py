@@ -12,6 +12,7 @@ of an SN-D (77 KB, format-2) upload + activation with 256- and 4,096-byte sector
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -24,6 +25,7 @@ import pytest
 
 from fleetlab.export import model_image
 from fleetlab.export.bundle import export_bundle, load_bundle
+from fleetlab.export.f32_bound import recorded_tolerance
 from fleetlab.export.image_layout import patch_header
 from fleetlab.export.vectors import draw_inputs
 from fleetlab.host_tools.emulator import EMULATOR_TARGET, build, find_artifact
@@ -59,6 +61,12 @@ def run(emu: Path, *args: str) -> subprocess.CompletedProcess:
     return subprocess.run([str(emu), *args], capture_output=True, text=True, timeout=60)
 
 
+def vectors_args(vectors_bin: Path) -> list[str]:
+    """--vectors of a bundle with that bundle's float tolerance (manifest.json float_tolerance)."""
+    tol = recorded_tolerance(json.loads((vectors_bin.parent / "manifest.json").read_text()))
+    return ["--vectors", str(vectors_bin), "--f32-tol", repr(tol)]
+
+
 def nvm_ops(res: subprocess.CompletedProcess) -> int:
     m = re.search(r"nvm ops=(\d+)", res.stderr)
     assert m, res.stderr
@@ -67,17 +75,17 @@ def nvm_ops(res: subprocess.CompletedProcess) -> int:
 
 def served(emu: Path, nvm: Path, sector: int, models: dict) -> str:
     """Boot the emulator on nvm, find which model it serves and check that model's vectors bit-exact."""
-    res = run(emu, "--nvm", str(nvm), "--nvm-sector", str(sector), "--vectors", str(models["old"][1]))
+    res = run(emu, "--nvm", str(nvm), "--nvm-sector", str(sector), *vectors_args(models["old"][1]))
     m = HASH_RE.search(res.stdout)
     assert m, res.stdout + res.stderr
     if m.group(1) == models["old"][2]:
         # every vector of the old model (the example bundle's 1,200) bit-exact, as for the new one below
         assert m.group(2) == "PASS" and res.returncode == 0, res.stdout + res.stderr
-        assert "q_exact=1200 f32_within_1e-5=1200" in res.stdout, res.stdout + res.stderr
+        assert "q_exact=1200 f32_within_tol=1200" in res.stdout, res.stdout + res.stderr
         return "old"
     assert m.group(1) == models["new"][2], f"served model {m.group(1)} is neither the old nor the new one"
-    res = run(emu, "--nvm", str(nvm), "--nvm-sector", str(sector), "--vectors", str(models["new"][1]))
-    assert res.returncode == 0 and "q_exact=1000 f32_within_1e-5=1000" in res.stdout and "PASS" in res.stdout, \
+    res = run(emu, "--nvm", str(nvm), "--nvm-sector", str(sector), *vectors_args(models["new"][1]))
+    assert res.returncode == 0 and "q_exact=1000 f32_within_tol=1000" in res.stdout and "PASS" in res.stdout, \
         res.stdout + res.stderr
     return "new"
 
@@ -257,5 +265,5 @@ def test_hmac_provisioned_build_refuses_unsigned_and_wrongly_signed_images(keyed
     assert model_image.read_image(img.read_bytes(), hmac_key=key).content_hash[:8] == models["new"][2]
     res = run(emu_k, "--nvm", str(nvm), "--upload", str(img), "--activate")
     assert res.returncode == 0 and "activated: slot 0" in res.stderr, res.stderr
-    res = run(emu_k, "--nvm", str(nvm), "--vectors", str(models["new"][1]))
+    res = run(emu_k, "--nvm", str(nvm), *vectors_args(models["new"][1]))
     assert res.returncode == 0 and f"model_hash={models['new'][2]} PASS" in res.stdout, res.stdout + res.stderr

@@ -1,6 +1,7 @@
 /* Standalone host check of the slipest inference kernels against a bundle's vectors.bin:
  * fixed-point logits and saturation counts bit for bit, float logits within tol * max(1, |torch logit|).
- * Usage: check_vectors VECTORS.BIN [FLOAT_TOLERANCE]   (exit 0 = all rows agree)
+ * Usage: check_vectors VECTORS.BIN FLOAT_TOLERANCE   (exit 0 = all rows agree)
+ * FLOAT_TOLERANCE is the bundle's manifest.json float_tolerance.tolerance (tests/c_check.py passes it).
  * The bundle's headers are included directly (their models are checked as generated), and
  * vectors.bin is read by the one vectors reader (firmware_c/common/slipest_vectors.c).
  * Built and run by tests/test_export_c.py (gcc/clang, -std=c99 -pedantic, UBSan). */
@@ -56,15 +57,15 @@ int main(int argc, char **argv)
     slipest_vectors_t v;
     const char *why = "";
     uint32_t r;
-    double tol = argc > 2 ? atof(argv[2]) : 1e-5;
+    double tol = argc > 2 ? atof(argv[2]) : 0.0;
     double max_err = 0.0;
     unsigned long q_bad = 0, f_bad = 0, fc_bad = 0;
 
     if (check_status_codes() != 0) {
         return 1;
     }
-    if (argc < 2 || (fp = fopen(argv[1], "rb")) == NULL) {
-        fprintf(stderr, "usage: check_vectors VECTORS.BIN [TOL]\n");
+    if (argc < 3 || !(tol > 0.0) || (fp = fopen(argv[1], "rb")) == NULL) {
+        fprintf(stderr, "usage: check_vectors VECTORS.BIN TOL (TOL: the bundle's float_tolerance)\n");
         return 2;
     }
     if (fseek(fp, 0, SEEK_END) != 0 || (size = ftell(fp)) < 0 || fseek(fp, 0, SEEK_SET) != 0) {

@@ -163,14 +163,50 @@ function(_json_list out)
 endfunction()
 _json_list(j_run ${SLIPEST_QEMU} ${SLIPEST_RUN} ${SLIPEST_RUN_IMAGE} @IMAGE@)
 _json_list(j_icount ${SLIPEST_RUN_ICOUNT})
+# which of the bundle's optional images this build has (the model store's and the CANopen node's, below), and why
+# not: `fleetlab bench c` reads it, so that a figure of another bundle's image left in the folder is never reported
+set(SLIPEST_STORE_IMAGE OFF)
+set(SLIPEST_CO_IMAGE OFF)
+set(SLIPEST_IMAGES_WHY "")
+if(NOT EXISTS "${SLIPEST_BUNDLE}/model.img")
+  set(SLIPEST_IMAGES_WHY "the bundle has no model.img")
+elseif(NOT SLIPEST_IMAGE_FITS)
+  set(SLIPEST_IMAGES_WHY "the bundle's model.img is beyond this build's image caps (${_slipest_why})")
+else()
+  # the store image needs a RAM NVM of two slots: not on the 16 KB-RAM parts that link their vectors into flash;
+  # there, only an SN-S's CANopen node (a 3.8 KB model) is built
+  if(NOT SLIPEST_TARGET_VECTORS STREQUAL "embed")
+    set(SLIPEST_STORE_IMAGE ON)
+    set(SLIPEST_CO_IMAGE ON)
+  elseif(NOT _slipest_table)
+    set(SLIPEST_CO_IMAGE ON)
+    set(SLIPEST_IMAGES_WHY "no RAM NVM of two slots on ${SLIPEST_TARGET_NAME} (vectors linked into flash)")
+  else()
+    set(SLIPEST_IMAGES_WHY "a layer-table model's slots and store do not fit ${SLIPEST_TARGET_NAME} (vectors linked into flash)")
+  endif()
+endif()
+string(REPLACE "\"" "'" _slipest_images_why_json "${SLIPEST_IMAGES_WHY}")
+if(SLIPEST_STORE_IMAGE)
+  set(j_store true)
+else()
+  set(j_store false)
+endif()
+if(SLIPEST_CO_IMAGE)
+  set(j_co true)
+else()
+  set(j_co false)
+endif()
 file(WRITE "${CMAKE_CURRENT_BINARY_DIR}/slipest_target.json"
      "{\"name\": \"${SLIPEST_TARGET_NAME}\", \"run\": ${j_run}, \"icount\": ${j_icount}, "
      "\"nm\": \"${SLIPEST_TARGET_NM_PATH}\", "
-     "\"size\": \"${SLIPEST_TARGET_SIZE_PATH}\"}\n")
+     "\"size\": \"${SLIPEST_TARGET_SIZE_PATH}\", \"bundle\": \"${SLIPEST_BUNDLE}\", "
+     "\"store_image\": ${j_store}, \"canopen_image\": ${j_co}, \"images_why\": \"${_slipest_images_why_json}\"}\n")
 
 # --- test images: every bundle vector bit-exact ---
 if(NOT SLIPEST_TARGET_INTEGER_ONLY)
   slipest_image(slipest_test_vectors slipest ${TGT}/test_target.c)
+  # the float check's tolerance: the bundle's manifest.json float_tolerance (read by CMakeLists.txt)
+  target_compile_definitions(slipest_test_vectors PRIVATE SLIPEST_BUNDLE_F32_TOL=${SLIPEST_F32_TOL})
   slipest_qemu_test(vectors_${SLIPEST_CPU} slipest_test_vectors)
 endif()
 slipest_image(slipest_test_q slipest_q ${TGT}/test_target.c)
@@ -178,8 +214,9 @@ slipest_qemu_test(vectors_q_${SLIPEST_CPU} slipest_test_q)
 
 # --- the model store: an image uploaded through a RAM NVM, activated, every vector bit-exact (not on the
 # 16 KB-RAM parts that link their vectors into flash: the RAM NVM alone takes 8 KB) ---
-# the model store and the CANopen node take format-1 images (SN-S): a layer-table bundle's format 2 is not streamed yet
-if(NOT SLIPEST_TARGET_VECTORS STREQUAL "embed" AND EXISTS "${SLIPEST_BUNDLE}/model.img" AND NOT _slipest_table)
+# the model store takes both formats (a layer-table bundle's format 2 in a build with the layer-table reader), when
+# the model is within the build's image caps (SLIPEST_IMAGE_FITS, CMakeLists.txt): SLIPEST_STORE_IMAGE above
+if(SLIPEST_STORE_IMAGE)
   slipest_image(slipest_store_target slipest_q ${TGT}/store_target.c)
   target_compile_definitions(slipest_store_target PRIVATE SLIPEST_STORE_IMAGE_PATH="${SLIPEST_BUNDLE}/model.img")
   set_source_files_properties(${TGT}/store_target.c PROPERTIES OBJECT_DEPENDS "${SLIPEST_BUNDLE}/model.img")
@@ -202,8 +239,9 @@ endforeach()
 
 # --- the CANopen node with two model slots (slipest_co.h + slipest_store.h): the bundle's model.img
 # arrives by SDO block download, is validated and activated, then one window of RPDOs gives its
-# TPDOs; bench c reads the node's RAM and flash from this image ---
-if(EXISTS "${SLIPEST_BUNDLE}/model.img" AND NOT _slipest_table)
+# TPDOs; bench c reads the node's RAM and flash from this image. A layer-table model's slots and store (tens of KB
+# of RAM) are built on the targets that read their vectors from the host, as the store image above ---
+if(SLIPEST_CO_IMAGE)
   file(READ "${SLIPEST_BUNDLE}/model.img" co_img HEX)
   string(REGEX REPLACE "([0-9a-f][0-9a-f])" "0x\\1u," co_img "${co_img}")
   file(WRITE "${CMAKE_CURRENT_BINARY_DIR}/co_image.c"
@@ -266,12 +304,22 @@ if(NOT SLIPEST_TARGET_FPU AND NOT SLIPEST_TARGET_INTEGER_ONLY)
 endif()
 # size matters more than speed outside the inference kernels (per-frame code, run at 150 Hz; the model
 # store, the image reader and the model checks run at boot and once per upload or activation)
+# The CANopen node and the model store are flash-bound (the keyless node's 12,288 B budget, test_firmware.py), not
+# time-bound: GCC's -Os still trades bytes for speed there. -fno-optimize-sibling-calls: a tail call's epilogue
+# plus branch is longer on Thumb-2 than a BL followed by the one shared POP; -fno-inline-small-functions and
+# -fno-ipa-sra keep the SDO helpers (frame8, put_mux, abort_cur...) as single out-of-line copies; the store's
+# functions (record encode / decode, walk, commit, upload_failed) run once per boot, upload or command, so none is
+# inlined (-fno-inline). None of these files holds an inference kernel: instructions per inference are unchanged.
 set_source_files_properties(${FW}/src/slipest_co.c ${FW}/src/slipest_co_sdo.c ${FW}/src/slipest_co_od_access.c
-    ${FW}/src/slipest_co_model.c
-                            "${GEN}/slipest_co_od.c" PROPERTIES COMPILE_OPTIONS -Os)
+                            ${FW}/src/slipest_co_model.c
+                            PROPERTIES COMPILE_OPTIONS
+                            "-Os;-fno-optimize-sibling-calls;-fno-inline-small-functions;-fno-ipa-sra")
+set_source_files_properties("${GEN}/slipest_co_od.c" PROPERTIES COMPILE_OPTIONS -Os)
+set_source_files_properties(${FW}/src/slipest_store.c PROPERTIES COMPILE_OPTIONS
+                            "-Os;-fno-optimize-sibling-calls;-fno-inline")
 set_source_files_properties(${FW}/src/slipest_node.c ${FW}/src/slipest_slcan.c ${FW}/src/slipest_cobs.c
                             ${FW}/src/slipest_crc.c ${FW}/src/slipest_status.c ${FW}/src/slipest_features.c
-                            ${FW}/src/slipest_store.c ${FW}/src/slipest_sha256.c
+                            ${FW}/src/slipest_sha256.c
                             ${FW}/src/slipest_image.c ${FW}/src/slipest_model.c ${FW}/src/slipest_node_model.c
                             ${FW}/src/slipest_model_hash.c
                             "${GEN}/slipest_dbc.c"

@@ -16,9 +16,11 @@ static uint32_t now_ms(void)
 }
 
 int emu_co_start(uint8_t node_id, slipest_store_t *store, const slipest_model_q_t *mq, const slipest_model_f32_t *mf,
-                 slipest_frame_t *out, size_t cap)
+                 const uint8_t *sha256, slipest_frame_t *out, size_t cap)
 {
-    return slipest_co_init(&co, node_id, 1u, store, mq, mf, now_ms(), out, cap);
+    int n = slipest_co_init(&co, node_id, 1u, store, mq, mf, now_ms(), out, cap);
+    slipest_co_set_builtin_sha256(&co, sha256);
+    return n;
 }
 
 int emu_co_handle(const slipest_frame_t *in, slipest_frame_t *out, size_t cap)

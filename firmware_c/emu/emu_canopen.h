@@ -8,9 +8,10 @@
 
 #include "slipest_co.h"
 
-/* Start the node (boot-up frame into out); store may be NULL. Returns frames written or < 0. */
+/* Start the node (boot-up frame into out); store may be NULL; sha256: the built-in model's content hash (32 bytes,
+ * 0x2001 sub 3 while it runs) or NULL. Returns frames written or < 0. */
 int emu_co_start(uint8_t node_id, slipest_store_t *store, const slipest_model_q_t *mq, const slipest_model_f32_t *mf,
-                 slipest_frame_t *out, size_t cap);
+                 const uint8_t *sha256, slipest_frame_t *out, size_t cap);
 
 /* One received frame; returns frames written to out (cap >= SLIPEST_CO_MAX_OUT). */
 int emu_co_handle(const slipest_frame_t *in, slipest_frame_t *out, size_t cap);

@@ -3,7 +3,7 @@
  *   slipest_emu --port /dev/pts/N --link slcan|cobs   serve a tty (raw mode)
  *   slipest_emu --stdio --link slcan|cobs             serve stdin/stdout
  *   slipest_emu --pty --link slcan|cobs               open a pty pair, print "PTY <path>"
- *   slipest_emu --vectors vectors.bin [--verbose]     batch check of a bundle's vectors
+ *   slipest_emu --vectors vectors.bin [--f32-tol T] [--verbose]   batch check of a bundle's vectors
  *   --model model.img (any mode)                      serve / check the model of that image instead
  *                                                     of the built-in bundle (no rebuild per bundle)
  *   --nvm FILE [--upload model.img [--activate]] [--rollback] (any mode)
@@ -72,6 +72,7 @@ static int profile_canopen = 0; /* --profile canopen */
 static const slipest_model_q_t *model_q;
 static const slipest_model_f32_t *model_f32;
 static char model_hex[9]; /* the model's hash32 as text */
+static const uint8_t *model_sha256; /* its sha256 content hash (the CANopen node's 0x2001 sub 3) */
 
 /* Read a whole image file into buf (cap bytes: one more than the largest image, so that a longer
  * file reaches the reader and is refused there). Returns 0, or 2 with a message. */
@@ -123,6 +124,13 @@ static int load_model_image(const char *path)
     }
     model_q = &mq;
     model_f32 = &mf;
+    { /* the image's trailer (before the HMAC tag, when it has one) carries the sha256 content hash */
+        static uint8_t sha[32];
+        unsigned flags = (unsigned)buf[SLIPEST_IMAGE_OFF_FLAGS] | ((unsigned)buf[SLIPEST_IMAGE_OFF_FLAGS + 1u] << 8);
+        size_t tag = (flags & SLIPEST_IMAGE_FLAG_HMAC) != 0u ? SLIPEST_IMAGE_HMAC_SIZE : 0u;
+        memcpy(sha, &buf[n - tag - SLIPEST_IMAGE_TRAILER_SIZE + SLIPEST_IMAGE_TRAILER_OFF_SHA256], sizeof sha);
+        model_sha256 = sha;
+    }
     snprintf(model_hex, sizeof model_hex, "%08lx", (unsigned long)slipest_model_hash32(model_q));
     return 0;
 }
@@ -344,7 +352,13 @@ static void print_counters(const emu_t *e)
             (unsigned long)c.windows_flagged, (unsigned long)c.windows_done, (unsigned long)c.saturations);
 }
 
-static int run_vectors(const char *path, int verbose)
+/* The float check's tolerance, |f32 - torch| <= tol * max(1, |torch logit|): by default the built bundle's
+ * manifest.json float_tolerance (CMake passes it), --f32-tol for the vectors of another bundle. */
+#ifndef SLIPEST_BUNDLE_F32_TOL
+#error "SLIPEST_BUNDLE_F32_TOL: the bundle's float tolerance (manifest.json float_tolerance), set by CMakeLists.txt"
+#endif
+
+static int run_vectors(const char *path, float tol, int verbose)
 {
     FILE *fp = fopen(path, "rb");
     uint8_t *buf;
@@ -378,7 +392,7 @@ static int run_vectors(const char *path, int verbose)
         int32_t q[3];
         float f[3];
         int fq = slipest_vectors_check_q(&v, model_q, i, q);
-        int ff = slipest_vectors_check_f32(&v, model_f32, i, 1e-5f, f);
+        int ff = slipest_vectors_check_f32(&v, model_f32, i, tol, f);
         q_fail += fq != 0;
         f_fail += ff != 0;
         if (verbose)
@@ -387,8 +401,8 @@ static int run_vectors(const char *path, int verbose)
                    q[1] > q[0] ? (q[2] > q[1] ? 2 : 1) : (q[2] > q[0] ? 2 : 0), (long)q[0], (long)q[1], (long)q[2], (double)f[0], (double)f[1], (double)f[2],
                    fq, ff, (fq | ff) ? "FAIL" : "ok");
     }
-    printf("vectors=%lu q_exact=%lu f32_within_1e-5=%lu model_hash=%s %s\n", (unsigned long)v.n,
-           (unsigned long)(v.n - q_fail), (unsigned long)(v.n - f_fail), model_hex,
+    printf("vectors=%lu q_exact=%lu f32_within_tol=%lu f32_tol=%.3g model_hash=%s %s\n", (unsigned long)v.n,
+           (unsigned long)(v.n - q_fail), (unsigned long)(v.n - f_fail), (double)tol, model_hex,
            (q_fail == 0 && f_fail == 0) ? "PASS" : "FAIL");
     free(buf);
     return (q_fail == 0 && f_fail == 0) ? 0 : 1;
@@ -398,13 +412,15 @@ static void usage(FILE *to)
 {
     fprintf(to,
             "usage: slipest_emu (--port TTY | --stdio | --pty) [--link slcan|cobs]\n"
-            "       slipest_emu --vectors vectors.bin [--verbose]\n"
+            "       slipest_emu --vectors vectors.bin [--f32-tol T] [--verbose]\n"
             "  --port TTY     serve a serial device / pty slave (set to raw mode)\n"
             "  --stdio        serve stdin/stdout\n"
             "  --pty          create a pseudo-terminal and print 'PTY <slave path>' on stdout\n"
             "  --link KIND    slcan (ASCII tIIILDD..\\r, default) or cobs (COBS + CRC-16 packets)\n"
             "  --model IMG    use the model of a model image (model.img) instead of the built-in bundle\n"
-            "  --vectors F    check every test vector (fixed-point logits exact, float within 1e-5*max(1,|logit|))\n"
+            "  --vectors F    check every test vector (fixed-point logits exact, float within T*max(1,|logit|))\n"
+            "  --f32-tol T    the float tolerance of those vectors' bundle (manifest.json float_tolerance.tolerance;\n"
+            "                 default: the built-in bundle's)\n"
             "  --version      print library version and model hash\n"
             "  --profile P    dbc (the plain profile, default) or canopen (CANopen node, see slipest_co.h)\n"
             "  --node-id N    CANopen node id, 1..127 (default 5)\n"
@@ -424,13 +440,16 @@ int main(int argc, char **argv)
     int print_version = 0;
     const slipest_model_q_t *boot_q;
     const slipest_model_f32_t *boot_f;
+    const uint8_t *boot_sha256;
     unsigned long sector = 256ul, cut_after = 0ul, node_id = 5ul;
     int cut_mode = EMU_CUT_BEFORE;
+    float f32_tol = (float)(SLIPEST_BUNDLE_F32_TOL);
     struct sigaction sa;
 
     e.link = LINK_SLCAN;
     model_q = slipest_bundle_model_q();
     model_f32 = slipest_bundle_model_f32();
+    model_sha256 = slipest_bundle_sha256();
     snprintf(model_hex, sizeof model_hex, "%08lx", (unsigned long)slipest_model_hash32(model_q));
     for (i = 1; i < argc; i++) {
         if (strcmp(argv[i], "--port") == 0 && i + 1 < argc) port = argv[++i];
@@ -438,6 +457,15 @@ int main(int argc, char **argv)
         else if (strcmp(argv[i], "--pty") == 0) use_pty = 1;
         else if (strcmp(argv[i], "--vectors") == 0 && i + 1 < argc) vectors = argv[++i];
         else if (strcmp(argv[i], "--verbose") == 0) verbose = 1;
+        else if (strcmp(argv[i], "--f32-tol") == 0 && i + 1 < argc) {
+            char *end = NULL;
+            double t = strtod(argv[++i], &end);
+            if (end == argv[i] || *end != '\0' || !(t > 0.0) || !(t < 1.0)) {
+                fprintf(stderr, "slipest_emu: --f32-tol needs a number in (0, 1), got '%s'\n", argv[i]);
+                return 2;
+            }
+            f32_tol = (float)t;
+        }
         else if (strcmp(argv[i], "--nvm") == 0 && i + 1 < argc) nvm_path = argv[++i];
         else if (strcmp(argv[i], "--nvm-sector") == 0 && i + 1 < argc) sector = strtoul(argv[++i], NULL, 10);
         else if (strcmp(argv[i], "--nvm-cut-after") == 0 && i + 1 < argc) cut_after = strtoul(argv[++i], NULL, 10);
@@ -491,6 +519,7 @@ int main(int argc, char **argv)
         }
     }
     boot_q = model_q; /* the built-in (or --model) model, before a slot's replaces it */
+    boot_sha256 = model_sha256;
     boot_f = model_f32;
     if (nvm_path != NULL) {
         if (sector < SLIPEST_STORE_SECTOR_MIN || sector > SLIPEST_STORE_SECTOR_MAX) {
@@ -505,6 +534,11 @@ int main(int argc, char **argv)
         if (upload != NULL && (rc = upload_image(upload, activate)) != 0) return rc;
         if (rollback) {
             rc = slipest_store_rollback(&store);
+            if (rc == SLIPEST_E_STATE) {
+                fprintf(stderr, "slipest_emu: rollback refused: no previous model (none was active before this one, "
+                                "or an upload since has taken its slot)\n");
+                return 3;
+            }
             if (rc != SLIPEST_OK) {
                 fprintf(stderr, "slipest_emu: rollback refused: %s (%d)\n", slipest_status_str(rc), rc);
                 return 3;
@@ -523,7 +557,7 @@ int main(int argc, char **argv)
                model_hex, (unsigned long)model_q->version);
         return 0;
     }
-    if (vectors != NULL) return run_vectors(vectors, verbose);
+    if (vectors != NULL) return run_vectors(vectors, f32_tol, verbose);
     if (nvm_path != NULL && port == NULL && !use_stdio && !use_pty) return 0; /* store operations only */
     if ((port != NULL) + use_stdio + use_pty != 1) {
         usage(stderr);
@@ -584,7 +618,7 @@ int main(int argc, char **argv)
     }
     if (profile_canopen) {
         slipest_frame_t boot;
-        rc = emu_co_start((uint8_t)node_id, nvm_path != NULL ? &store : NULL, boot_q, boot_f, &boot, 1u);
+        rc = emu_co_start((uint8_t)node_id, nvm_path != NULL ? &store : NULL, boot_q, boot_f, boot_sha256, &boot, 1u);
         if (rc < 0) {
             fprintf(stderr, "slipest_emu: CANopen node: %s\n", slipest_status_str(rc));
             return 2;

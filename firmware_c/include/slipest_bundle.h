@@ -9,6 +9,8 @@
 #ifndef SLIPEST_BUNDLE_H
 #define SLIPEST_BUNDLE_H
 
+#include <stdint.h>
+
 #include "slipest_model.h"
 
 #ifdef __cplusplus
@@ -20,6 +22,14 @@ extern "C" {
  * @return a pointer to a const model in flash (never NULL)
  */
 const slipest_model_q_t *slipest_bundle_model_q(void);
+
+/**
+ * @brief The sha256 content hash of the built-in bundle (manifest.json content_hash, written into the build at
+ *        configure time): what a model image of that bundle carries in its trailer, and what the CANopen node
+ *        answers as 0x2001 sub 3 while it runs the built-in model (slipest_co_set_builtin_sha256()).
+ * @return a pointer to 32 bytes in flash (never NULL)
+ */
+const uint8_t *slipest_bundle_sha256(void);
 
 /**
  * @brief The float32 model of the built-in bundle (absent from the fixed-point-only library).

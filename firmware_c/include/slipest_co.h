@@ -6,7 +6,8 @@
  * One CAN frame in, output frames out, like slipest_node_handle(); time comes from the caller
  * (a millisecond tick), the library reads no clock. The node is:
  * - an NMT slave (boot-up, pre-operational, operational, stopped; NMT commands on COB-ID 0x000),
- * - a heartbeat producer (0x1017),
+ * - a heartbeat producer (0x1017), whose time CiA 301 store / restore (0x1010 / 0x1011 sub 1, signatures "save" /
+ *   "load") keeps in the store's commit record across resets and power cycles,
  * - an SDO server (expedited and segmented upload and download, block download with the CiA 301
  *   CRC): the model image is the DOMAIN object 0x2000, written into the inactive slot of a
  *   slipest_store_t and activated by writing 1 to 0x2002 sub 1,
@@ -75,6 +76,7 @@ typedef struct {
     slipest_store_t *store;              /**< model slots, or NULL (no model upload) */
     const slipest_model_q_t *builtin_q;  /**< model when no slot holds one, or NULL (none built in) */
     const slipest_model_f32_t *builtin_f; /**< its float model, or NULL */
+    const uint8_t *builtin_sha256;       /**< its 32-byte sha256 content hash, or NULL (not known) */
     slipest_co_sdo_t sdo;                /**< SDO server */
     uint32_t serial;                     /**< identity serial number (0x1018 sub 4) */
     uint32_t hb_last_ms;                 /**< tick of the last heartbeat */
@@ -97,7 +99,8 @@ typedef struct {
  *        model can be uploaded and activated), sends the EMCY SLIPEST_CO_EMCY_NO_MODEL after the
  *        boot-up message (error register bit 7 set until an activation succeeds), sends no
  *        estimate TPDO, and counts the RPDOs it takes meanwhile (SLIPEST_CO_CNT_RPDO_NO_MODEL);
- *        0x2001 then reads version 0, hash32 0 and slot 0xFE.
+ *        0x2001 then reads version 0, hash32 0, sha256 32 zero bytes and slot 0xFE. The heartbeat time is the
+ *        one 0x1010 stored (slipest_store_params()), else SLIPEST_CO_HEARTBEAT_DEFAULT_MS.
  * @param[out] co        node context
  * @param[in]  node_id   CANopen node id, 1..127
  * @param[in]  serial    identity serial number (0x1018 sub 4)
@@ -114,6 +117,18 @@ typedef struct {
 int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_store_t *store,
                     const slipest_model_q_t *builtin_q, const slipest_model_f32_t *builtin_f, uint32_t now_ms,
                     slipest_frame_t *out, size_t cap);
+
+/**
+ * @brief Tell the node the sha256 content hash of the built-in model given to slipest_co_init(), which it
+ *        answers as 0x2001 sub 3 while that model runs (a slot's model carries its own in its image). An
+ *        image built with a bundle passes slipest_bundle_sha256(); one that takes its built-in model from a
+ *        model image passes the sha256 of the image's trailer. Call it after slipest_co_init(); it survives an
+ *        NMT reset. Until it is called (or with NULL) the built-in model's sha256 reads as 32 zero bytes, as it
+ *        does when no model runs at all.
+ * @param[in,out] co      an initialised node
+ * @param[in]     sha256  32 bytes that outlive the node, or NULL
+ */
+void slipest_co_set_builtin_sha256(slipest_co_t *co, const uint8_t *sha256);
 
 /**
  * @brief Handle one received CAN frame (NMT, SDO request, RPDO; other COB-IDs are ignored, as on

@@ -16,7 +16,8 @@
  *
  * A commit record (SLIPEST_STORE_RECORD_SIZE bytes at the start of its sector, little-endian):
  * magic "SLPR", layout version, sequence number, active and previous slot, per slot the image
- * length, CRC-32, model version and hash32, then a CRC-32 of all the preceding record bytes.
+ * length, CRC-32, model version and hash32, the stored parameters (slipest_store_params_save()),
+ * then a CRC-32 of all the preceding record bytes.
  * At boot the valid record with the highest sequence number whose active slot validates wins;
  * a torn record fails its CRC and the older one is used. A slot is erased only when no record
  * names it as active, and activation is a single record write, so a power loss at any point of an
@@ -49,8 +50,11 @@ extern "C" {
 #endif
 /** Smallest NVM sector the store accepts (a commit record and an image header must fit). */
 #define SLIPEST_STORE_SECTOR_MIN 64u
-/** Bytes of a commit record at the start of a record sector. */
-#define SLIPEST_STORE_RECORD_SIZE 52u
+/** Bytes of a commit record at the start of a record sector (layout 2: with the stored parameters). */
+#define SLIPEST_STORE_RECORD_SIZE 56u
+/** Bytes of parameters a commit record holds (slipest_store_params_save(): the CANopen node's stored communication
+ *  parameters, CiA 301 0x1010). */
+#define SLIPEST_STORE_PARAMS_MAX 4u
 /** Largest image the store takes, and with it the slot size: by default the largest image this build reads
  *  (SLIPEST_IMAGE_READ_MAX_SIZE: 3,874 B for SN-S only, 80,696 B with the layer-table reader at its default
  *  caps). An integrator lowers it (CMake -DSLIPEST_STORE_IMAGE_MAX=...) to the largest model it will upload;
@@ -166,6 +170,8 @@ typedef struct {
     uint32_t crc[SLIPEST_STORE_N_SLOTS];                /**< image CRC-32 per slot */
     uint32_t version[SLIPEST_STORE_N_SLOTS];            /**< model version per slot */
     uint32_t hash32[SLIPEST_STORE_N_SLOTS];             /**< content hash32 per slot */
+    uint8_t params_len;                                 /**< bytes of params stored (0: the defaults) */
+    uint8_t params[SLIPEST_STORE_PARAMS_MAX];           /**< the stored parameters */
 } slipest_store_record_t;
 
 /** All state of a model store (caller-allocated; no globals, no malloc). Treat as opaque. */
@@ -281,9 +287,10 @@ slipest_status_t slipest_store_activate(slipest_store_t *store);
  * @brief Re-activate the previous slot's image (one command; no model version check). Refused
  *        while an upload is RECEIVING (it writes into that very slot).
  * @param[in,out] store  the store
- * @return SLIPEST_OK; SLIPEST_E_STATE (no valid previous image, or an upload is open); or as
- *         slipest_store_finish() when the previous image no longer validates (nothing changed);
- *         SLIPEST_E_NVM. After a failure, as for slipest_store_activate().
+ * @return SLIPEST_OK; SLIPEST_E_STATE: there is no previous model (none was active before this one, an upload
+ *         is open, or the previous slot no longer holds the image its record names: an upload since began there,
+ *         even one whose image was then refused, or it decayed; the slot is then marked INVALID and nothing else
+ *         changes); SLIPEST_E_NVM. After a failure, as for slipest_store_activate().
  */
 slipest_status_t slipest_store_rollback(slipest_store_t *store);
 
@@ -294,6 +301,31 @@ slipest_status_t slipest_store_rollback(slipest_store_t *store);
  * @return SLIPEST_OK; SLIPEST_E_STATE (no upload open); SLIPEST_E_NULL
  */
 slipest_status_t slipest_store_abort(slipest_store_t *store);
+
+/**
+ * @brief Keep len bytes of parameters across resets and power losses (CiA 301 0x1010 "save"; len 0 forgets them:
+ *        0x1011 "restore defaults"). They travel in the commit record: one record write, as an activation makes,
+ *        naming the same slots as the newest record, so a power loss at any point leaves the previous parameters
+ *        or the new ones and the same model, never neither (a torn record fails its CRC and the older one is read
+ *        at the next boot). Later records (activations, rollbacks) carry them on. slipest_store_params() returns
+ *        the new data at once.
+ * @param[in,out] store  the store
+ * @param[in]     data   the bytes (may be NULL when len is 0)
+ * @param[in]     len    0..SLIPEST_STORE_PARAMS_MAX
+ * @return SLIPEST_OK; SLIPEST_E_LENGTH (len); SLIPEST_E_STATE (an upload is RECEIVING: its sector is in the
+ *         store's one sector buffer); SLIPEST_E_NVM (the erase or the program failed: the previous record and
+ *         parameters stand); SLIPEST_E_NULL
+ */
+slipest_status_t slipest_store_params_save(slipest_store_t *store, const uint8_t *data, uint32_t len);
+
+/**
+ * @brief The stored parameters of the commit record in force (read at slipest_store_open(), updated by
+ *        slipest_store_params_save()).
+ * @param[in]  store  the store, or NULL
+ * @param[out] len    receives their bytes (0 when none)
+ * @return the bytes inside the store, or NULL when none are kept (no record, the defaults restored, or no store)
+ */
+const uint8_t *slipest_store_params(const slipest_store_t *store, uint32_t *len);
 
 /**
  * @brief The active fixed-point model (validated), or NULL when no slot holds one.

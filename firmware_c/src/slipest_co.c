@@ -39,7 +39,12 @@ static int nmt_state_frame(const slipest_co_t *co, uint8_t state, slipest_frame_
 
 static int bootup(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
 {
+    uint32_t len = 0u;
+    const uint8_t *stored = slipest_store_params(co->store, &len); /* 0x1010's record, NULL: the defaults */
     co->hb_ms = (uint16_t)SLIPEST_CO_HEARTBEAT_DEFAULT_MS;
+    if (stored != NULL && len >= SLIPEST_CO_PARAMS_BYTES) {
+        co->hb_ms = (uint16_t)slipest_co_get_le(stored, SLIPEST_CO_PARAMS_BYTES); /* objects.STORED_PARAMS */
+    }
     co->hb_last_ms = now_ms;
     co->err_reg &= (uint8_t)~SLIPEST_CO_ERR_COMM;
     slipest_co_sdo_reset(co);
@@ -105,6 +110,13 @@ int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_
     st = reset_application(co);
     if (st != SLIPEST_OK) return st;
     return boot(co, now_ms, out);
+}
+
+void slipest_co_set_builtin_sha256(slipest_co_t *co, const uint8_t *sha256)
+{
+    if (co != NULL) {
+        co->builtin_sha256 = sha256;
+    }
 }
 
 static int nmt(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, slipest_frame_t *out)

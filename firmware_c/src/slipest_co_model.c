@@ -32,9 +32,9 @@ uint32_t slipest_co_store_failed(slipest_co_t *co, int status, slipest_frame_t *
     case SLIPEST_E_NVM:
         *n += slipest_co_emcy(co, SLIPEST_CO_EMCY_HARDWARE, SLIPEST_CO_ERR_GENERIC, status, out);
         return SLIPEST_CO_ABORT_HARDWARE;
-    case SLIPEST_E_STATE: return SLIPEST_CO_ABORT_STATE;
-    case SLIPEST_E_ORDER:
-    case SLIPEST_E_NULL: return SLIPEST_CO_ABORT_GENERAL;
+    case SLIPEST_E_STATE:
+    case SLIPEST_E_NULL: return SLIPEST_CO_ABORT_STATE; /* no store (0x1010 / 0x1011 without one) */
+    case SLIPEST_E_ORDER: return SLIPEST_CO_ABORT_GENERAL;
     default: break;
     }
     /* the image was refused (length, format, version, arch, CRC, hash, range, HMAC, stale) */

@@ -49,8 +49,8 @@ static uint32_t store_counter(const slipest_store_counters_t *c, unsigned n)
 {
     static const uint8_t at[] = SLIPEST_CO_STORE_COUNTER_OFFSETS;
     const uint8_t *bytes = (const uint8_t *)c;
-    uint32_t v = 0u;
-    if (n < sizeof at) {
+    uint32_t v = 0u; /* no store: nothing counted */
+    if ((c != NULL) && (n < sizeof at)) {
         (void)memcpy(&v, &bytes[at[n]], sizeof v); /* the field's own bytes: a native value, not wire data */
     }
     return v;
@@ -64,12 +64,15 @@ static uint32_t read_model(const slipest_co_t *co, unsigned what, uint8_t buf[32
     case SLIPEST_CO_MODEL_VERSION: v = (m == NULL) ? 0u : m->version; break; /* 0: no model */
     case SLIPEST_CO_MODEL_HASH32: v = slipest_model_hash32(m); break;
     case SLIPEST_CO_MODEL_SHA256: {
-        /* the built-in model's sha256 is not compiled in: only a slot's image carries it */
-        const uint8_t *h = co->from_store ? slipest_store_active_sha256(co->store) : NULL;
-        if (h == NULL) return SLIPEST_CO_ABORT_NO_DATA;
-        (void)memcpy(buf, h, 32u); /* a byte string: no byte order to apply */
-        *len = 32u;
-        return 0u;
+        /* a slot's model: its image's trailer; the built-in one: known at build time (slipest_co_set_builtin_sha256());
+         * no model, or a built-in one whose hash was not given: 32 zero bytes (as version 0 and hash32 0 say) */
+        const uint8_t *h = co->from_store ? slipest_store_active_sha256(co->store) : co->builtin_sha256;
+        if (m == NULL || h == NULL) {
+            (void)memset(buf, 0, 32u);
+        } else {
+            (void)memcpy(buf, h, 32u); /* a byte string: no byte order to apply */
+        }
+        return 0u; /* *len is the entry's size, 32 */
     }
     case SLIPEST_CO_MODEL_SLOT: {
         int s = co->from_store ? slipest_store_active_slot(co->store) : SLIPEST_STORE_NO_SLOT;
@@ -108,11 +111,10 @@ uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e,
     case SLIPEST_CO_KIND_MODEL: return read_model(co, arg, buf, len);
     case SLIPEST_CO_KIND_COUNTER: v = slipest_co_counter(co, arg); break;
     case SLIPEST_CO_KIND_SLOT: {
-        slipest_slot_info_t info;
-        if (co->store == NULL) return SLIPEST_CO_ABORT_NO_DATA;
-        if (slipest_store_slot_info(co->store, arg >> SLIPEST_CO_SLOT_SHIFT, &info) != SLIPEST_OK) {
-            return SLIPEST_CO_ABORT_GENERAL;
-        }
+        slipest_slot_info_t info = {SLIPEST_SLOT_EMPTY, 0u, 0u, 0u};
+        /* without a store it fails (E_NULL) and leaves info as it is: every slot empty (the slot number is 0 or 1
+         * by the generated table, so that is its only failure) */
+        (void)slipest_store_slot_info(co->store, arg >> SLIPEST_CO_SLOT_SHIFT, &info);
         switch (arg & SLIPEST_CO_SLOT_FIELD_MASK) {
         case SLIPEST_CO_SLOT_STATE: v = (uint32_t)info.state; break;
         case SLIPEST_CO_SLOT_LENGTH: v = info.length; break;
@@ -121,10 +123,8 @@ uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e,
         }
         break;
     }
-    case SLIPEST_CO_KIND_STORE_CNT:
-        if (co->store == NULL) return SLIPEST_CO_ABORT_NO_DATA;
-        v = store_counter(slipest_store_counters(co->store), arg);
-        break;
+    case SLIPEST_CO_KIND_STORE_CNT: v = store_counter(slipest_store_counters(co->store), arg); break;
+    case SLIPEST_CO_KIND_PARAMS: v = (co->store != NULL) ? (uint32_t)1u : (uint32_t)0u; break; /* bit 0: on command (CiA 301) */
     case SLIPEST_CO_KIND_UPLOAD:
         if (arg == SLIPEST_CO_UPLOAD_STATE) {
             v = (co->store == NULL) ? 0u : (uint32_t)slipest_store_upload_state(co->store);
@@ -164,6 +164,20 @@ uint32_t slipest_co_od_write(slipest_co_t *co, const slipest_co_entry_t *e, cons
     case SLIPEST_CO_KIND_COMMAND:
         if (v != 1u) return SLIPEST_CO_ABORT_VALUE; /* a command is started by writing 1 */
         return slipest_co_model_command(co, arg, out, n);
+    case SLIPEST_CO_KIND_PARAMS: {
+        /* CiA 301 0x1010 / 0x1011 sub 1: with its signature, the stored communication parameters (objects.STORED_PARAMS,
+         * in order: the heartbeat time, as generate.py checks) go into the store's commit record, or none (the
+         * defaults at the next reset); a wrong signature is refused with 0x08000020 */
+        uint8_t rec[SLIPEST_CO_PARAMS_BYTES];
+        slipest_status_t st;
+        if (v != ((arg == SLIPEST_CO_PARAMS_SAVE) ? SLIPEST_CO_SIGNATURE_SAVE : SLIPEST_CO_SIGNATURE_LOAD)) {
+            return SLIPEST_CO_ABORT_STORE;
+        }
+        slipest_co_put_le(rec, co->hb_ms, SLIPEST_CO_PARAMS_BYTES);
+        st = slipest_store_params_save(co->store, rec, (arg == SLIPEST_CO_PARAMS_SAVE) ? SLIPEST_CO_PARAMS_BYTES : 0u);
+        /* no store: 0x08000022; an upload open: 0x08000022; NVM: 0x06060000 and EMCY 0x5000 */
+        return (st == SLIPEST_OK) ? 0u : slipest_co_store_failed(co, st, out, n);
+    }
     default: return SLIPEST_CO_ABORT_READ_ONLY;
     }
 }

@@ -31,11 +31,12 @@ static int is_domain(const slipest_co_t *co)
     return SLIPEST_CO_KIND(slipest_co_od[co->sdo.entry]) == SLIPEST_CO_KIND_DOMAIN;
 }
 
-/* End the transfer in progress; an open model upload is abandoned in the store. */
+/* End the transfer in progress; an open model upload is abandoned in the store. One the store already closed (it
+ * refused the image) is left as it is, and so is 0x2006 sub 2, which keeps the refusal's status. */
 static void end_transfer(slipest_co_t *co, int abandon)
 {
     if (abandon && co->sdo.state != SLIPEST_CO_SDO_IDLE && co->sdo.state != SLIPEST_CO_SDO_UPLOAD && is_domain(co) &&
-        co->store != NULL) {
+        slipest_store_upload_state(co->store) == SLIPEST_UPLOAD_RECEIVING) {
         co->last_store_status = (int8_t)slipest_store_abort(co->store);
     }
     co->sdo.state = SLIPEST_CO_SDO_IDLE;

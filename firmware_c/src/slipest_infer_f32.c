@@ -1,5 +1,6 @@
 /* Float32 inference of any SlipNet (eval semantics: Linear -> LayerNorm -> exact GELU blocks -> Linear).
- * Follows torch within 1e-5*max(1,|logit|) on the bundle's test vectors; float32 math throughout. */
+ * Follows torch within the bundle's float tolerance (manifest.json float_tolerance: the float32 error bound of the
+ * network, export/f32_bound.py) on its test vectors; float32 math throughout. */
 #include "slipest_infer.h"
 
 #include <math.h>

@@ -78,7 +78,9 @@ static uint32_t crc32_update(uint32_t crc, uint8_t byte)
     return crc;
 }
 
-#define VERSION_AT SLIPEST_IMAGE_OFF_MODEL_VERSION
+/* the model version field: format 1 (SN-S) and format 2 (the layer table) keep it at their own offsets */
+#define VERSION_AT                                                                                                    \
+    (co_image[SLIPEST_IMAGE_OFF_FORMAT] == 2u ? SLIPEST_IMAGE_V2_OFF_MODEL_VERSION : SLIPEST_IMAGE_OFF_MODEL_VERSION)
 
 /* Byte i of the bundle's image as model version `version` (little-endian header field) with
  * the CRC-32 field (first trailer bytes) that goes with it; with CO_NODE_AUTH the HMAC flag is set

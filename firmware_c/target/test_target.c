@@ -1,5 +1,6 @@
 /* Target test image (Cortex-M, RISC-V, PowerPC, SPARC): every test vector through the kernels (fixed-point logits must equal
- * q_logits; float logits within 1e-5*max(1,|logit|) of torch_logits, same class), plus an extractor check
+ * q_logits; float logits within tol*max(1,|logit|) of torch_logits, same class, tol the bundle's manifest.json
+ * float_tolerance, SLIPEST_BUNDLE_F32_TOL from CMake), plus an extractor check
  * that exercises the int64 paths on the target. Exit code via semihosting (or exit() in user mode): 0 = pass. */
 #include <stdint.h>
 
@@ -9,6 +10,10 @@
 #include "slipest_infer.h"
 #include "slipest_vectors.h"
 #include "target_vectors.h"
+
+#if !defined(SLIPEST_Q_ONLY) && !defined(SLIPEST_BUNDLE_F32_TOL)
+#error "SLIPEST_BUNDLE_F32_TOL: the bundle's float tolerance (manifest.json float_tolerance), set by target.cmake"
+#endif
 
 static int check_extractor(void)
 {
@@ -57,7 +62,7 @@ int main(void)
 #ifndef SLIPEST_Q_ONLY
         {
             float f[3];
-            if (slipest_vectors_check_f32(&v, slipest_bundle_model_f32(), i, 1e-5f, f) != 0) {
+            if (slipest_vectors_check_f32(&v, slipest_bundle_model_f32(), i, (float)(SLIPEST_BUNDLE_F32_TOL), f) != 0) {
                 if (f_fail < 5) {
                     semihost_puts("f32 mismatch at vector ");
                     semihost_put_uint(i);

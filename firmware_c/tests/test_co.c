@@ -138,6 +138,29 @@ static uint32_t segmented(const uint8_t *data, size_t len, int toggle_error)
     return 0u;
 }
 
+/* 0x2001 sub 3 by segmented upload (32 bytes, five segments) into sha; 0 or the abort code */
+static uint32_t read_sha256(uint8_t sha[32])
+{
+    unsigned t = 0, k, got = 0;
+    sdo8(0x40u, 0x2001u, 3u, 0u);
+    if (aborted() != 0u) return aborted();
+    CHECK(out[0].data[0] == 0x41u && le32(&out[0].data[4]) == 32u);
+    for (k = 0; k < 5u; k++) {
+        unsigned len;
+        sdo8((uint8_t)(0x60u | (t << 4)), 0u, 0u, 0u);
+        if (aborted() != 0u) return aborted();
+        CHECK(((out[0].data[0] >> 4) & 1u) == t && ((out[0].data[0] & 1u) != 0u) == (k == 4u));
+        len = 7u - ((out[0].data[0] >> 1) & 7u);
+        CHECK(got + len <= 32u);
+        if (got + len > 32u) return 1u;
+        memcpy(&sha[got], &out[0].data[1], len);
+        got += len;
+        t ^= 1u;
+    }
+    CHECK(got == 32u);
+    return 0u;
+}
+
 static void put_version(uint8_t *im, uint32_t v)
 {
     image_edit_put_le32(im + SLIPEST_IMAGE_OFF_MODEL_VERSION, v);
@@ -186,8 +209,12 @@ static void no_builtin_model(const slipest_nvm_t *nvm)
     CHECK(rd(0x2001u, 1u, &code) == 0u && code == 0u); /* version 0 */
     CHECK(rd(0x2001u, 2u, &code) == 0u && code == 0u); /* hash32 0 */
     CHECK((rd(0x2001u, 4u, &code) & 0xFFu) == 0xFEu && code == 0u); /* slot: no model */
-    (void)rd(0x2001u, 3u, &code);
-    CHECK(code == SLIPEST_CO_ABORT_NO_DATA);
+    {
+        static const uint8_t zero[32] = {0};
+        uint8_t sha[32];
+        slipest_co_set_builtin_sha256(&co, slipest_bundle_sha256()); /* no built-in model runs: still none */
+        CHECK(read_sha256(sha) == 0u && memcmp(sha, zero, 32) == 0); /* no model: 32 zero bytes, as version 0 */
+    }
     CHECK(wr(0x2002u, 2u, 1u, 1u) == SLIPEST_CO_ABORT_STATE); /* nothing to roll back to */
     CHECK(slipest_co_tick(&co, 1000u, out, 2u) == 1 && out[0].data[0] == 0x7Fu); /* heartbeat */
     send(0u, 2u, (const uint8_t[]){0x01u, ID});
@@ -232,6 +259,104 @@ static void no_builtin_model(const slipest_nvm_t *nvm)
         CHECK(slipest_node_telemetry(&node, 1u, 0u, vals, out, SLIPEST_NODE_MAX_OUT) == SLIPEST_E_ORDER); /* duplicate */
         CHECK(slipest_node_counters(&node, &c) == SLIPEST_OK && c.frames_received == 3u && c.frames_rejected == 2u);
     }
+}
+
+/* CiA 301 0x1010 / 0x1011: the heartbeat time saved with "save" survives a reset and a power cycle; "load"
+ * brings the default back at the next reset; a wrong signature, an open upload, an NVM failure and no store are
+ * refused; a torn newest record gives the previous one. */
+static void test_params(const slipest_nvm_t *nvm)
+{
+    uint32_t code, save_cnt;
+    memset(mem, 0xFF, sizeof mem);
+    CHECK(slipest_store_open(&store, nvm, NULL) == SLIPEST_E_STATE && slipest_store_params(&store, NULL) == NULL);
+    CHECK(slipest_co_init(&co, ID, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 1u) == 1);
+    CHECK(rd(0x1010u, 1u, &code) == 1u && code == 0u && rd(0x1011u, 1u, &code) == 1u && code == 0u);
+    CHECK(rd(0x1010u, 0u, &code) == 1u && rd(0x1011u, 0u, &code) == 1u);
+    CHECK(wr(0x1017u, 0u, 250u, 2u) == 0u);
+    CHECK(wr(0x1010u, 1u, SLIPEST_CO_SIGNATURE_LOAD, 4u) == SLIPEST_CO_ABORT_STORE); /* the other signature */
+    CHECK(wr(0x1010u, 1u, 1u, 4u) == SLIPEST_CO_ABORT_STORE);
+    CHECK(wr(0x1010u, 1u, SLIPEST_CO_SIGNATURE_SAVE, 2u) == SLIPEST_CO_ABORT_TOO_LOW);
+    CHECK(slipest_store_params(&store, NULL) == NULL); /* nothing saved by a refusal */
+    save_cnt = ram.ops;
+    CHECK(wr(0x1010u, 1u, SLIPEST_CO_SIGNATURE_SAVE, 4u) == 0u);
+    CHECK(ram.ops == save_cnt + 2u); /* one sector erase, one program */
+    send(0u, 2u, (const uint8_t[]){0x81u, ID}); /* reset node: the saved value, not the default */
+    CHECK(n == 1 && rd(0x1017u, 0u, &code) == 250u);
+    CHECK(wr(0x1017u, 0u, 300u, 2u) == 0u);
+    send(0u, 2u, (const uint8_t[]){0x82u, ID}); /* reset communication too */
+    CHECK(rd(0x1017u, 0u, &code) == 250u);
+    /* power cycle: the record is read back from the NVM */
+    CHECK(slipest_store_open(&store, nvm, NULL) == SLIPEST_E_STATE);
+    CHECK(slipest_co_init(&co, ID, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 1u) == 1);
+    CHECK(rd(0x1017u, 0u, &code) == 250u);
+    CHECK(slipest_co_tick(&co, 249u, out, 2u) == 0 && slipest_co_tick(&co, 250u, out, 2u) == 1);
+    /* a second save goes into the other sector; tearing it (its CRC) gives the first one back */
+    CHECK(wr(0x1017u, 0u, 40u, 2u) == 0u && wr(0x1010u, 1u, SLIPEST_CO_SIGNATURE_SAVE, 4u) == 0u);
+    CHECK(slipest_store_open(&store, nvm, NULL) == SLIPEST_E_STATE);
+    CHECK(slipest_co_init(&co, ID, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 1u) == 1);
+    CHECK(rd(0x1017u, 0u, &code) == 40u);
+    {
+        /* the parameters travel in the commit records (sectors 0 and 1), at byte 48; no model activated yet: the
+         * records name no active slot (byte 12: 0xFF) */
+        CHECK(mem[SECTOR + 48u] == 40u && mem[48u] == 250u && mem[12u] == 0xFFu && mem[14u] == 2u);
+        mem[SECTOR + 48u] ^= 0x01u; /* torn: the newer record fails its CRC */
+        CHECK(slipest_store_open(&store, nvm, NULL) == SLIPEST_E_STATE);
+        CHECK(slipest_store_counters(&store)->boot_fallbacks == 1u); /* the torn record, not the parameters-only one */
+        CHECK(slipest_co_init(&co, ID, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 1u) == 1);
+        CHECK(rd(0x1017u, 0u, &code) == 250u);
+        /* the next save replaces the torn one, not the valid one */
+        CHECK(wr(0x1017u, 0u, 60u, 2u) == 0u && wr(0x1010u, 1u, SLIPEST_CO_SIGNATURE_SAVE, 4u) == 0u);
+        CHECK(mem[SECTOR + 48u] == 60u && mem[48u] == 250u);
+    }
+    /* restore: the value stays until a reset, then the default */
+    CHECK(wr(0x1011u, 1u, SLIPEST_CO_SIGNATURE_SAVE, 4u) == SLIPEST_CO_ABORT_STORE);
+    CHECK(wr(0x1011u, 1u, SLIPEST_CO_SIGNATURE_LOAD, 4u) == 0u && rd(0x1017u, 0u, &code) == 60u);
+    CHECK(slipest_store_params(&store, NULL) == NULL);
+    send(0u, 2u, (const uint8_t[]){0x81u, ID});
+    CHECK(rd(0x1017u, 0u, &code) == SLIPEST_CO_HEARTBEAT_DEFAULT_MS);
+    CHECK(slipest_store_open(&store, nvm, NULL) == SLIPEST_E_STATE);
+    CHECK(slipest_co_init(&co, ID, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 1u) == 1);
+    CHECK(rd(0x1017u, 0u, &code) == SLIPEST_CO_HEARTBEAT_DEFAULT_MS);
+    /* refused: while an upload is open (the store's one sector buffer holds it), and when the NVM fails */
+    sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
+    CHECK(aborted() == 0u);
+    CHECK(wr(0x1010u, 1u, SLIPEST_CO_SIGNATURE_SAVE, 4u) == SLIPEST_CO_ABORT_STATE);
+    CHECK(wr(0x2002u, 3u, 1u, 1u) == 0u); /* abort the upload */
+    ram.fail_all = 1;
+    CHECK(wr(0x1010u, 1u, SLIPEST_CO_SIGNATURE_SAVE, 4u) == SLIPEST_CO_ABORT_HARDWARE && emcy_in_out(SLIPEST_CO_EMCY_HARDWARE));
+    ram.fail_all = 0;
+    /* the store API's own limits */
+    CHECK(slipest_store_params_save(NULL, NULL, 0u) == SLIPEST_E_NULL);
+    CHECK(slipest_store_params_save(&store, NULL, 1u) == SLIPEST_E_NULL);
+    CHECK(slipest_store_params_save(&store, mem, SLIPEST_STORE_PARAMS_MAX + 1u) == SLIPEST_E_LENGTH);
+    {
+        static const uint8_t full[SLIPEST_STORE_PARAMS_MAX] = {1, 2, 3, 4};
+        uint32_t len = 0u;
+        CHECK(slipest_store_params_save(&store, full, sizeof full) == SLIPEST_OK);
+        CHECK(slipest_store_open(&store, nvm, NULL) == SLIPEST_E_STATE);
+        CHECK(memcmp(slipest_store_params(&store, &len), full, sizeof full) == 0 && len == sizeof full);
+        CHECK(slipest_store_params(NULL, &len) == NULL && len == 0u);
+    }
+    /* a model activated after the parameters were saved carries them on, and so does every later record (its
+     * rollback target: none, the built-in model ran before); a save with a model active keeps that model */
+    {
+        uint32_t len = 0u;
+        CHECK(slipest_co_init(&co, ID, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 1u) == 1);
+        CHECK(block(img, img_len, (uint32_t)img_len, 0u, 0) == 0u && wr(0x2002u, 1u, 1u, 1u) == 0u);
+        CHECK(slipest_store_params(&store, &len) != NULL && len == SLIPEST_STORE_PARAMS_MAX);
+        CHECK(wr(0x1017u, 0u, 70u, 2u) == 0u && wr(0x1010u, 1u, SLIPEST_CO_SIGNATURE_SAVE, 4u) == 0u);
+        CHECK(slipest_store_open(&store, nvm, NULL) == SLIPEST_OK && slipest_store_active_version(&store) == 3u);
+        CHECK(slipest_co_init(&co, ID, 9u, &store, NULL, NULL, 0u, out, 2u) == 1); /* the slot's model: no EMCY */
+        CHECK(rd(0x1017u, 0u, &code) == 70u && rd(0x2001u, 1u, &code) == 3u);
+        CHECK(wr(0x1011u, 1u, SLIPEST_CO_SIGNATURE_LOAD, 4u) == 0u);
+        CHECK(slipest_store_open(&store, nvm, NULL) == SLIPEST_OK && slipest_store_active_version(&store) == 3u);
+        CHECK(slipest_store_params(&store, &len) == NULL && len == 0u);
+    }
+    /* no store: the node neither saves nor restores (reads 0), and says so when asked */
+    CHECK(slipest_co_init(&co, ID, 9u, NULL, slipest_bundle_model_q(), NULL, 0u, out, 1u) == 1);
+    CHECK(rd(0x1010u, 1u, &code) == 0u && code == 0u && rd(0x1011u, 1u, &code) == 0u);
+    CHECK(wr(0x1010u, 1u, SLIPEST_CO_SIGNATURE_SAVE, 4u) == SLIPEST_CO_ABORT_STATE);
+    CHECK(wr(0x1011u, 1u, SLIPEST_CO_SIGNATURE_LOAD, 4u) == SLIPEST_CO_ABORT_STATE);
 }
 
 /* slipest_node_telemetry() gives slipest_node_handle()'s estimate frames, bit for bit, and one
@@ -337,8 +462,21 @@ int main(void)
     CHECK(rd(0x2001u, 2u, &code) == slipest_model_hash32(slipest_bundle_model_q()));
     CHECK((rd(0x2001u, 4u, &code) & 0xFFu) == 0xFFu); /* built-in model: no slot */
     CHECK((rd(0x2001u, 5u, &code) & 0xFFFFu) == slipest_lib_version());
-    (void)rd(0x2001u, 3u, &code);
-    CHECK(code == SLIPEST_CO_ABORT_NO_DATA); /* no sha256 for the built-in model */
+    {
+        static const uint8_t zero[32] = {0};
+        uint8_t sha[32];
+        const uint8_t *b = slipest_bundle_sha256();
+        CHECK(read_sha256(sha) == 0u && memcmp(sha, zero, 32) == 0); /* the built-in model's not given: zeros */
+        slipest_co_set_builtin_sha256(&co, b);
+        CHECK(read_sha256(sha) == 0u && memcmp(sha, b, 32) == 0); /* known at build time */
+        /* its first 4 bytes, big-endian, are the model's hash32: the header and the manifest agree */
+        CHECK(((uint32_t)b[0] << 24 | (uint32_t)b[1] << 16 | (uint32_t)b[2] << 8 | b[3]) ==
+              slipest_model_hash32(slipest_bundle_model_q()));
+        send(0u, 2u, (const uint8_t[]){0x81u, ID}); /* it survives a reset node */
+        CHECK(read_sha256(sha) == 0u && memcmp(sha, b, 32) == 0);
+        slipest_co_set_builtin_sha256(NULL, b); /* no node: nothing happens */
+    }
+    CHECK(slipest_co_counter(&co, SLIPEST_CO_CNT_NMT_COMMANDS) == 6u);
     CHECK((rd(0x2004u, 1u, &code) & 0xFFu) == 0u && code == 0u);
     CHECK(rd(0x2005u, 1u, &code) == 0u && code == 0u);
     CHECK((rd(0x2006u, 1u, &code) & 0xFFu) == 0u);
@@ -418,11 +556,14 @@ int main(void)
     CHECK(segmented(img, img_len, 0) == SLIPEST_CO_ABORT_STORE);
     CHECK(emcy_in_out(SLIPEST_CO_EMCY_DATA_SET) && (rd(0x1001u, 0u, &code) & 0x81u) == 0x81u);
     CHECK(slipest_store_counters(&store)->refused_version == 1u);
+    /* why, in 0x2006 sub 2 as in the EMCY's byte 3 (not overwritten by the transfer's end) */
+    CHECK((rd(0x2006u, 2u, &code) & 0xFFu) == (uint8_t)(int8_t)SLIPEST_E_STALE && code == 0u);
     memcpy(bad, img, img_len);
     put_version(bad, 4u);
     bad[100] ^= 1u; /* after the CRC was computed */
     CHECK(segmented(bad, img_len, 0) == SLIPEST_CO_ABORT_STORE);
     CHECK(slipest_store_counters(&store)->refused_crc == 1u);
+    CHECK((rd(0x2006u, 2u, &code) & 0xFFu) == (uint8_t)(int8_t)SLIPEST_E_CRC);
     image_edit_reseal(bad, img_len - SLIPEST_IMAGE_TRAILER_SIZE);
     CHECK(segmented(bad, img_len, 1) == SLIPEST_CO_ABORT_TOGGLE);
     sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
@@ -563,7 +704,15 @@ int main(void)
     CHECK(n == 1 && slipest_co_counter(&co, SLIPEST_CO_CNT_WINDOWS_DONE) == 0u && rd(0x2001u, 1u, &code) == 3u);
     CHECK(slipest_co_counter(NULL, 0u) == 0u && slipest_co_estimator(&co) != NULL && slipest_co_size() > 0u);
     CHECK(slipest_co_store_size() == sizeof(slipest_store_t) && slipest_co_max_out() == SLIPEST_CO_MAX_OUT);
+    test_params(&nvm);
     no_builtin_model(&nvm);
+    /* a node without a store (no model upload): the slots read empty and the store counters 0, not an abort */
+    CHECK(slipest_co_init(&co, ID, 9u, NULL, slipest_bundle_model_q(), NULL, 0u, out, 1u) == 1);
+    CHECK((rd(0x2004u, 1u, &code) & 0xFFu) == (uint32_t)SLIPEST_SLOT_EMPTY && code == 0u);
+    CHECK(rd(0x2004u, 6u, &code) == 0u && code == 0u);
+    CHECK(rd(0x2005u, 3u, &code) == 0u && code == 0u);
+    CHECK(rd(0x2006u, 1u, &code) == 0u && code == 0u);
+    CHECK(wr(0x2002u, 2u, 1u, 1u) == SLIPEST_CO_ABORT_STATE);
     test_telemetry_matches_handle(slipest_bundle_model_q());
     CHECK_DONE();
 }

@@ -122,9 +122,33 @@ static void test_boot_upload_activate_rollback(void)
     CHECK(slipest_store_active_version(&st) == 4u);
     CHECK(slipest_store_abort(&st) == SLIPEST_E_STATE);
     CHECK(slipest_store_write(&st, 0, img, 1) == SLIPEST_E_STATE);
-    /* after a reboot the record still names the erased slot: rollback validates and refuses it */
-    CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_rollback(&st) == SLIPEST_E_FORMAT);
+    /* after a reboot the record still names the erased slot: rollback validates it and says there is no previous
+     * model (not what is wrong with the erased slot), and marks the slot invalid */
+    CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_rollback(&st) == SLIPEST_E_STATE);
     CHECK(slipest_store_active_version(&st) == 4u);
+    CHECK(slipest_store_slot_info(&st, 0, &info) == SLIPEST_OK && info.state == SLIPEST_SLOT_INVALID);
+    CHECK(slipest_store_rollback(&st) == SLIPEST_E_STATE);
+    /* a record with parameters, then its bit flipped: the CRC refuses it and the older record (the same model,
+     * no parameters) wins */
+    {
+        uint32_t len = 9u;
+        static const uint8_t par[2] = {7u, 8u};
+        unsigned sec;
+        CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_params_save(&st, par, 2u) == SLIPEST_OK);
+        CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_params(&st, &len) != NULL && len == 2u);
+        sec = st.rec_sector;
+        CHECK(mem[sec * SECTOR + 4u] == 2u && mem[sec * SECTOR + 14u] == 2u && mem[sec * SECTOR + 48u] == 7u);
+        mem[sec * SECTOR + 49u] ^= 0x01u;
+        CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_active_version(&st) == 4u);
+        CHECK(slipest_store_params(&st, &len) == NULL && len == 0u && slipest_store_counters(&st)->boot_fallbacks == 1u);
+    }
+    /* the same after a refused image (a corrupted byte: CRC-32) took the rollback target's slot: once the CRC
+     * mismatch (-7) was the answer */
+    CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_rollback(&st) == SLIPEST_E_STATE); /* fresh boot, state again */
+    img[n / 2u] ^= 0x10u;
+    CHECK(upload(img, n) == SLIPEST_E_CRC);
+    CHECK(reboot(NULL) == SLIPEST_OK && slipest_store_rollback(&st) == SLIPEST_E_STATE);
+    CHECK(slipest_store_active_version(&st) == 4u && slipest_store_counters(&st)->rollbacks == 0u);
 }
 
 static void test_version_rule_and_refusals(void)

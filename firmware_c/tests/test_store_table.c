@@ -1,8 +1,8 @@
 /* The model store (slipest_store.h) with a format-2 (layer-table) image, the model.img of a layer-table bundle
- * (an SN-D) given as argv[1], over a RAM NVM with 256-byte sectors: uploaded in random-sized chunks, validated by
- * the streaming validator a sector at a time, activated, and read back at the next boot as the very model that
- * slipest_image_read_table() reads from the whole buffer; edited copies are refused under their reasons while
- * the active model keeps serving. */
+ * (SN-D, 24,9 or any other shape) given as argv[1], over a RAM NVM with 256-byte sectors: uploaded in
+ * random-sized chunks, validated by the streaming validator a sector at a time, activated, and read back at the
+ * next boot as the very model that slipest_image_read_table() reads from the whole buffer; edited copies are
+ * refused under their reasons while the active model keeps serving. */
 #include <stdio.h>
 #include <string.h>
 
@@ -61,6 +61,29 @@ static int same_model(const slipest_model_q_t *q, const slipest_model_f32_t *f)
            memcmp(f->b2, ref_f.b2, SLIPEST_N_CLASSES * sizeof *f->b2) == 0;
 }
 
+/* The largest h_bits in 1..24 that slipest_model_q_check() refuses for a block of `width` units: its centring
+ * bound 2 H 2^h_bits <= 2^30, written as the library writes it (2H <= 2^30 >> h_bits); 0 when every value in range
+ * passes (H <= 32). */
+static unsigned breaking_h_bits(unsigned width)
+{
+    unsigned h;
+    for (h = 24u; h >= 1u; --h) {
+        if ((2u * width) > ((UINT32_C(1) << 30) >> h)) return h;
+    }
+    return 0u;
+}
+
+/* The first block with an in-range h_bits that breaks its bound (that value in *h_bits), or n_layers. */
+static unsigned first_block_breakable(unsigned *h_bits)
+{
+    unsigned k;
+    for (k = 0u; k < ref_q.n_layers; ++k) {
+        *h_bits = breaking_h_bits(ref_q.layers[k].width);
+        if (*h_bits != 0u) return k;
+    }
+    return ref_q.n_layers;
+}
+
 /* a copy of the image with model version v, edited by a 32-bit value at `at` (when at != 0), CRC redone */
 static size_t edited(uint32_t v, size_t at, uint32_t value)
 {
@@ -76,7 +99,8 @@ int main(int argc, char **argv)
     FILE *fp;
     const slipest_store_counters_t *c;
     size_t w0 = SLIPEST_IMAGE_V2_HEADER_SIZE, b0, beta0, body, n;
-    uint32_t v;
+    uint32_t v, n_range;
+    unsigned k, h_bits = 0u, w_edit;
     if (argc < 2 || (fp = fopen(argv[1], "rb")) == NULL) {
         fprintf(stderr, "usage: test_store_table MODEL.IMG (a format-2 image without a tag)\n");
         return 2;
@@ -121,14 +145,28 @@ int main(int argc, char **argv)
     edit[SLIPEST_IMAGE_V2_TABLE_AT + SLIPEST_IMAGE_V2_REC_H_BITS] = 30u; /* block 0's shift out of range */
     image_edit_reseal(edit, body);
     CHECK(upload(edit, n) == SLIPEST_E_RANGE && c->refused_range == 4u);
+    /* an h_bits in range alone (1..24) that breaks the centring bound 2 H 2^h_bits <= 2^30 of its block's width
+     * (24 for H = 128: 2^32, where a uint32_t shift of H would wrap to 0). Such a value exists for a block wider
+     * than 32 units only (2 H 2^24 <= 2^30 up to H = 32), so the first such block is edited; a model whose blocks
+     * are all 32 units or narrower (24,9) has no in-range h_bits to refuse, and that edit is skipped (the
+     * out-of-range 30 above is refused for every width) */
+    n_range = 4u;
+    k = first_block_breakable(&h_bits);
+    if (k < ref_q.n_layers) {
+        n = edited(v + 1u, 0u, 0u);
+        edit[SLIPEST_IMAGE_V2_TABLE_AT + k * SLIPEST_IMAGE_V2_RECORD_SIZE + SLIPEST_IMAGE_V2_REC_H_BITS] =
+            (uint8_t)h_bits;
+        image_edit_reseal(edit, body);
+        CHECK(upload(edit, n) == SLIPEST_E_RANGE && c->refused_range == ++n_range);
+        printf("h_bits %u refused for block %u (%u units)\n", h_bits, k, (unsigned)ref_q.layers[k].width);
+    } else {
+        printf("skipped: every block is 32 units or narrower, no h_bits in 1..24 breaks 2 H 2^h_bits <= 2^30\n");
+    }
     n = edited(v + 1u, 0u, 0u);
-    /* h_bits 24 in range alone, but 2 H 2^24 > 2^30 for H >= 64 (2^32 for H = 128: a uint32_t shift wraps to 0) */
-    CHECK(ref_q.layers[0].width >= 64u);
-    edit[SLIPEST_IMAGE_V2_TABLE_AT + SLIPEST_IMAGE_V2_REC_H_BITS] = 24u;
-    image_edit_reseal(edit, body);
-    CHECK(upload(edit, n) == SLIPEST_E_RANGE && c->refused_range == 5u);
-    n = edited(v + 1u, 0u, 0u);
-    edit[SLIPEST_IMAGE_V2_TABLE_AT + SLIPEST_IMAGE_V2_REC_WIDTH] ^= 1u; /* the table disagrees with the payload */
+    /* the table disagrees with the payload: block 0 one unit narrower (wider at 2 units), still 2..256 units */
+    w_edit = ref_q.layers[0].width > 2u ? ref_q.layers[0].width - 1u : 3u;
+    edit[SLIPEST_IMAGE_V2_TABLE_AT + SLIPEST_IMAGE_V2_REC_WIDTH] = (uint8_t)(w_edit & 0xFFu);
+    edit[SLIPEST_IMAGE_V2_TABLE_AT + SLIPEST_IMAGE_V2_REC_WIDTH + 1u] = (uint8_t)(w_edit >> 8);
     image_edit_reseal(edit, body);
     CHECK(upload(edit, n) == SLIPEST_E_LENGTH && c->refused_length == 1u);
     n = edited(v, 0u, 0u);

@@ -106,19 +106,22 @@ def run(args: argparse.Namespace) -> int:
     compare = Path(args.compare) if args.compare is not None else None
     if compare is not None and not (compare / "vectors.bin").is_file():
         raise FileNotFoundError(f"{compare}: no vectors.bin (not an export bundle?)")
-    steps = tqdm(total=(2 + 2 * len(names)) * (2 if compare else 1), desc="bench c",
+    steps = tqdm(total=(2 + 2 * len(names)) * (2 if compare else 1), desc="bench c", leave=False,
                  disable=args.json or not sys.stderr.isatty())
-    builds, t, ref_cost, rows = _measure(bundle, args.build_dir, names, found, ref, args.iterations, steps, options)
-    result = bench_figures(ref, builds[ref.name], ref_cost, t, rows, bundle)
-    result["arch"] = _arch_of(bundle)
-    result["trap_unaligned"] = args.trap_unaligned
-    if compare is not None:
-        _, c_t, _, c_rows = _measure(compare, args.build_dir / "compare", names, found, None, args.iterations, steps,
-                                     options)
-        result["compare"] = {"bundle": str(compare), "arch": _arch_of(compare), "host_ns_per_inference_q": c_t["q"],
-                             "host_ns_per_inference_f32": c_t["f32"], "onnxruntime_ns_per_inference": c_t["onnxruntime"],
-                             "speedup_vs_onnxruntime": c_t["onnxruntime"] / c_t["q"], "cpu_targets": c_rows}
-    steps.close()
+    try:
+        builds, t, ref_cost, rows = _measure(bundle, args.build_dir, names, found, ref, args.iterations, steps, options)
+        result = bench_figures(ref, builds[ref.name], ref_cost, t, rows, bundle)
+        result["arch"] = _arch_of(bundle)
+        result["trap_unaligned"] = args.trap_unaligned
+        if compare is not None:
+            _, c_t, _, c_rows = _measure(compare, args.build_dir / "compare", names, found, None, args.iterations,
+                                         steps, options)
+            result["compare"] = {"bundle": str(compare), "arch": _arch_of(compare), "host_ns_per_inference_q": c_t["q"],
+                                 "host_ns_per_inference_f32": c_t["f32"],
+                                 "onnxruntime_ns_per_inference": c_t["onnxruntime"],
+                                 "speedup_vs_onnxruntime": c_t["onnxruntime"] / c_t["q"], "cpu_targets": c_rows}
+    finally:
+        steps.close()  # cleared before anything else is printed: an error line is never written over by the bar
     if args.json:
         print(json.dumps(result))
     else:
@@ -152,13 +155,17 @@ def _measure(bundle: Path, build_dir: Path, names: list[str], found: dict, ref, 
 def format_result(result: dict, key: str) -> str:
     """The plain-text output: one line per scalar figure, the CANopen node's parts and goals, the targets table,
     and a second bundle's figures beside the first when --compare gave one."""
-    lines = [f"{k:42s} {v:.1f}" if isinstance(v, float) else f"{k:42s} {v}"
+    lines = [f"{k:42s} {v:.1f}" if isinstance(v, float) else f"{k:42s} {'n/a' if v is None else v}"
              for k, v in result.items() if not isinstance(v, dict)]
     co_node = result[f"{key}_canopen_node"]
-    parts = ", ".join(f"{k} {v}" for k, v in co_node["flash_bytes_by_part"].items())
-    lines.append(f"{key + '_canopen_node_flash_by_part':42s} {parts}")
-    lines.append(f"{key + '_canopen_node_ram_parts':42s} " + ", ".join(f"{k} {v}" for k, v in co_node["ram_parts"].items()))
-    lines.append(f"{key + '_canopen_node_goals':42s} {_goal_line(co_node)}")
+    if "not_measured" not in co_node:
+        parts = ", ".join(f"{k} {v}" for k, v in co_node["flash_bytes_by_part"].items())
+        lines.append(f"{key + '_canopen_node_flash_by_part':42s} {parts}")
+        lines.append(f"{key + '_canopen_node_ram_parts':42s} " +
+                     ", ".join(f"{k} {v}" for k, v in co_node["ram_parts"].items()))
+        lines.append(f"{key + '_canopen_node_goals':42s} {_goal_line(co_node)}")
+    for what, why in result.get(f"{key}_not_measured", {}).items():
+        lines.append(f"{key + '_' + what:42s} not measured for this bundle: {why}")
     lines.append("")
     lines.append(format_table(result["cpu_targets"]))
     cmp_result = result.get("compare")

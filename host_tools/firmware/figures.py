@@ -2,7 +2,9 @@
 
 * `target_figures`: one row per CPU target (instructions where counted, flash, peak stack);
 * `canopen_node_figures`: RAM and flash of the CANopen node with two model slots, by part;
-* `bench_figures`: the whole result. The reference target's figures (the target file marked
+* `bench_figures`: the whole result (the store's and the CANopen node's figures measured on images of the given
+  bundle's model.img, null with the reason under `<key>_not_measured` where the build has none). The reference
+  target's figures (the target file marked
   SLIPEST_TARGET_REFERENCE) are keyed `<key>_*`, `<key>` being that target's `Target.key` (`m4` for the
   M4), so that docs and scripts can quote them by name; every target's row is under `cpu_targets`.
 
@@ -16,7 +18,8 @@ import os
 from pathlib import Path
 
 from .build import run_image
-from .measure import STORE_OBJECTS, by_source, library_footprint, model_slots_footprint, parse_kv, target_costs
+from .measure import (STORE_OBJECTS, bundle_images, by_source, library_footprint, model_slots_footprint, parse_kv,
+                      target_costs)
 from .targets import Target
 
 SERIAL_LINK_OBJECTS = ("slipest_slcan", "slipest_cobs", "slipest_crc")
@@ -120,8 +123,13 @@ def bench_figures(ref: Target, ref_build: Path, ref_cost: dict, host: dict[str, 
     lib = library_footprint(ref_build / "slipest_bench_target_q.elf.map", "libslipest_q.a")
     # a CAN-attached flight firmware: the integration guide's main loop, no serial codec linked
     can_fw = library_footprint(ref_build / "example_minimal_can_loop.elf.map", "libslipest_q.a")
-    slots = model_slots_footprint(ref_build)
-    co_node = canopen_node_figures(ref_build)
+    # the store's and the CANopen node's figures come from images of this bundle's model.img; where the build has
+    # none (a model beyond its image caps), the figures are null and `<key>_not_measured` says why
+    images = bundle_images(ref_build)
+    slots = model_slots_footprint(ref_build) if images["store"] else None
+    co_node = canopen_node_figures(ref_build) if images["canopen"] else None
+    not_measured = {name: images["why"] for name, fig in (("model_slots", slots), ("canopen_node", co_node))
+                    if fig is None}
     flash = sum(o["flash"] for o in lib.values())
     static_ram = sum(o["ram"] for o in lib.values())
     kernel = sum(o["flash"] for k, o in by_source(lib).items() if k in KERNEL_AND_MODEL_OBJECTS)
@@ -145,10 +153,10 @@ def bench_figures(ref: Target, ref_build: Path, ref_cost: dict, host: dict[str, 
         f"{p}_flash_bytes_can_firmware": sum(o["flash"] for o in can_fw.values()),
         f"{p}_flash_bytes_by_object": {k: v["flash"] for k, v in sorted(lib.items())},
         # A/B model slots on NVM (docs/model_slots.md): store + SHA-256 + image reader, and slipest_store_t
-        f"{p}_flash_bytes_model_slots": slots["flash"],
-        f"{p}_ram_bytes_model_slots": slots["ram"],
+        f"{p}_flash_bytes_model_slots": slots["flash"] if slots else None,
+        f"{p}_ram_bytes_model_slots": slots["ram"] if slots else None,
         f"{p}_flash_bytes_can_node_with_slots": sum(o["flash"] for k, o in can_fw.items() if k not in STORE_OBJECTS)
-        + slots["flash"],
+        + slots["flash"] if slots else None,
         f"{p}_static_ram_bytes": static_ram,
         f"{p}_node_context_bytes": ref_cost["node_bytes"],
         f"{p}_stack_bytes_q": ref_cost["stack_q"],
@@ -158,11 +166,12 @@ def bench_figures(ref: Target, ref_build: Path, ref_cost: dict, host: dict[str, 
         f"{p}_instructions_per_systick": ref_cost["instructions_per_tick"],
         f"{p}_label": ref.label,
         # the CANopen node with two model slots (issue 20 goal: <= 4 KB RAM, <= 12 KB flash)
-        f"{p}_canopen_node_ram_bytes": co_node["ram_bytes"],
-        f"{p}_canopen_node_flash_bytes": co_node["flash_bytes"],
-        f"{p}_canopen_node_auth_ram_bytes": co_node["with_auth"]["ram_bytes"],
-        f"{p}_canopen_node_auth_flash_bytes": co_node["with_auth"]["flash_bytes"],
-        f"{p}_canopen_node": co_node,
+        f"{p}_canopen_node_ram_bytes": co_node["ram_bytes"] if co_node else None,
+        f"{p}_canopen_node_flash_bytes": co_node["flash_bytes"] if co_node else None,
+        f"{p}_canopen_node_auth_ram_bytes": co_node["with_auth"]["ram_bytes"] if co_node else None,
+        f"{p}_canopen_node_auth_flash_bytes": co_node["with_auth"]["flash_bytes"] if co_node else None,
+        f"{p}_canopen_node": co_node if co_node else {"not_measured": images["why"]},
+        f"{p}_not_measured": not_measured,
         "cpu_targets": rows,
         "targets": {**{f"{p}_{k}": v for k, v in REFERENCE_GOALS.items()}, "speedup_vs_onnxruntime": SPEEDUP_GOAL},
         "bundle": str(bundle),

@@ -6,7 +6,8 @@ reported figures.
   between the image's count marks (`instructions_between_marks`);
 * instructions per inference, per sample and the painted stacks of one target (`target_costs`);
 * bytes per library object in a linked image, from its linker map (`library_footprint`), and the
-  model store's flash and RAM (`model_slots_footprint`);
+  model store's flash and RAM (`model_slots_footprint`), where the build has the bundle's store image
+  (`bundle_images`);
 * host ns per single-window inference of the C bench, onnxruntime and torch (`host_timings`).
 """
 
@@ -136,6 +137,17 @@ def by_source(footprint: dict[str, dict[str, int]]) -> dict[str, dict[str, int]]
     return {re.sub(r"\.c\.o(bj)?$", "", k): v for k, v in footprint.items()}
 
 
+def bundle_images(build_dir: Path) -> dict:
+    """Which of its bundle's optional images a cross build has: the model store's (`store`) and the CANopen node's
+    (`canopen`), and `why` not, as the build recorded them at configure time (firmware_c/cmake/target.cmake). A folder
+    may still hold another bundle's images from an earlier build: only what the record names is this bundle's."""
+    rec = run_record(build_dir)
+    if "store_image" not in rec:
+        return {"store": False, "canopen": False, "why": f"{build_dir} does not record its images (configure it again)"}
+    return {"store": bool(rec["store_image"]), "canopen": bool(rec["canopen_image"]), "why": rec.get("images_why", ""),
+            "bundle": rec.get("bundle")}
+
+
 def model_slots_footprint(build_dir: Path) -> dict[str, int]:
     """Flash of the model-store objects and RAM of the store state, from the store test image
     (firmware_c/target/store_target.c) of a cross build."""
@@ -188,13 +200,23 @@ def python_baselines(bundle: Path, n: int) -> dict[str, Callable[[], object]]:
     return {"onnxruntime": lambda: sess.run(None, {name: x}), "torch": torch_call}
 
 
+def c_bench_inferences(bundle: Path) -> int:
+    """Inferences per round of the host C bench: 100,000 for an SN-S (543 parameters), proportionally fewer for a
+    larger model (about the same work: 4 x 256 units would take minutes per round), never fewer than the vectors."""
+    from fleetlab.models import n_params
+
+    arch = json.loads((Path(bundle) / "manifest.json").read_text()).get("arch", "sn-s")
+    return max(1000, round(100_000 * n_params("sn-s") / n_params(arch)))
+
+
 def host_timings(host_build: Path, bundle: Path, n: int, rounds: int = 3) -> dict[str, float]:
     """Best-of-rounds ns per inference; C, onnxruntime and torch interleaved so that load
     from other processes hits all of them alike."""
     calls = python_baselines(bundle, n)
+    c_calls = str(c_bench_inferences(bundle))
     best = {"q": float("inf"), "f32": float("inf"), "onnxruntime": float("inf"), "torch": float("inf")}
     for _ in range(rounds):
-        c = json.loads(run([str(host_build / "slipest_bench"), str(Path(bundle) / "vectors.bin"), "100000"]))
+        c = json.loads(run([str(host_build / "slipest_bench"), str(Path(bundle) / "vectors.bin"), c_calls]))
         best["q"] = min(best["q"], c["host_ns_per_inference_q"])
         best["f32"] = min(best["f32"], c["host_ns_per_inference_f32"])
         for key, fn in calls.items():

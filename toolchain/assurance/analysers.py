@@ -41,7 +41,7 @@ class ToolResult:
 
 def _with_sources(bundle: Path, fn):
     with tempfile.TemporaryDirectory() as tmp:
-        gen = generate_dbc(Path(tmp) / "generated")
+        gen = generate_dbc(Path(tmp) / "generated", bundle)
         incs = [f"-I{d}" for d in include_dirs(bundle, gen.parent)]
         return fn([*library_sources(), gen], incs, gen.parent)
 

@@ -60,7 +60,7 @@ def run_cppcheck(bundle: Path | None = None, work: Path | None = None,
     DBC codec."""
     cppcheck = need("cppcheck")
     with tempfile.TemporaryDirectory() as tmp:
-        gen = generate_dbc(Path(work or tmp) / "generated")
+        gen = generate_dbc(Path(work or tmp) / "generated", bundle)
         incs = [a for d in include_dirs(bundle, gen.parent) for a in ("-I", str(d))]
         res = run([cppcheck, "--addon=misra", "--std=c99", "-q", "--enable=style", "--error-exitcode=0",
                    "--template={file}:{line}:{id}", *incs, *(sources or library_sources()), gen], timeout=1200)

@@ -38,13 +38,16 @@ def public_headers() -> list[Path]:
     return sorted((fw() / "include").glob("*.h"))
 
 
-def generate_dbc(out_dir: Path) -> Path:
+def generate_dbc(out_dir: Path, bundle: Path | None = None) -> Path:
     """cantools C codec from the repo DBC, integer-only: the CMake build's own generation script; beside it
-    the CANopen object dictionary tables (slipest_co_od.h/.c), as CMake generates them."""
+    the CANopen object dictionary tables (slipest_co_od.h/.c) and the bundle's sha256 header
+    (slipest_bundle_sha256.h; default: the example bundle), as CMake generates them."""
     tree = repo_root()
     run(["cmake", f"-DPYTHON={sys.executable}", f"-DDBC={tree / 'dbc' / 'slipest.dbc'}", f"-DGEN={out_dir}", "-P",
          tree / "firmware_c" / "cmake" / "generate_dbc.cmake"], check=True)
     run([sys.executable, str(tree / "canopen_od" / "generate.py"), "c", str(out_dir)], check=True)
+    run(["cmake", f"-DBUNDLE={Path(bundle or default_bundle())}", f"-DOUT={out_dir / 'slipest_bundle_sha256.h'}",
+         "-P", tree / "firmware_c" / "cmake" / "bundle_sha256.cmake"], check=True)
     return out_dir / "slipest_dbc.c"
 
 

@@ -108,7 +108,7 @@ def compile_graph(bundle: Path | None = None, q_only: bool = True, with_bench: b
     gcc = need("arm-none-eabi-gcc")
     graph = StackGraph()
     with tempfile.TemporaryDirectory() as tmp:
-        gen = generate_dbc(Path(tmp) / "generated")
+        gen = generate_dbc(Path(tmp) / "generated", bundle)
         incs = [f"-I{d}" for d in include_dirs(bundle, gen.parent)]
         defs = ["-DSLIPEST_Q_ONLY"] if q_only else []
         bench = fw() / "target" / "bench_target.c"

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import options
+
 DEFAULT_VECTORS = 1200
 
 
@@ -44,6 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "two bundles different names to include both in one image")
     p.add_argument("--onnx-only", action="store_true",
                    help="write model.onnx and the manifest only (no C headers, vectors or image)")
+    options.no_progress(p)
 
 
 def _data_windows(dirs: list[Path]) -> np.ndarray | None:
@@ -88,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     b = export_bundle(model, args.out, inputs=inputs, meta=meta, model_path=args.model, data_dirs=args.data,
                       onnx_only=args.onnx_only, vector_sources=sources, c_name=args.c_name,
                       model_version=args.model_version,
-                      hmac_key=args.hmac_key.read_bytes() if args.hmac_key is not None else None)
+                      hmac_key=args.hmac_key.read_bytes() if args.hmac_key is not None else None, progress=not args.no_progress)
     print(f"wrote {b.path} ({meta['arch']}, content hash {b.content_hash[:16]}...)")
     for name, entry in b.manifest["files"].items():
         print(f"  {name:24s} {entry['bytes']:>9d} bytes")

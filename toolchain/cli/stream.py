@@ -13,6 +13,7 @@ from fleetlab.host_tools.links import CanBusLink, Link, link_class, open_can_bus
 from fleetlab.host_tools.sources import LOG_SUFFIXES, FeatureSource, TelemetrySource, resolve
 from fleetlab.host_tools.stream import TrafficLog, stream, timed_frames
 from fleetlab.host_tools.wire.dbc import WindowEstimate
+from . import options
 from .dbc_option import add_dbc_option, apply_dbc_option
 from ..paths import default_bundle
 
@@ -49,6 +50,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         q.add_argument("--scale", type=float, default=0.08, help="simulator scenario scale (default 0.08)")
         q.add_argument("--wait", type=float, default=5.0, help="seconds to wait for the last answers (default 5)")
         q.add_argument("--quiet", action="store_true", help="do not print every estimate")
+        options.no_progress(q)
         add_dbc_option(q)
 
 
@@ -98,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
             per = 3 * SAMPLES_PER_WINDOW if isinstance(source, TelemetrySource) else 4
             total = per * (min(args.limit, source.n_windows) if args.limit else source.n_windows)
         stats = stream(link, timed_frames(source, args.limit, skipped), args.realtime, log, args.wait,
-                       None if args.quiet else _print_estimate, total, progress=True)
+                       None if args.quiet else _print_estimate, total, progress=not args.no_progress)
     finally:
         log.close()
         link.close()

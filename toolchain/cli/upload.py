@@ -14,11 +14,16 @@ from fleetlab.canopen_od import eds_text
 from fleetlab.host_tools.canopen_session import CobsCanBus, eds_for
 from fleetlab.host_tools.links import open_can_bus
 from fleetlab.export.image_layout import V2, layout_of
-from fleetlab.host_tools.upload import open_tapped, read_image, rehearse, upload_image
+from fleetlab.host_tools.upload import open_tapped, read_image, rehearse, rollback_model, upload_image
+from . import options
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--bundle", type=Path, required=True, help="export bundle whose model.img is sent")
+    p.add_argument("--bundle", type=Path, default=None, help="export bundle whose model.img is sent (required unless "
+                                                             "--rollback)")
+    p.add_argument("--rollback", action="store_true",
+                   help="send no image: the node re-activates its previous model (0x2002 sub 2); says so in one line "
+                        "when it has none")
     p.add_argument("--link", choices=("canopen", "serial"), default="canopen",
                    help="canopen: a CAN bus (python-can --interface/--channel); serial: the same CAN frames in "
                         "COBS packets on --port")
@@ -43,6 +48,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scale", type=float, default=0.3, help="simulator scale of --rehearse (default 0.3)")
     p.add_argument("--report", type=Path, default=None, metavar="FILE", help="also write the report as JSON to FILE")
     p.add_argument("--json", action="store_true", help="print the report as one JSON object")
+    options.no_progress(p)
 
 
 def _is_table_image(image: bytes) -> bool:
@@ -53,12 +59,31 @@ def _is_table_image(image: bytes) -> bool:
         return False
 
 
+def _rollback(session, before: dict, args: argparse.Namespace) -> int:
+    after = rollback_model(session)  # OSError (one line) when the node has no previous model
+    result = {"before": {"version": before["version"], "hash32": f"{before['hash32']:08x}"},
+              "after": {"version": after["version"], "hash32": f"{after['hash32']:08x}", "sha256": after["sha256"],
+                        "slot": after["slot"]}}
+    if args.report:
+        args.report.write_text(json.dumps(result, indent=1))
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(f"rolled back  model version {before['version']} hash {before['hash32']:08x} -> version "
+              f"{after['version']} hash {after['hash32']:08x} (slot {after['slot']})")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from tqdm.auto import tqdm
 
     if not 1 <= args.node_id <= 127:
         raise ValueError("--node-id must be 1..127")
-    image = read_image(args.bundle)
+    if args.rollback and (args.bundle is not None or args.activate or args.rehearse):
+        raise ValueError("--rollback sends no image: it takes no --bundle, --activate or --rehearse")
+    if not args.rollback and args.bundle is None:
+        raise ValueError("--bundle is required (or --rollback)")
+    image = b"" if args.rollback else read_image(args.bundle)
     with tempfile.TemporaryDirectory() as tmp:
         if args.emulate:
             from fleetlab.host_tools.emulator import EMULATOR_TARGET, build, find_artifact
@@ -90,7 +115,9 @@ def run(args: argparse.Namespace) -> int:
             session, tap = open_tapped("bus", eds, args.node_id, bus=bus)
         with session:
             before = session.master.active_model()
-            bar = tqdm(total=len(image), unit="B", unit_scale=True, desc="upload", disable=args.json,
+            if args.rollback:
+                return _rollback(session, before, args)
+            bar = tqdm(total=len(image), unit="B", unit_scale=True, desc="upload", disable=args.json or args.no_progress,
                        file=sys.stderr)
             try:
                 if args.rehearse > 0:

@@ -18,6 +18,9 @@ def test_demo_quick_end_to_end(tmp_path):
     assert "**All stages green**" in report and "FAILED" not in report
     for stage in ("Simulate", "AcoMerge", "MCCV", "Export", "host", "Cortex-M4", "SLCAN", "cost"):
         assert stage in report, stage
+    # the label-noise stage: its table (how many labels were corrupted) and plot
+    assert "## Calibration labels with noise" in report and "| labels corrupted | 0.0 % |" in report
+    assert (out / "noise" / "sweep.png").is_file()
     # the assurance stage's own summary table, for the bundle this run exported
     assert "## Assurance evidence" in report and "MISRA C:2012 (cppcheck addon)" in report
     assert (out / "assurance" / "assurance.html").exists()

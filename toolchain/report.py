@@ -207,6 +207,7 @@ def write_report(out: Path, stages: list, total_s: float, args, prof, cortex_not
         ("data", lambda: _section_data(out, by_name["data"])),
         ("fuse", lambda: _section_fuse(out)),
         ("evaluate", lambda: _section_evaluate(out)),
+        ("noise", lambda: _section_noise(out)),
         ("export", lambda: _section_export(out)),
         ("build_host", lambda: _section_c(out, by_name, cortex_note)),
         ("emulate", lambda: _section_emulate(out)),
@@ -227,6 +228,16 @@ def write_report(out: Path, stages: list, total_s: float, args, prof, cortex_not
     (out / "report.md").write_text(md)
     _write_html(md, out / "report.html")
     return out / "report.md"
+
+
+def _section_noise(out: Path) -> list[str]:
+    """The label-noise sweep of `fleetlab evaluate --label-noise-sweep` (noise/sweep.md and sweep.png)."""
+    noise = out / "noise"
+    return ["## Calibration labels with noise", "",
+            "D_Cal's labels corrupted as visual odometry would (here a fifth moved to a neighbouring class); the "
+            "test rows keep exact labels. The full sweep and the VO model: docs/paper_table.md.", "",
+            _demote((noise / "sweep.md").read_text().strip()), "", _img(noise / "sweep.png", out, "balanced accuracy "
+            "against the label-noise rate"), ""]
 
 
 def _section_assure(out: Path) -> list[str]:

@@ -342,8 +342,9 @@ slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t 
     store->rec.prev = NO_SLOT;
     store->upload_slot = NO_SLOT;
 
+    cand[0].seq = 0u; /* both before the loop: gcc -fanalyzer does not follow a loop's two passes */
+    cand[1].seq = 0u;
     for (k = 0; k < 2u; ++k) {
-        cand[k].seq = 0u;
         if (nvm_read(store, k * nvm->sector_size, raw, sizeof raw) != SLIPEST_OK) {
             st = SLIPEST_E_NVM;
         } else {

@@ -97,6 +97,13 @@ def plan(out: Path, seed: int, prof: Profile, cortex_m: bool) -> list[Stage]:
               [_fleetlab("evaluate", "--data", data, "--runs", prof.runs, "--cal-size", 150, "--seed", seed,
                          "--epochs", prof.epochs, "--generations", prof.generations, "--ants", prof.ants,
                          "--methods", "acomerge,earth-ft,model-base", "--jobs", 2, "--out", ev, "--no-progress")]),
+        # on the Moon D_Cal's labels come from visual odometry: the same short comparison with a fifth of them
+        # moved to a neighbouring class (the confusion VO makes), beside the exact labels
+        Stage("noise", "Calibration labels as a rover gets them: the short MCCV under label noise",
+              [_fleetlab("evaluate", "--data", data, "--runs", prof.runs, "--cal-size", 150, "--seed", seed,
+                         "--epochs", prof.epochs, "--generations", prof.generations, "--ants", prof.ants,
+                         "--methods", "acomerge,earth-ft", "--label-noise-sweep", "adjacent:0,0.2", "--jobs", 2,
+                         "--out", out / "noise", "--no-progress")]),
         Stage("export", "Export ONNX, C headers and test vectors",
               # version 2: the fused model is the one that reaches the rover after landing (stage after_landing)
               [_fleetlab("export", fuse / "fused.pt", "--out", bundle, "--data", data, "--check", "--model-version", 2)]),

@@ -101,17 +101,8 @@ def run(args: argparse.Namespace) -> int:
     result = run_mccv(dataset, settings, n_jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
                       progress=not args.no_progress, results_dir=args.out, resume=args.resume is not None)
     result["config"]["data"] = str(args.data)
-    table = markdown_table(result)
-    text = json.dumps(result, indent=1)
-    if args.json:
-        write_atomic(args.json, text)
-    if args.out:
-        write_atomic(args.out / "results.json", text)
-        write_atomic(args.out / "table.md", table)
-        written = write_plots(result, args.out)
-        print(f"wrote {args.out / 'table.md'}, results.json and {len(written)} plots", file=sys.stderr)
-    sys.stdout.write(table)
-    return 0
+    return _output(args, result, markdown_table(result), "results.json", "table.md",
+                   lambda out: f"{len(write_plots(result, out))} plots")
 
 
 def _sweep(args: argparse.Namespace, settings: EvalSettings, dataset) -> int:
@@ -125,14 +116,20 @@ def _sweep(args: argparse.Namespace, settings: EvalSettings, dataset) -> int:
                                   resume=args.resume is not None)
     sweep["config"] = {"data": str(args.data), "arch": settings.arch, "protocol": settings.protocol,
                        "runs": settings.runs, "seed": settings.seed, "methods": list(settings.all_methods)}
-    table = noise_sweep.markdown(sweep)
-    text = json.dumps(sweep, indent=1)
+    return _output(args, sweep, noise_sweep.markdown(sweep), "sweep.json", "sweep.md",
+                   lambda out: noise_sweep.plot(sweep, out / "sweep.png").name)
+
+
+def _output(args: argparse.Namespace, result: dict, table: str, json_name: str, table_name: str, plots) -> int:
+    """The one way an evaluation's result leaves: --json, and with --out the JSON, the table and `plots(out)`
+    (which says what it drew); the table on stdout."""
+    text = json.dumps(result, indent=1)
     if args.json:
         write_atomic(args.json, text)
     if args.out:
-        write_atomic(args.out / "sweep.json", text)
-        write_atomic(args.out / "sweep.md", table)
-        noise_sweep.plot(sweep, args.out / "sweep.png")
-        print(f"wrote {args.out / 'sweep.md'}, sweep.json and sweep.png", file=sys.stderr)
+        write_atomic(args.out / json_name, text)
+        write_atomic(args.out / table_name, table)
+        drawn = plots(args.out)
+        print(f"wrote {args.out / table_name}, {json_name} and {drawn}", file=sys.stderr)
     sys.stdout.write(table)
     return 0

@@ -179,7 +179,7 @@ class Target:
     duration_s: np.ndarray | None = None
 
 
-NOISE_CODE = zlib.crc32(b"label-noise")  # the noise of a draw is seeded apart from every method's own seed
+NOISE_CODE = method_code("label-noise")  # the noise of a draw is seeded apart from every method's own seed
 
 
 def calibration_labels(settings: EvalSettings, cal_size: int, run: int, target: Target,

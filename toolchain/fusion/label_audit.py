@@ -24,13 +24,6 @@ FOLDS = 5  # cross-validation folds of the audit's out-of-sample prediction
 MIN_PER_CLASS = 3  # keep at least this many rows of every class present
 
 
-def expert_probabilities(arch: str, experts: torch.Tensor, x: np.ndarray) -> np.ndarray:
-    """(N, 3) mean softmax of the (K, T) flat experts on x: an out-of-sample prediction for D_Cal."""
-    with torch.no_grad():
-        logits = batched_logits(arch, torch.as_tensor(experts, dtype=torch.float32), torch.as_tensor(x))
-    return torch.softmax(logits, dim=2).mean(dim=0).double().numpy()
-
-
 def crossval_probabilities(arch: str, start: torch.Tensor, x: np.ndarray, y: np.ndarray, seed: int, steps: int,
                            lr: float, folds: int = FOLDS) -> np.ndarray:
     """(N, 3) out-of-sample softmax for every row of (x, y): the flat model `start` fine-tuned on the other

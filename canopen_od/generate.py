@@ -18,7 +18,7 @@ else:  # run as a script by CMake
     import objects as od  # type: ignore[no-redef]
 
 KINDS = ("const", "hb_time", "err_reg", "serial", "pdo", "model", "counter", "slot", "store_cnt", "upload",
-         "command", "domain", "params")
+         "command", "domain", "params", "prog_ctrl", "flash")
 ACCESS_BITS = {"const": 1, "ro": 1, "wo": 2, "rw": 3, "rww": 3, "rwr": 3}
 
 
@@ -51,7 +51,6 @@ def c_header() -> str:
         f"#define SLIPEST_CO_N_RPDO {n_rx}u",
         f"#define SLIPEST_CO_N_PDO {len(od.PDOS)}u",
         f"#define SLIPEST_CO_N_COUNTERS {len(od.COUNTERS)}u",
-        f"#define SLIPEST_CO_IDX_MODEL_IMAGE 0x{od.IDX_MODEL_IMAGE:04X}u",
         f"#define SLIPEST_CO_IDX_HEARTBEAT 0x1017u",
         f"#define SLIPEST_CO_SIGNATURE_SAVE 0x{od.SIGNATURE_SAVE:08X}u /**< \"save\": 0x1010 stores */",
         f"#define SLIPEST_CO_SIGNATURE_LOAD 0x{od.SIGNATURE_LOAD:08X}u /**< \"load\": 0x1011 restores the defaults */",
@@ -60,6 +59,18 @@ def c_header() -> str:
         "/* EMCY error codes (CiA 301) the node sends */",
     ]
     lines += [f"#define SLIPEST_CO_EMCY_{n} 0x{c:04X}u /**< {doc} */" for n, c, doc in od.EMCY_CODES]
+    lines += ["/* CiA 302-3 program control (0x1F51) commands and states, flash status (0x1F57) codes */"]
+    lines += [f"#define SLIPEST_CO_PROG_{n.upper()} 0x{c:02X}u" for n, c in od.PROGRAM_CONTROL]
+    lines += [f"#define SLIPEST_CO_PROG_STATE_{n.upper()} {c}u" for n, c in od.PROGRAM_STATES]
+    lines += [f"#define SLIPEST_CO_FLASH_{n} {c}u /**< {doc} */" for n, c, doc in od.FLASH_STATUS]
+    lines += [f"#define SLIPEST_CO_FLASH_BUSY 0x{od.FLASH_BUSY:X}u",
+              f"#define SLIPEST_CO_FLASH_CODE_SHIFT {od.FLASH_CODE_SHIFT}u",
+              f"#define SLIPEST_CO_FLASH_SLIPEST_SHIFT {od.FLASH_SLIPEST_SHIFT}u",
+              "/* the 302-3 flash status code of slipest status -1 - k at position k (C99 designated initialisers by",
+              " * status name; a status not named is 0 here and reads as UNSPECIFIED) */",
+              "#define SLIPEST_CO_FLASH_BY_STATUS \\",
+              "    {" + ", ".join(f"[-(int)({st}) - 1] = SLIPEST_CO_FLASH_{code}"
+                                for st, code in sorted(od.FLASH_BY_STATUS.items())) + "}"]
     lines += ["/* SDO abort codes (CiA 301) the server sends */"]
     lines += [f"#define SLIPEST_CO_ABORT_{n} 0x{c:08X}u /**< {doc} */" for n, c, doc in od.ABORT_CODES]
     lines += [
@@ -188,7 +199,7 @@ _C_STORED = (0x1017,)
 
 
 def _stored_params_bytes() -> int:
-    writable = sorted({e.index for e in od.objects() if e.index < 0x2000 and e.kind not in ("params",)
+    writable = sorted({e.index for e in od.objects() if e.index < 0x2000 and e.kind not in ("params", "domain", "prog_ctrl")
                        and ACCESS_BITS[e.access] & 2})
     if tuple(od.STORED_PARAMS) != _C_STORED or writable != sorted(od.STORED_PARAMS):
         raise ValueError(f"0x1010 stores {[hex(i) for i in od.STORED_PARAMS]}, the writable communication objects are "
@@ -343,7 +354,9 @@ _MEANING = {"hb_time": "0 = off", "err_reg": "bit 0 generic, 4 communication, 7 
             "counter": "node counter", "slot": "from the store", "store_cnt": "store counter",
             "upload": "upload progress", "command": "write 1 to execute",
             "domain": "model.img, written into the inactive slot",
-            "params": "reads 1; write the signature"}
+            "params": "reads 1; write the signature",
+            "prog_ctrl": "write 0 stop, 1 start (on trial), 2 reset, 3 clear, 0x80 confirm; read 0 stopped, 1 started, 3 none",
+            "flash": "bit 0 busy, bits 1-7 CiA 302-3 error code, bits 16-23 slipest status"}
 
 
 def markdown_table() -> str:

@@ -15,8 +15,11 @@ Each entry: (index, sub, name, data type, access, default, kind, arg, pdo_mappab
   slot       slot arg >> SLOT_SHIFT, field (low bits) = position in SLOT_FIELDS
   store_cnt  store counter number arg (slipest_store_counters_t field order)
   upload     arg = position in UPLOAD_ARGS (upload state, last store status, bytes received)
-  command    write-only command arg = command_arg(name) for COMMAND_ARGS (activate, rollback, abort)
-  domain     the model image (DOMAIN, written into the inactive slot)
+  command    write-only command arg = command_arg(name) for COMMAND_ARGS (rollback: CiA 302-3 has none)
+  domain     the model image, CiA 302-3 program data 0x1F50 sub 1 (DOMAIN): written into the inactive slot, only
+             after a clear; a read is the active image
+  prog_ctrl  CiA 302-3 program control 0x1F51 sub 1: a write is a PROGRAM_CONTROL command, a read PROGRAM_STATES
+  flash      CiA 302-3 flash status identification 0x1F57 sub 1 (see FLASH_STATUS_* below)
   params     CiA 301 store (0x1010) / restore (0x1011) parameters: arg = position in PARAM_ARGS; reads 1 (the
              node saves / restores on command; 0 without a store), a write needs the signature
 PDO communication and mapping objects (0x1400/0x1600/0x1800/0x1A00) are derived from PDOS.
@@ -44,9 +47,16 @@ DEVICE_NAME = "slipest"
 # ModificationDate (CiA 306 [FileInfo]). Written here, never taken from the clock, so the generated EDS is the same
 # bytes on every machine and every day (tests/test_determinism.py). Raise OD_VERSION and set OD_VERSION_DATE
 # whenever an object changes. CiA 306 dates are mm-dd-yyyy, times hh:mm(AM|PM).
-OD_VERSION = (2, 0)  # 2.0: 0x1010 / 0x1011 (store and restore parameters); 0x2001 sub 3 readable in every state
+# 2.0: 0x1010 / 0x1011 (store and restore parameters); 0x2001 sub 3 readable in every state
+# 3.0: CiA 302-3 program download 0x1F50 / 0x1F51 / 0x1F56 / 0x1F57, trial activation (0x1F51 = 0x80 confirms),
+#      0x2005 sub 16 trial reverts
+# 4.0: the manufacturer duplicates of 0x1F50 / 0x1F51 gone: 0x2000 (model image; 0x1F50 sub 1 after a clear),
+#      0x2002 sub 1 activate (0x1F51 = 1, then 0x80) and sub 3 abort (0x1F51 = 3); 0x2002 is the rollback command
+#      alone, a VAR (sub 0), so that a master written for 3.0 that writes 0x2002 sub 1 or 3 gets "sub-index does
+#      not exist" instead of another command (issue 45: the manufacturer objects stay for what 302-3 lacks)
+OD_VERSION = (4, 0)
 OD_CREATED = ("11-24-2026", "12:00PM")  # the first version of this dictionary
-OD_VERSION_DATE = ("12-01-2026", "12:00PM")
+OD_VERSION_DATE = ("12-03-2026", "12:00PM")
 
 # CiA 301 store / restore parameters (0x1010 / 0x1011 sub 1): the signatures a master writes, "save" and "load" as
 # four ASCII bytes in SDO (little-endian) order
@@ -59,10 +69,43 @@ IDX_RESTORE_PARAMS = 0x1011
 # object that is not here: the C node packs exactly these (slipest_co_od_access.c).
 STORED_PARAMS = (0x1017,)
 
-# Manufacturer objects
-IDX_MODEL_IMAGE = 0x2000
+# CiA 302-3 program download: the model is the node's "program". A generic master needs these four and nothing of
+# fleetlab's (docs/model_update.md); sub 1 of each is program number 1, the one model the node runs.
+IDX_PROGRAM_DATA = 0x1F50  # DOMAIN: write = an image into the inactive slot (after a clear), read = the active image
+IDX_PROGRAM_CONTROL = 0x1F51  # UNSIGNED8: PROGRAM_CONTROL commands, read PROGRAM_STATES
+IDX_PROGRAM_SWID = 0x1F56  # UNSIGNED32: the running model's hash32 (first 4 bytes of its sha256, big-endian)
+IDX_FLASH_STATUS = 0x1F57  # UNSIGNED32: bit 0 busy, bits 1-7 FLASH_STATUS code, bits 16-23 the slipest status
+# 0x1F51 writes (CiA 302-3; 0x80 "confirm" is the code Zephyr's program download and MCUboot-style masters send)
+PROGRAM_CONTROL = (("stop", 0), ("start", 1), ("reset", 2), ("clear", 3), ("confirm", 0x80))
+# 0x1F51 reads
+PROGRAM_STATES = (("stopped", 0), ("started", 1), ("no_program", 3))
+# 0x1F57 bits 1-7 (CiA 302-3 flash status error codes): (C name, code, meaning)
+FLASH_STATUS = (
+    ("OK", 0, "no error"),
+    ("NO_VALID_PROGRAM", 1, "no valid program (start with nothing downloaded that could run)"),
+    ("UNKNOWN_FORMAT", 2, "unknown format (not a model image: magic, image format version)"),
+    ("FORMAT_ERROR", 3, "format error (length, architecture, CRC, hash or a model check)"),
+    ("NOT_CLEARED", 4, "flash not cleared before write (0x1F50 written without 0x1F51 = 3)"),
+    ("WRITE_ERROR", 5, "flash write error (the NVM failed)"),
+    ("ADDRESS_ERROR", 6, "general address error (the image is larger than a slot)"),
+    ("SECURED", 7, "flash secured (authentication failed, or a model version not newer than the running one)"),
+    ("UNSPECIFIED", 63, "unspecified error"),
+)
+FLASH_BUSY = 0x1  # bit 0: a download is open
+FLASH_CODE_SHIFT = 1
+FLASH_SLIPEST_SHIFT = 16  # bits 16-23 (manufacturer-specific): the slipest status of the last store call
+# the 302-3 code of each slipest status a store call refuses with (slipest_status.h names); any other: UNSPECIFIED
+FLASH_BY_STATUS = {"SLIPEST_E_LENGTH": "FORMAT_ERROR", "SLIPEST_E_FORMAT": "UNKNOWN_FORMAT",
+                   "SLIPEST_E_VERSION": "UNKNOWN_FORMAT", "SLIPEST_E_ARCH": "FORMAT_ERROR", "SLIPEST_E_CRC": "FORMAT_ERROR",
+                   "SLIPEST_E_HASH": "FORMAT_ERROR", "SLIPEST_E_RANGE": "FORMAT_ERROR",
+                   "SLIPEST_E_NONFINITE": "FORMAT_ERROR", "SLIPEST_E_NVM": "WRITE_ERROR", "SLIPEST_E_AUTH": "SECURED",
+                   "SLIPEST_E_STALE": "SECURED"}
+FLASH = {name: code for name, code, _ in FLASH_STATUS}
+
+# Manufacturer objects: only what CiA 302-3 has no object for (model details, rollback, counters, slot table, upload
+# progress; docs/model_update.md lists each with its 302-3 counterpart). 0x2000 is no longer used (OD 4.0).
 IDX_ACTIVE_MODEL = 0x2001
-IDX_COMMAND = 0x2002
+IDX_ROLLBACK = 0x2002
 IDX_COUNTERS = 0x2003
 IDX_SLOTS = 0x2004
 IDX_STORE_COUNTERS = 0x2005
@@ -96,6 +139,7 @@ EMCY_CODES = (
     ("RESET", 0x0000, "error reset: the error register is clear again"),
     ("HARDWARE", 0x5000, "an NVM callback failed"),
     ("DATA_SET", 0x6300, "a model image was refused (byte 3: slipest status)"),
+    ("TRIAL_REVERTED", 0xFF01, "device specific: a model on trial met a reset before its confirm; the previous runs"),
     ("PDO_LENGTH", 0x8210, "an RPDO had the wrong length"),
     ("NO_MODEL", 0xFF00, "device specific: no model to run (none built in, no valid slot)"),
 )
@@ -105,7 +149,7 @@ EMCY = {name: code for name, code, _ in EMCY_CODES}
 # The arguments of the kinds (what the C node's handler switches on), by name: generate.py writes
 # them into slipest_co_od.h as SLIPEST_CO_<KIND>_<NAME>, so neither side spells a bare number.
 MODEL_ARGS = ("version", "hash32", "sha256", "slot", "library_version")
-COMMAND_ARGS = ("activate", "rollback", "abort")  # arg = 1 + position (the value written must be 1)
+COMMAND_ARGS = ("rollback",)  # arg = 1 + position (the value written must be 1)
 UPLOAD_ARGS = ("state", "last_status", "received")
 PARAM_ARGS = ("save", "restore")  # 0x1010 sub 1, 0x1011 sub 1
 SLOT_SHIFT = 4  # slot arg: slot << SLOT_SHIFT | position of the field in SLOT_FIELDS
@@ -125,7 +169,7 @@ COUNTERS = ESTIMATOR_COUNTERS + ("rpdo_received", "sdo_aborts_sent", "sdo_aborts
 # slipest_store_counters_t's fields in the order 0x2005 lists them (any order: read through offsetof)
 STORE_COUNTERS = ("uploads_started", "uploads_aborted", "images_accepted", "refused_length", "refused_format",
                   "refused_arch", "refused_crc", "refused_hash", "refused_range", "refused_hmac", "refused_version",
-                  "activations", "rollbacks", "nvm_errors", "boot_fallbacks")
+                  "activations", "rollbacks", "nvm_errors", "boot_fallbacks", "trial_reverts")
 SLOT_FIELDS = (("state", UNSIGNED8), ("length", UNSIGNED32), ("version", UNSIGNED32), ("hash32", UNSIGNED32))
 
 # PDO-mapped records. Payload layouts equal the DBC frames (dbc/slipest.dbc, little-endian),
@@ -223,7 +267,11 @@ def objects() -> list[Entry]:
             (f"Mapped object {k}", UNSIGNED32, "ro", (rec << 16) | (k << 8) | (8 * TYPE_BYTES[t]))
             for k, (_, t) in enumerate(fields, start=1)
         ])
-    e.append(Entry(IDX_MODEL_IMAGE, 0, "Model image", DOMAIN, "wo", 0, "domain"))
+    e += _record(IDX_PROGRAM_DATA, "Program data", [("Program number 1", DOMAIN, "rw", 0, "domain")])
+    e += _record(IDX_PROGRAM_CONTROL, "Program control", [("Program number 1", UNSIGNED8, "rw", 0, "prog_ctrl")])
+    e += _record(IDX_PROGRAM_SWID, "Program software identification",
+                 [("Program number 1", UNSIGNED32, "ro", 0, "model", MODEL_ARGS.index("hash32"))])
+    e += _record(IDX_FLASH_STATUS, "Flash status identification", [("Program number 1", UNSIGNED32, "ro", 0, "flash")])
     e += _record(IDX_ACTIVE_MODEL, "Active model", [
         ("version", UNSIGNED32, "ro", 0, "model", MODEL_ARGS.index("version")),
         ("hash32", UNSIGNED32, "ro", 0, "model", MODEL_ARGS.index("hash32")),
@@ -231,11 +279,8 @@ def objects() -> list[Entry]:
         ("slot", UNSIGNED8, "ro", 0, "model", MODEL_ARGS.index("slot")),  # 0xFF: the built-in model, 0xFE: none
         ("library version", UNSIGNED16, "ro", 0, "model", MODEL_ARGS.index("library_version")),
     ])
-    e += _record(IDX_COMMAND, "Model command", [
-        ("activate", UNSIGNED8, "wo", 0, "command", command_arg("activate")),  # write 1
-        ("rollback", UNSIGNED8, "wo", 0, "command", command_arg("rollback")),
-        ("abort upload", UNSIGNED8, "wo", 0, "command", command_arg("abort")),
-    ])
+    # write 1: back to the previous slot's model (302-3 has no rollback)
+    e.append(Entry(IDX_ROLLBACK, 0, "Model rollback", UNSIGNED8, "wo", 0, "command", command_arg("rollback")))
     e += _record(IDX_COUNTERS, "Node counters",
                  [(n, UNSIGNED32, "ro", 0, "counter", k) for k, n in enumerate(COUNTERS)])
     e += _record(IDX_SLOTS, "Model slots",

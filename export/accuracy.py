@@ -20,7 +20,7 @@ from sklearn.metrics import balanced_accuracy_score
 from fleetlab.data.features_int import FEATURE_LSB, quantize_features
 
 from .intref import argmax_lowest, run
-from .quant import QParams
+from .quant import QNet
 
 TARGET_AGREEMENT = 0.995
 TARGET_BACC_LOSS = 0.005
@@ -30,7 +30,7 @@ def _bacc(y: np.ndarray, pred: np.ndarray) -> float:
     return float(balanced_accuracy_score(y, pred)) if len(np.unique(y)) > 1 else float(np.mean(y == pred))
 
 
-def compare(model: torch.nn.Module, qp: QParams, x: np.ndarray, y: np.ndarray) -> dict:
+def compare(model: torch.nn.Module, qp: QNet, x: np.ndarray, y: np.ndarray) -> dict:
     """Statistics of one set of windows (x float physical units, y labels)."""
     x = np.asarray(x, dtype=np.float32)
     with torch.no_grad():
@@ -61,7 +61,7 @@ def compare(model: torch.nn.Module, qp: QParams, x: np.ndarray, y: np.ndarray) -
     }
 
 
-def report(model: torch.nn.Module, qp: QParams, data_dirs: list[Path]) -> dict:
+def report(model: torch.nn.Module, qp: QNet, data_dirs: list[Path]) -> dict:
     """Per dataset folder: every role, and all rows together."""
     from fleetlab.data.dataset import load_dataset
 

@@ -27,7 +27,9 @@ from fleetlab.data.features_int import FEATURE_LSB, quantize_features
 from fleetlab.models.mlp import arch_of
 
 from . import f32_bound, headers, manifest, model_image, onnx_export, vectors
-from .quant import FloatNet, FloatParams, QNet, QParams, quantize, quantize_net
+from . import sns_profile
+from .quant import FloatNet, QNet, quantize
+from fleetlab.errors import InputError
 
 ONNX_FILE = "model.onnx"
 # Every file a bundle can hold; an export removes the ones it does not rewrite (never other files).
@@ -42,21 +44,30 @@ ROUNDING = {
 }
 
 
-def _image_entry(qp: QParams | QNet, hmac_key: bytes | None) -> dict:
+def _image_entry(qn: QNet, hmac_key: bytes | None) -> dict:
     """manifest.json `model_image`: format 1 for an SN-S, format 2 (the layer table) for any other."""
-    table = isinstance(qp, QNet)
-    return {"file": model_image.IMAGE_FILE,
-            "format_version": model_image.layout.V2.version if table else model_image.FORMAT_VERSION,
-            "arch_id": model_image.layout.ARCH_TABLE if table else model_image.ARCH_SN_S,
+    layout = model_image.layout.layout_for(qn.hidden)
+    return {"file": model_image.IMAGE_FILE, "format_version": layout.version, "arch_id": layout.arch,
             "byte_order": "little-endian", "hmac_sha256": hmac_key is not None}
+
+
+def _quantization_entry(qn: QNet) -> dict:
+    """manifest.json `quantization`: the scheme's scalars, the roundings and, for an SN-S, where each array of
+    its flat header comes from."""
+    entry = {**manifest.quantization_scalars(qn), "rounding": ROUNDING}
+    if sns_profile.fits(qn):
+        flat = sns_profile.q_arrays(qn)
+        entry["arrays"] = {headers.Q_MEMBERS[attr]: {"from": attr, "ctype": ctype, "shape": list(np.shape(flat[attr]))}
+                           for attr, ctype, _, _ in headers.Q_ARRAYS}
+    return entry
 
 
 @dataclass
 class Bundle:
     path: Path
     manifest: dict[str, Any]
-    fparams: FloatParams | FloatNet | None  # FloatNet / QNet: any architecture but SN-S (a layer table)
-    qparams: QParams | QNet | None
+    fparams: FloatNet | None  # None: an ONNX-only bundle
+    qparams: QNet | None
 
     @property
     def content_hash(self) -> str:
@@ -165,15 +176,12 @@ def _write_bundle(model: torch.nn.Module, out: Path, steps, *, inputs: np.ndarra
         content = _flat_hash(model)
         vec_info = None
     else:
-        # SN-S: its own headers and a format-1 image; any other architecture: the layer-table headers and a
-        # format-2 image (write_image picks the format from the parameters)
-        from_model, quant, content_hash, write_headers = (
-            (FloatParams.from_model, quantize, manifest.content_hash, headers.write_headers) if arch == "sn-s"
-            else (FloatNet.from_model, quantize_net, manifest.content_hash_net, headers.write_net_headers))
-        fp = from_model(model)
-        qp = quant(fp)
-        content = content_hash(qp, fp)
-        names += [p.name for p in write_headers(out, qp, fp, content, c_name, model_version)]
+        # an SN-S gets its flat headers and a format-1 image, any other network the layer-table headers and a
+        # format-2 image: the writers pick the format from the network's widths
+        fp = FloatNet.from_model(model)
+        qp = quantize(fp)
+        content = manifest.content_hash(qp, fp)
+        names += [p.name for p in headers.write_headers(out, qp, fp, content, c_name, model_version)]
         names.append(model_image.write_image(out, qp, fp, content, model_version, hmac_key).name)
         steps.update()
     if not onnx_only:
@@ -217,24 +225,12 @@ def _write_bundle(model: torch.nn.Module, out: Path, steps, *, inputs: np.ndarra
         "content_hash": content,
         "content_hash32": f"0x{content[:8]}",
     }
-    if isinstance(qp, QNet):
-        m["quantization"] = {**qp.scalars(), "rounding": ROUNDING}
-        m["headers"] = {"fixed_point": headers.Q_HEADER, "float": headers.F32_HEADER,
-                        "model_q": f"slipest_{c_name}_q", "model_f32": f"slipest_{c_name}_f32", "layer_table": True}
-        m["model_version"] = int(model_version)
-        m["model_image"] = _image_entry(qp, hmac_key)
-        m["vectors"] = vec_info
-    elif qp is not None:
-        m["quantization"] = {
-            **qp.scalars(),
-            "rounding": ROUNDING,
-            "arrays": {
-                headers.Q_MEMBERS[attr]: {"from": attr, "ctype": ctype, "shape": list(np.shape(getattr(qp, attr)))}
-                for attr, ctype, _, _ in headers.Q_ARRAYS
-            },
-        }
+    if qp is not None:
+        m["quantization"] = _quantization_entry(qp)
         m["headers"] = {"fixed_point": headers.Q_HEADER, "float": headers.F32_HEADER,
                         "model_q": f"slipest_{c_name}_q", "model_f32": f"slipest_{c_name}_f32"}
+        if not sns_profile.fits(qp):
+            m["headers"]["layer_table"] = True
         m["model_version"] = int(model_version)
         m["model_image"] = _image_entry(qp, hmac_key)
         m["vectors"] = vec_info
@@ -253,59 +249,44 @@ def load_bundle(path: Path | str) -> Bundle:
     manifest.verify_files(path, m)
     if "quantization" not in m:  # ONNX-only bundle
         return Bundle(path, m, None, None)
-    if m.get("headers", {}).get("layer_table"):
-        return _load_net_bundle(path, m)
-
     qfile, ffile = path / headers.Q_HEADER, path / headers.F32_HEADER
     for f in (qfile, ffile):
         if f.name not in m["files"]:
-            raise ValueError(f"{path / manifest.MANIFEST}: does not list {f.name}")
-    farr, eps, fhash, fhash32 = headers.read_f32_header(ffile)
-    fp = FloatParams(**farr, eps=eps)
-    qsc, qarr, qhash, qhash32 = headers.read_q_header(qfile)
+            raise InputError(f"{path / manifest.MANIFEST}: does not list {f.name}")
+    net, qhash, qhash32 = headers.read_q_header(qfile)
+    fn, fhash, fhash32 = headers.read_f32_header(ffile)
     msc = m["quantization"]
-    for key, value in qsc.items():
+    _restore_scales(net, msc, qfile)
+    net.check_bounds()
+    for key, value in manifest.quantization_scalars(net).items():
         if msc.get(key) != value:
-            raise ValueError(f"{qfile}: .{key} = {value}, manifest.json says {msc.get(key)}")
-    qp = QParams(
-        w1=qarr["w1"], b1=qarr["b1"], g=qarr["g"], bb=qarr["bb"], w2=qarr["w2"], b2=qarr["b2"], gelu=qarr["gelu"],
-        rsqrt_seed=qarr["rsqrt_seed"].astype(np.int64), fg=qsc["fg"], fy=qsc["fy"], eps_m=qsc["eps_m"],
-        eps_e=qsc["eps_e"], s1=float(msc["s1"]), s2=float(msc["s2"]),
-    )
-    qp.check_bounds()
-    _check_hashes(path, m, manifest.content_hash(qp, fp), ((qfile, qhash, qhash32), (ffile, fhash, fhash32)))
-    return Bundle(path, m, fp, qp)
+            raise InputError(f"{qfile}: {key} = {value}, manifest.json says {msc.get(key)}")
+    _check_hashes(path, m, manifest.content_hash(net, fn), ((qfile, qhash, qhash32), (ffile, fhash, fhash32)))
+    return Bundle(path, m, fn, net)
+
+
+def _restore_scales(net: QNet, msc: dict, qfile: Path) -> None:
+    """Set the scales s, information the headers do not carry, from the manifest's `quantization` (an SN-S's
+    flat s1 and s2, any other network's per block and s_out)."""
+    recorded = msc.get("hidden", [msc.get("n_hidden")])
+    if list(net.hidden) != recorded or (not sns_profile.fits(net) and len(msc.get("blocks", [])) != len(net.blocks)):
+        raise InputError(f"{qfile}: hidden blocks {list(net.hidden)}, manifest.json says {recorded}")
+    if sns_profile.fits(net):
+        scales, s_out = [msc["s1"]], msc["s2"]
+    else:
+        scales, s_out = [entry["s"] for entry in msc["blocks"]], msc["s_out"]
+    for blk, s in zip(net.blocks, scales):
+        blk.s = float(s)
+    net.s_out = float(s_out)
 
 
 def _check_hashes(path: Path, m: dict, content: str, named: tuple) -> None:
     """Both headers name the manifest's content hash, and their parameters hash to it."""
     for where, h, h32 in named:
         if h != m["content_hash"] or h32 != manifest.hash32(h):
-            raise ValueError(f"{where}: model hash {h[:16]}... disagrees with manifest.json {m['content_hash'][:16]}...")
+            raise InputError(f"{where}: model hash {h[:16]}... disagrees with manifest.json {m['content_hash'][:16]}...")
     if content != m["content_hash"]:
-        raise ValueError(f"{path}: parameters in the headers hash to {content[:16]}..., manifest.json says {m['content_hash'][:16]}...")
-
-
-def _load_net_bundle(path: Path, m: dict) -> Bundle:
-    """A layer-table bundle (any architecture but SN-S): both headers, checked against the manifest."""
-    qfile, ffile = path / headers.Q_HEADER, path / headers.F32_HEADER
-    for f in (qfile, ffile):
-        if f.name not in m["files"]:
-            raise ValueError(f"{path / manifest.MANIFEST}: does not list {f.name}")
-    net, qhash, qhash32 = headers.read_q_net_header(qfile)
-    fn, fhash, fhash32 = headers.read_f32_net_header(ffile)
-    msc = m["quantization"]
-    if list(net.hidden) != msc.get("hidden") or len(msc.get("blocks", [])) != len(net.blocks):
-        raise ValueError(f"{qfile}: hidden blocks {list(net.hidden)}, manifest.json says {msc.get('hidden')}")
-    for blk, entry in zip(net.blocks, msc["blocks"]):  # the scales are information the headers do not carry
-        blk.s = float(entry["s"])
-    net.s_out = float(msc["s_out"])
-    net.check_bounds()
-    for key, value in net.scalars().items():
-        if msc.get(key) != value:
-            raise ValueError(f"{qfile}: {key} = {value}, manifest.json says {msc.get(key)}")
-    _check_hashes(path, m, manifest.content_hash_net(net, fn), ((qfile, qhash, qhash32), (ffile, fhash, fhash32)))
-    return Bundle(path, m, fn, net)
+        raise InputError(f"{path}: parameters in the headers hash to {content[:16]}..., manifest.json says {m['content_hash'][:16]}...")
 
 
 def _check_tolerance(b: Bundle, model: torch.nn.Module, inputs: np.ndarray, tol: float) -> str:
@@ -318,7 +299,7 @@ def _check_tolerance(b: Bundle, model: torch.nn.Module, inputs: np.ndarray, tol:
                 f"(the bound for this network and its vectors: {bound:.2e})")
     # the same 3 significant digits, rounded up; a last float64 bit of another machine may move it by one step
     if not bound / 1.01 <= tol <= bound * 1.01:
-        raise ValueError(f"{b.path / manifest.MANIFEST}: float_tolerance {tol:.6g} is not the float32 bound of this "
+        raise InputError(f"{b.path / manifest.MANIFEST}: float_tolerance {tol:.6g} is not the float32 bound of this "
                          f"network on its vectors ({bound:.6g})")
     return f"float tolerance {tol:.2e} x max(1, |logit|) = the float32 error bound of this network on its vectors"
 
@@ -341,30 +322,30 @@ def check_bundle(path: Path | str, model: torch.nn.Module | None = None) -> list
         if model is not None:
             tl_given = model.eval()(torch.from_numpy(v.inputs)).numpy()
             if not f32_bound.excess(tl_given, tl) <= tol:
-                raise ValueError(f"{b.path}: the given model is not the model in this bundle")
+                raise InputError(f"{b.path}: the given model is not the model in this bundle")
     if not f32_bound.excess(tl, v.torch_logits) <= tol:
-        raise ValueError(f"{b.path}: torch_logits in vectors.npz do not match the float header parameters")
+        raise InputError(f"{b.path}: torch_logits in vectors.npz do not match the float header parameters")
     diff, scaled = onnx_export.check_onnx(onnx_file, v.inputs, v.torch_logits, tol)
     done.append(f"ONNX: checker passed, onnxruntime vs torch max |diff| {diff:.2e} on {len(v)} vectors "
                 f"({scaled:.2e} x max(1, |logit|), tolerance {tol:.2e})")
     if not np.array_equal(quantize_features(v.inputs), v.q_inputs):
-        raise ValueError(f"{b.path}: q_inputs in vectors.npz are not quantize_features(inputs)")
+        raise InputError(f"{b.path}: q_inputs in vectors.npz are not quantize_features(inputs)")
     ql, sat = run(b.qparams, v.q_inputs)
     bad = np.flatnonzero((ql != v.q_logits).any(axis=1) | (sat != v.q_saturations))
     if len(bad):
-        raise ValueError(f"{b.path}: integer reference differs from q_logits/q_saturations at {len(bad)} rows (first {bad[0]})")
+        raise InputError(f"{b.path}: integer reference differs from q_logits/q_saturations at {len(bad)} rows (first {bad[0]})")
     if not (np.array_equal(argmax_lowest(ql), v.q_class) and np.array_equal(argmax_lowest(v.torch_logits), v.f_class)):
-        raise ValueError(f"{b.path}: q_class/f_class in vectors.npz are not the argmax of the logits")
+        raise InputError(f"{b.path}: q_class/f_class in vectors.npz are not the argmax of the logits")
     binv = vectors.read_vectors_bin(b.path / "vectors.bin")
     for name, arr in v.arrays().items():
         if not np.array_equal(binv[name], arr):
-            raise ValueError(f"{b.path / 'vectors.bin'}: array {name} differs from vectors.npz")
+            raise InputError(f"{b.path / 'vectors.bin'}: array {name} differs from vectors.npz")
     done.append(f"integer reference reproduces q_logits bit for bit on {len(v)} vectors; vectors.bin == vectors.npz")
     done.append(f"fixed-point vs float class agreement on the vectors: {np.mean(v.q_class == v.f_class):.4%}")
     if model_image.IMAGE_FILE in b.manifest["files"]:
         img = model_image.read_image((b.path / model_image.IMAGE_FILE).read_bytes())
         if img.content_hash != b.content_hash or not model_image.same_model(img, b.qparams):
-            raise ValueError(f"{b.path / model_image.IMAGE_FILE}: parameters or hash differ from the headers")
+            raise InputError(f"{b.path / model_image.IMAGE_FILE}: parameters or hash differ from the headers")
         done.append(f"model.img (format {img.format_version}, model version {img.model_version}) holds "
                     "the headers' parameters")
     return done

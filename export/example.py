@@ -1,6 +1,6 @@
 """Regenerate the committed example bundle `firmware_c/bundles/example` from simulator data.
 
-    python -m fleetlab.export.example [--out DIR] [--seed 1] [--scale 0.3]
+    python -m fleetlab.cli.example_bundle [--out DIR] [--seed 1] [--scale 0.3]
 
 Simulates the built-in scenario (as `fleetlab simulate --seed SEED --scale SCALE`) into a temporary folder, trains an SN-S on
 its `earth` and `target` windows (Adam, the expert hyper-parameters, fixed seed, one thread so
@@ -11,8 +11,6 @@ Nothing from the real Fleet-To-Lab files goes into the bundle.
 
 from __future__ import annotations
 
-import argparse
-import sys
 import tempfile
 from pathlib import Path
 
@@ -20,7 +18,6 @@ import numpy as np
 import torch
 
 from fleetlab.models.train import EXPERT_EPOCHS
-from fleetlab.paths import default_bundle
 
 TRAIN_ROLES = ("earth", "target")
 N_VECTORS = 1200
@@ -50,7 +47,7 @@ def make_example(out: Path, seed: int = 1, scale: float = 0.3, epochs: int = EXP
             torch.set_num_threads(threads)
         meta = {
             "trained_on": f"fleetlab simulate --seed {seed} --scale {scale}, roles {', '.join(TRAIN_ROLES)}",
-            "windows": int(len(y)), "epochs": epochs, "seed": seed, "made_by": "python -m fleetlab.export.example",
+            "windows": int(len(y)), "epochs": epochs, "seed": seed, "made_by": "python -m fleetlab.cli.example_bundle",
         }
         model_path = save_model(Path(tmp) / "example_sns.pt", model, meta)
         all_windows = np.concatenate([ds.xy(r)[0] for r in ds.roles])
@@ -82,24 +79,6 @@ def _rewrite_manifest_paths(out: Path, sim_dir: str) -> None:
         if p.exists():
             p.write_text(p.read_text().replace(sim_dir, label))
     m = json.loads((out / manifest.MANIFEST).read_text())
-    m["source_model"]["path"] = "example_sns.pt (temporary; python -m fleetlab.export.example rebuilds it)"
+    m["source_model"]["path"] = "example_sns.pt (temporary; python -m fleetlab.cli.example_bundle rebuilds it)"
     m["files"] = manifest.file_entries(out, list(m["files"]))
     manifest.write_manifest(out, m)
-
-
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m fleetlab.export.example", description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=Path, default=None,
-                   help="bundle directory (default: the committed example bundle, firmware_c/bundles/example)")
-    p.add_argument("--seed", type=int, default=1, help="simulator and training seed (default 1)")
-    p.add_argument("--scale", type=float, default=0.3, help="simulator scale (default 0.3)")
-    p.add_argument("--epochs", type=int, default=EXPERT_EPOCHS, help=f"training epochs (default {EXPERT_EPOCHS})")
-    p.add_argument("--keep", type=Path, help="also keep the trained model and the simulated data in this folder")
-    args = p.parse_args(argv)
-    out = make_example(args.out or default_bundle(), args.seed, args.scale, args.epochs, args.keep)
-    print(f"example bundle written to {out}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

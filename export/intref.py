@@ -1,7 +1,7 @@
 """Torch integer reference of the fixed-point scheme (quant.py, docs/fixed_point.md).
 
 `IntSlipNet` runs the scheme on int64 tensors, operation by operation in the order of the C
-kernel `firmware_c/src/slipest_infer_q.c`; the C fixed-point path must reproduce its logits and
+kernels `firmware_c/src/slipest_infer_q.c` and `slipest_infer_table_q.c`; the C fixed-point path must reproduce its logits and
 saturation counts bit for bit. Every intermediate is proven to fit the C type it lives in
 (int32, or uint64 inside the reciprocal square root), so int64 here never wraps and the two
 agree exactly. Floor division by a power of two replaces C's arithmetic-shift helper.
@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from .quant import EPS_CAP, GELU_N, GELU_STEP_LOG2, QBlock, QNet, QParams
+from .quant import EPS_CAP, GELU_N, GELU_STEP_LOG2, QBlock, QNet
+from fleetlab.errors import InputError
 
 _POW2 = torch.tensor([1 << b for b in range(63)], dtype=torch.int64)
 
@@ -106,9 +107,8 @@ class IntBlock(torch.nn.Module):
 class IntSlipNet(torch.nn.Module):
     """The fixed-point path of any SlipNet: int16 features (N,12) -> int32-range logits (N,3), saturations (N,)."""
 
-    def __init__(self, qp: QParams | QNet):
+    def __init__(self, net: QNet):
         super().__init__()
-        net = qp.net() if isinstance(qp, QParams) else qp
         net.check_bounds()
         self.blocks = torch.nn.ModuleList(IntBlock(b, net.rsqrt_seed) for b in net.blocks)
         self.register_buffer("t_w_out", torch.as_tensor(np.asarray(net.w_out, dtype=np.int64)))
@@ -118,9 +118,9 @@ class IntSlipNet(torch.nn.Module):
         x = torch.as_tensor(xq).to(torch.int64)
         n_in = self.blocks[0].t_w.shape[1]
         if x.dim() != 2 or x.shape[1] != n_in:
-            raise ValueError(f"integer features must have shape (N, {n_in}), got {tuple(x.shape)}")
+            raise InputError(f"integer features must have shape (N, {n_in}), got {tuple(x.shape)}")
         if x.numel() and (x.min() < -(2**15) or x.max() > 2**15 - 1):
-            raise ValueError("integer features must be int16 values")
+            raise InputError("integer features must be int16 values")
         sat = torch.zeros(x.shape[0], dtype=torch.int64)
         for blk in self.blocks:
             x, s = blk(x)
@@ -128,17 +128,17 @@ class IntSlipNet(torch.nn.Module):
         return x @ self.t_w_out.T + self.t_b_out, sat
 
 
-def run(qp: QParams | QNet, q_inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def run(net: QNet, q_inputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(logits int32 (N,3), saturations int32 (N,)) of the fixed-point path."""
     with torch.no_grad():
-        logits, sat = IntSlipNet(qp)(torch.from_numpy(np.asarray(q_inputs, dtype=np.int64)))
+        logits, sat = IntSlipNet(net)(torch.from_numpy(np.asarray(q_inputs, dtype=np.int64)))
     return logits.numpy().astype(np.int32), sat.numpy().astype(np.int32)
 
 
-def q_logits_of(qp: QParams | QNet, q_inputs: np.ndarray, return_saturations: bool = False):
+def q_logits_of(net: QNet, q_inputs: np.ndarray, return_saturations: bool = False):
     """Integer logits (N,3) int32 of fixed-point parameters (of a bundle: `load_bundle(dir).qparams`;
     this module does not load bundles itself, so bundle -> vectors -> intref stays one-way)."""
-    logits, sat = run(qp, q_inputs)
+    logits, sat = run(net, q_inputs)
     return (logits, sat) if return_saturations else logits
 
 

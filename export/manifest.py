@@ -17,7 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from .quant import FloatBlock, FloatNet, FloatParams, QBlock, QNet, QParams
+from . import sns_profile
+from .quant import FloatBlock, FloatNet, QBlock, QNet
+from fleetlab.errors import InputError
 
 MANIFEST = "manifest.json"
 FORMAT = "fleetlab-bundle/1"
@@ -30,39 +32,41 @@ def _feed(h, name: str, arr: np.ndarray, dtype: str) -> None:
     h.update(a.tobytes())
 
 
-def content_hash(qp: QParams | None, fp: FloatParams) -> str:
-    """sha256 hex of the canonical SN-S model content (fixed-point part absent for ONNX-only bundles)."""
-    h = hashlib.sha256(CONTENT_TAG)
-    if qp is not None:
-        h.update(json.dumps(qp.scalars(), sort_keys=True, separators=(",", ":")).encode() + b"\n")
-        for name in QParams.INT_ARRAYS:
-            _feed(h, "q." + name, getattr(qp, name), "<i8")
-    h.update(f"eps:{float(np.float32(fp.eps))!r}\n".encode())
-    for name in FloatParams.ARRAYS:
-        _feed(h, "f." + name, getattr(fp, name), "<f4")
-    return h.hexdigest()
+def quantization_scalars(net: QNet) -> dict:
+    """The scheme's scalars a bundle records (manifest.json `quantization`): an SN-S's flat dict (the SN-S
+    formats name them so), any other network's list of blocks."""
+    return sns_profile.scalars(net) if sns_profile.fits(net) else net.scalars()
 
 
-def content_hash_net(net: QNet, fn: FloatNet) -> str:
-    """sha256 hex of a layer-table model's content (any architecture but SN-S, whose hash is content_hash).
-    The scales s are information only and left out, so that a bundle read back from its headers hashes the same."""
-    h = hashlib.sha256(CONTENT_TAG)
+def _named_arrays(net: QNet, fn: FloatNet) -> tuple[dict, list[tuple[str, np.ndarray]], list[tuple[str, np.ndarray]]]:
+    """(scalars, integer arrays, float arrays) that the content hash covers, under the names it has always used:
+    an SN-S's flat ones, else per block. A layer-table model's scales s are information only and left out, so that
+    a bundle read back from its headers hashes the same (an SN-S's s1 and s2 were hashed from the start, and
+    its loader takes them from the manifest)."""
+    if sns_profile.fits(net):
+        return (sns_profile.scalars(net), list(sns_profile.q_arrays(net).items()),
+                list(sns_profile.f32_arrays(fn).items()))
     sc = net.scalars()
     sc = {**sc, "blocks": [{k: v for k, v in b.items() if k != "s"} for b in sc["blocks"]]}
     sc.pop("s_out"), sc.pop("logit_scale")
+    q = [(f"{k}.{name}", getattr(blk, name)) for k, blk in enumerate(net.blocks) for name in QBlock.INT_ARRAYS]
+    q += [(name, getattr(net, name)) for name in ("w_out", "b_out", "rsqrt_seed")]
+    f = [(f"{k}.{name}", getattr(fb, name)) for k, fb in enumerate(fn.blocks) for name in FloatBlock.ARRAYS]
+    f += [(name, getattr(fn, name)) for name in ("w_out", "b_out")]
+    return sc, q, f
+
+
+def content_hash(net: QNet, fn: FloatNet) -> str:
+    """sha256 hex of the canonical model content: the scheme's scalars (JSON, sorted keys), each integer array
+    (int64) and, after the float LayerNorm eps, each float32 array, every array preceded by its name."""
+    sc, q, f = _named_arrays(net, fn)
+    h = hashlib.sha256(CONTENT_TAG)
     h.update(json.dumps(sc, sort_keys=True, separators=(",", ":")).encode() + b"\n")
-    for k, blk in enumerate(net.blocks):
-        for name in QBlock.INT_ARRAYS:
-            _feed(h, f"q.{k}.{name}", getattr(blk, name), "<i8")
-    _feed(h, "q.w_out", net.w_out, "<i8")
-    _feed(h, "q.b_out", net.b_out, "<i8")
-    _feed(h, "q.rsqrt_seed", net.rsqrt_seed, "<i8")
+    for name, arr in q:
+        _feed(h, "q." + name, arr, "<i8")
     h.update(f"eps:{float(np.float32(fn.eps))!r}\n".encode())
-    for k, fb in enumerate(fn.blocks):
-        for name in FloatBlock.ARRAYS:
-            _feed(h, f"f.{k}.{name}", getattr(fb, name), "<f4")
-    _feed(h, "f.w_out", fn.w_out, "<f4")
-    _feed(h, "f.b_out", fn.b_out, "<f4")
+    for name, arr in f:
+        _feed(h, "f." + name, arr, "<f4")
     return h.hexdigest()
 
 
@@ -96,12 +100,12 @@ def read_manifest(bundle: Path) -> dict[str, Any]:
     try:
         m = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise ValueError(f"{path}: manifest is not valid JSON ({e})") from None
+        raise InputError(f"{path}: manifest is not valid JSON ({e})") from None
     if not isinstance(m, dict) or m.get("format") != FORMAT:
-        raise ValueError(f"{path}: unknown manifest format {m.get('format') if isinstance(m, dict) else None!r}, expected {FORMAT!r}")
+        raise InputError(f"{path}: unknown manifest format {m.get('format') if isinstance(m, dict) else None!r}, expected {FORMAT!r}")
     for key in ("content_hash", "files", "arch"):
         if key not in m:
-            raise ValueError(f"{path}: manifest has no {key!r}")
+            raise InputError(f"{path}: manifest has no {key!r}")
     return m
 
 
@@ -111,9 +115,9 @@ def verify_files(bundle: Path, manifest: dict[str, Any]) -> None:
     for name, entry in manifest["files"].items():
         p = bundle / name
         if not p.is_file():
-            raise ValueError(f"{p}: listed in manifest.json but missing")
+            raise InputError(f"{p}: listed in manifest.json but missing")
         size = p.stat().st_size
         if size != entry["bytes"]:
-            raise ValueError(f"{p}: {size} bytes, manifest.json says {entry['bytes']} (truncated or edited)")
+            raise InputError(f"{p}: {size} bytes, manifest.json says {entry['bytes']} (truncated or edited)")
         if file_sha256(p) != entry["sha256"]:
-            raise ValueError(f"{p}: sha256 differs from manifest.json (file edited or corrupted)")
+            raise InputError(f"{p}: sha256 differs from manifest.json (file edited or corrupted)")

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from fleetlab.errors import InputError
 
 OPSET = 17  # first opset with a native LayerNormalization
 INPUT_NAME, OUTPUT_NAME = "features", "logits"
@@ -58,13 +59,13 @@ def check_onnx(path: Path, inputs: np.ndarray, torch_logits: np.ndarray, tol: fl
     try:
         onnx.checker.check_model(onnx.load(str(path)), full_check=True)
     except Exception as e:  # onnx raises its own error types for a damaged file
-        raise ValueError(f"{path}: ONNX checker failed ({type(e).__name__}: {e})") from None
+        raise InputError(f"{path}: ONNX checker failed ({type(e).__name__}: {e})") from None
     out = onnx_logits(path, inputs)
     if out.shape != np.shape(torch_logits):
-        raise ValueError(f"{path}: onnxruntime output shape {out.shape}, expected {np.shape(torch_logits)}")
+        raise InputError(f"{path}: onnxruntime output shape {out.shape}, expected {np.shape(torch_logits)}")
     diff = float(np.abs(out - torch_logits).max(initial=0.0))
     scaled = excess(out, torch_logits)
     if not scaled <= tol:
-        raise ValueError(f"{path}: onnxruntime logits differ from torch by {diff:.3g} "
+        raise InputError(f"{path}: onnxruntime logits differ from torch by {diff:.3g} "
                          f"({scaled:.3g} x max(1, |logit|) > the bundle's float tolerance {tol:.3g})")
     return diff, scaled

@@ -1,12 +1,14 @@
 """The fixed-point scheme of the estimator (integer-only inference for a core without FPU).
 
-Below: the scheme on SN-S (QParams, quantize). Any other stack of Linear -> LayerNorm -> GELU
-blocks (QBlock, QNet, quantize_net further down) uses the same steps per block with shifts that
-depend on the block's width (docs/fixed_point.md, "A general block"); at width 30 they are the
-SN-S constants, and quantize() is quantize_net() seen through the SN-S layout.
+One representation serves every architecture: FloatNet (float32) and QNet (fixed point), a stack of
+Linear -> LayerNorm -> GELU blocks (FloatBlock, QBlock) and a head. SN-S is the one-block case of width 30;
+the steps below are written for it, and every other block uses the same steps with shifts that depend on
+its width (docs/fixed_point.md, "A general block"), which at width 30 are the SN-S constants. The flat
+names that SN-S's own formats give these arrays (w1, b1, ..., the format-1 image, the SN-S C headers) are
+mapped onto the blocks in one place, sns_profile.py.
 
 Full description with the overflow proofs: docs/fixed_point.md. The integer operations are
-performed identically by `intref.py` (torch) and `firmware_c/src/slipest_infer_q.c` (C).
+performed identically by `intref.py` (torch) and the C kernels (`firmware_c/src/slipest_infer_q.c`, `slipest_infer_table_q.c`).
 
 Data flow for one window (all integers; Qn = value * 2^n):
 
@@ -56,17 +58,17 @@ import torch
 
 from fleetlab.data.contracts import FEATURE_SOURCES, N_CLASSES, N_FEATURES, RAW_LSB
 from fleetlab.models.mlp import LN_EPS, MAX_HIDDEN_LAYERS, MAX_UNITS, MIN_UNITS, SlipNet, arch_of
+from fleetlab.errors import InputError
 
 SCHEME = "fleetlab-slipest-q/1"
-N_HIDDEN = 30
+N_HIDDEN = 30  # SN-S: the width the constants below are written for
 
 INT16_MIN, INT16_MAX = -(2**15), 2**15 - 1
 INT32_MAX = 2**31 - 1
 # Layer-1 accumulator limit: room for the rounding term 2^(k1-1) <= 2^6 of rsr(h, k1) in C.
 ACC1_LIMIT = INT32_MAX - 2**8
 
-W1_MAX = INT16_MAX  # int16 weights; the scale is limited by the exact per-row accumulator bound
-W2_MAX = INT16_MAX
+W1_MAX = INT16_MAX  # int16 weights in every layer; the scale is limited by the exact per-row accumulator bound
 H_BITS = 24  # |h'| <= 2^24 before centring
 E_BITS = 13  # |e| <= 2^13 so that sum(e^2) over 30 units < 2^31
 FZ = 12  # normalised activations z in Q12
@@ -106,147 +108,6 @@ def round_away(x) -> np.ndarray:
     return np.sign(x) * np.floor(np.abs(x) + 0.5)
 
 
-@dataclass
-class FloatParams:
-    """The float32 parameters of an SN-S (eval semantics: dropout gone)."""
-
-    w1: np.ndarray  # (30, 12)
-    b1: np.ndarray  # (30,)
-    gamma: np.ndarray  # (30,)
-    beta: np.ndarray  # (30,)
-    w2: np.ndarray  # (3, 30)
-    b2: np.ndarray  # (3,)
-    eps: float = LN_EPS
-
-    ARRAYS = ("w1", "b1", "gamma", "beta", "w2", "b2")
-
-    @classmethod
-    def from_model(cls, model: SlipNet) -> "FloatParams":
-        if arch_of(model) != "sn-s":
-            raise ValueError(
-                f"the fixed-point C path supports only SN-S (Linear 12->30, LayerNorm, GELU, Linear 30->3); "
-                f"this model is {arch_of(model)}"
-            )
-        lin, norm, head = model.linears[0], model.norms[0], model.head
-        f = lambda t: t.detach().cpu().numpy().astype(np.float32).copy()  # noqa: E731
-        fp = cls(f(lin.weight), f(lin.bias), f(norm.weight), f(norm.bias), f(head.weight), f(head.bias), float(np.float32(norm.eps)))
-        for name in cls.ARRAYS:
-            if not np.isfinite(getattr(fp, name)).all():
-                raise ValueError(f"model parameter {name} contains NaN/Inf: cannot export")
-        return fp
-
-    def net(self) -> "FloatNet":
-        return FloatNet([FloatBlock(self.w1, self.b1, self.gamma, self.beta)], self.w2, self.b2, self.eps)
-
-    def to_model(self) -> SlipNet:
-        from fleetlab.models import build
-
-        m = build("sn-s")
-        with torch.no_grad():
-            m.linears[0].weight.copy_(torch.from_numpy(self.w1))
-            m.linears[0].bias.copy_(torch.from_numpy(self.b1))
-            m.norms[0].weight.copy_(torch.from_numpy(self.gamma))
-            m.norms[0].bias.copy_(torch.from_numpy(self.beta))
-            m.head.weight.copy_(torch.from_numpy(self.w2))
-            m.head.bias.copy_(torch.from_numpy(self.b2))
-        return m.eval()
-
-
-@dataclass
-class QParams:
-    """Every integer array and every shift/scale of the fixed-point path."""
-
-    w1: np.ndarray  # int16 (30, 12), row-major: w1[i, j] multiplies feature j for hidden unit i
-    b1: np.ndarray  # int32 (30,)
-    g: np.ndarray  # int16 (30,)  LayerNorm gamma, Q(fg)
-    bb: np.ndarray  # int32 (30,)  LayerNorm beta, Q(fy)
-    w2: np.ndarray  # int16 (3, 30)
-    b2: np.ndarray  # int32 (3,)
-    gelu: np.ndarray  # int16 (129,)  GELU(-k/16) in Q(fy)
-    fg: int
-    fy: int
-    eps_m: int
-    eps_e: int
-    s1: float  # layer-1 scale (information: the scheme never undoes it)
-    s2: float  # head weight scale; logits_real = logits_q / (s2 * 2^fy)
-    rsqrt_seed: np.ndarray = field(default_factory=rsqrt_seed_table)  # int64 (24,), Q30
-
-    INT_ARRAYS = ("w1", "b1", "g", "bb", "w2", "b2", "gelu", "rsqrt_seed")
-
-    @property
-    def logit_scale(self) -> float:
-        return self.s2 * 2.0**self.fy
-
-    def net(self) -> "QNet":
-        """The same parameters as the general one-block network (a copy of the current fields)."""
-        blk = QBlock(w=self.w1, b=self.b1, g=self.g, bb=self.bb, gelu=self.gelu, fg=self.fg, fy=self.fy,
-                     eps_m=self.eps_m, eps_e=self.eps_e, s=self.s1)
-        return QNet([blk], self.w2, self.b2, self.s2, self.rsqrt_seed)
-
-    @classmethod
-    def from_net(cls, net: "QNet") -> "QParams":
-        if net.hidden != (N_HIDDEN,):
-            raise ValueError(f"the SN-S layout needs one hidden block of {N_HIDDEN} units, not {list(net.hidden)}")
-        b = net.blocks[0]
-        qp = cls(w1=b.w, b1=b.b, g=b.g, bb=b.bb, w2=net.w_out, b2=net.b_out, gelu=b.gelu, fg=b.fg, fy=b.fy,
-                 eps_m=b.eps_m, eps_e=b.eps_e, s1=b.s, s2=net.s_out, rsqrt_seed=net.rsqrt_seed)
-        qp.check_bounds()
-        return qp
-
-    def scalars(self) -> dict:
-        """The scheme parameters that are not arrays (all go into manifest.json and the q header)."""
-        return {
-            "scheme": SCHEME,
-            "n_in": N_FEATURES,
-            "n_hidden": N_HIDDEN,
-            "n_out": N_CLASSES,
-            "w1_max": int(np.abs(self.w1).max(initial=0)),
-            "w2_max": int(np.abs(self.w2).max(initial=0)),
-            "acc1_bound": int(row_bounds(self.w1, self.b1).max(initial=0)),
-            "acc2_bound": int(row_bounds(self.w2, self.b2).max(initial=0)),
-            "h_bits": H_BITS,
-            "e_bits": E_BITS,
-            "fz": FZ,
-            "fg": int(self.fg),
-            "fy": int(self.fy),
-            "eps_m": int(self.eps_m),
-            "eps_e": int(self.eps_e),
-            "eps_cap": EPS_CAP,
-            "gelu_step_log2": GELU_STEP_LOG2,
-            "gelu_n": GELU_N,
-            "rsqrt_seed_bits": RSQRT_SEED_BITS,
-            "c30": C30,
-            "s1": float(self.s1),
-            "s2": float(self.s2),
-            "logit_scale": float(self.logit_scale),
-            "feature_lsb": [float(v) for v in FEATURE_LSB],
-        }
-
-    def check_bounds(self) -> None:
-        """The preconditions of the overflow proof (docs/fixed_point.md); raise ValueError if broken."""
-        problems = []
-        if self.w1.shape != (N_HIDDEN, N_FEATURES) or self.w2.shape != (N_CLASSES, N_HIDDEN):
-            problems.append(f"shapes w1 {self.w1.shape}, w2 {self.w2.shape}")
-        acc1 = int(row_bounds(self.w1, self.b1).max(initial=0))
-        if acc1 > ACC1_LIMIT:
-            problems.append(f"layer-1 accumulator bound {acc1} exceeds {ACC1_LIMIT}")
-        acc2 = int(row_bounds(self.w2, self.b2).max(initial=0))
-        if acc2 > INT32_MAX:
-            problems.append(f"head accumulator bound {acc2} exceeds int32")
-        if not FY_MIN <= self.fy <= FY_MAX:
-            problems.append(f"fy={self.fy} outside [{FY_MIN}, {FY_MAX}]")
-        if not 0 <= self.fg <= 15:
-            problems.append(f"fg={self.fg} outside [0, 15]")
-        if np.abs(self.bb).max(initial=0) > INT16_MAX:
-            problems.append("LayerNorm beta does not fit int16 in Q(fy)")
-        if not (2**14 <= self.eps_m < 2**15 or self.eps_m == 0) or abs(self.eps_e) > 200:
-            problems.append(f"eps mantissa/exponent {self.eps_m}, {self.eps_e} out of range")
-        if len(self.gelu) != GELU_N:
-            problems.append(f"GELU table has {len(self.gelu)} entries, expected {GELU_N}")
-        if problems:
-            raise ValueError("fixed-point parameters break the scheme's bounds: " + "; ".join(problems))
-
-
 def _scale_for(max_abs: float, limit: float) -> float:
     return limit / max_abs if max_abs > 0 else 1.0
 
@@ -270,7 +131,7 @@ def _fit_scale(wf: np.ndarray, bf: np.ndarray, w_max: int, limit: int, b_mult: f
         if np.abs(wq).max(initial=0) <= w_max and row_bounds(wq, bq).max(initial=0) <= limit:
             return s, wq, bq
         s *= 0.999
-    raise ValueError("cannot fit the parameters into the accumulator bound")
+    raise InputError("cannot fit the parameters into the accumulator bound")
 
 
 def _mantissa_exponent(v: float) -> tuple[int, int]:
@@ -284,10 +145,10 @@ def _mantissa_exponent(v: float) -> tuple[int, int]:
     return m, e
 
 
-# --- The general scheme: a stack of Linear -> LayerNorm -> GELU blocks, then the head -------------
+# --- The shifts of one block ----------------------------------------------------------------------------
 #
-# The shifts of one block depend only on its width H (docs/fixed_point.md, "A general block"); at
-# H = 30 they are exactly SN-S's constants above, so SN-S bundles did not change.
+# They depend only on its width H (docs/fixed_point.md, "A general block"); at H = 30 they are exactly
+# SN-S's constants above, so SN-S bundles did not change when the general block came.
 
 
 def h_bits_of(width: int) -> int:
@@ -361,9 +222,9 @@ class FloatNet:
         for i, blk in enumerate(net.blocks):
             for name in FloatBlock.ARRAYS:
                 if not np.isfinite(getattr(blk, name)).all():
-                    raise ValueError(f"model parameter {name} of hidden block {i + 1} contains NaN/Inf: cannot export")
+                    raise InputError(f"model parameter {name} of hidden block {i + 1} contains NaN/Inf: cannot export")
         if not (np.isfinite(net.w_out).all() and np.isfinite(net.b_out).all()):
-            raise ValueError("model parameter of the output layer contains NaN/Inf: cannot export")
+            raise InputError("model parameter of the output layer contains NaN/Inf: cannot export")
         return net
 
     def to_model(self) -> SlipNet:
@@ -471,7 +332,8 @@ class QNet:
         return self.s_out * 2.0 ** self.blocks[-1].fy
 
     def scalars(self) -> dict:
-        """Every scalar of the scheme of this network (manifest.json `quantization`, the content hash)."""
+        """Every scalar of the scheme of this network, per block (manifest.json `quantization` and the content hash
+        of a layer-table bundle; an SN-S bundle records the flat dict of sns_profile.scalars)."""
         return {
             "scheme": SCHEME, "n_in": N_FEATURES, "hidden": list(self.hidden), "n_out": N_CLASSES,
             "blocks": [b.scalars() for b in self.blocks],
@@ -496,7 +358,7 @@ class QNet:
         elif int(row_bounds(self.w_out, self.b_out).max(initial=0)) > INT32_MAX:
             problems.append("head accumulator bound exceeds int32")
         if problems:
-            raise ValueError("fixed-point parameters break the scheme's bounds: " + "; ".join(problems))
+            raise InputError("fixed-point parameters break the scheme's bounds: " + "; ".join(problems))
 
 
 def _quantize_block(fb: FloatBlock, w_scale: np.ndarray | float, b_mult: float, w_max: int,
@@ -511,14 +373,14 @@ def _quantize_block(fb: FloatBlock, w_scale: np.ndarray | float, b_mult: float, 
     gamma, beta = fb.gamma.astype(np.float64), fb.beta.astype(np.float64)
     gmax = float(np.abs(gamma).max())
     if gmax >= 2**15:
-        raise ValueError(f"LayerNorm weight {gmax:g} too large for the fixed-point scheme")
+        raise InputError(f"LayerNorm weight {gmax:g} too large for the fixed-point scheme")
     fg = 15 if gmax == 0 else min(15, math.floor(math.log2(INT16_MAX / gmax)))
     u_bound = float((np.abs(gamma) * z_bound_of(width) + np.abs(beta)).max())
     fy = FY_MAX
     while fy > FY_MIN and u_bound * 2**fy + 2 >= 2**15:
         fy -= 1
     if u_bound * 2**fy + 2 >= 2**15:
-        raise ValueError(f"LayerNorm output bound {u_bound:g} too large for the fixed-point scheme (needs < {2**15 / 2**FY_MIN:g})")
+        raise InputError(f"LayerNorm output bound {u_bound:g} too large for the fixed-point scheme (needs < {2**15 / 2**FY_MIN:g})")
 
     # eps in the units of S = sum(e^2) before the per-sample shifts: eps H (H sigma)^2, sigma = s b_mult
     # the scale of the accumulator over the real pre-activation.
@@ -529,8 +391,8 @@ def _quantize_block(fb: FloatBlock, w_scale: np.ndarray | float, b_mult: float, 
                   eps_m=eps_m, eps_e=eps_e, s=float(s))
 
 
-def quantize_net(fn: FloatNet, w_max: int = W1_MAX) -> QNet:
-    """Float parameters of any SlipNet -> the fixed-point scheme, block by block, then the head."""
+def quantize(fn: FloatNet, w_max: int = W1_MAX) -> QNet:
+    """Float parameters of any SlipNet -> the fixed-point scheme, block by block, then the head (SN-S: one block)."""
     blocks: list[QBlock] = []
     w_scale, b_mult = FEATURE_LSB[None, :], 1.0  # block 1: the feature LSB folded into the weights
     for fb in fn.blocks:
@@ -542,10 +404,3 @@ def quantize_net(fn: FloatNet, w_max: int = W1_MAX) -> QNet:
     net = QNet(blocks, woq.astype(np.int16), boq.astype(np.int32), float(s_out))
     net.check_bounds()
     return net
-
-
-def quantize(fp: FloatParams, w1_max: int = W1_MAX, w2_max: int = W2_MAX) -> QParams:
-    """Float SN-S parameters -> integer parameters of the fixed-point scheme (quantize_net's SN-S view)."""
-    if w1_max != w2_max:
-        raise ValueError("one weight width serves every layer")
-    return QParams.from_net(quantize_net(fp.net(), w1_max))

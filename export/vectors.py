@@ -20,6 +20,7 @@ import torch
 
 from fleetlab.data.contracts import N_CLASSES, N_FEATURES
 from fleetlab.data.features_int import FEATURE_LSB, quantize_features
+from fleetlab.errors import InputError
 
 BIN_MAGIC = b"SLPV"
 BIN_VERSION = 1
@@ -179,7 +180,7 @@ def read_vectors(bundle: Path) -> Vectors:
         with np.load(path) as z:
             arrays = {name: z[name] for name, _, _ in VECTOR_ARRAYS}
     except (KeyError, ValueError, OSError, EOFError) as e:
-        raise ValueError(f"{path}: cannot read test vectors ({type(e).__name__}: {e})") from None
+        raise InputError(f"{path}: cannot read test vectors ({type(e).__name__}: {e})") from None
     return Vectors(**arrays)
 
 
@@ -187,13 +188,13 @@ def read_vectors_bin(path: Path) -> dict[str, np.ndarray]:
     """Parse vectors.bin (used by tests to check it against vectors.npz)."""
     data = Path(path).read_bytes()
     if len(data) < BIN_HEADER.size:
-        raise ValueError(f"{path}: shorter than the vectors.bin header")
+        raise InputError(f"{path}: shorter than the vectors.bin header")
     magic, version, n, n_in, n_out, n_arr, hdr, _ = BIN_HEADER.unpack_from(data)
     if magic != BIN_MAGIC or version != BIN_VERSION or n_in != N_FEATURES or n_out != N_CLASSES:
-        raise ValueError(f"{path}: not a version-{BIN_VERSION} vectors.bin for {N_FEATURES} features")
+        raise InputError(f"{path}: not a version-{BIN_VERSION} vectors.bin for {N_FEATURES} features")
     layout = bin_layout(n)
     if len(data) != layout["total_bytes"]:
-        raise ValueError(f"{path}: {len(data)} bytes, expected {layout['total_bytes']} for N={n}")
+        raise InputError(f"{path}: {len(data)} bytes, expected {layout['total_bytes']} for N={n}")
     return {
         a["name"]: np.frombuffer(data, dtype=a["dtype"], count=int(np.prod(a["shape"])), offset=a["offset"]).reshape(a["shape"])
         for a in layout["arrays"]

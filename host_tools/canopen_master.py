@@ -1,8 +1,10 @@
 """The master side of the slipest CANopen node, on the python `canopen` library.
 
 `SlipestMaster` is a `canopen.Network` with the node added from its EDS: NMT, heartbeat, SDO
-reads of identity and model, the model upload (SDO block download of the DOMAIN 0x2000),
-activation and rollback, and the estimates decoded from the TPDOs by canopen's own PDO maps.
+reads of identity and model, the model update by CiA 302-3 program download (clear 0x1F51 = 3, SDO block
+download of the DOMAIN 0x1F50, start 0x1F51 = 1 on trial with the node's boot-up, confirm 0x1F51 = 0x80; the
+flash status 0x1F57 says why a download was refused), rollback (0x2002 = 1, which 302-3 lacks), and the
+estimates decoded from the TPDOs by canopen's own PDO maps.
 `telemetry_rpdos` turns telemetry samples into the RPDO frames the node takes.
 """
 
@@ -20,11 +22,14 @@ import numpy as np
 from fleetlab.canopen_od import objects as od
 from .wire.dbc import Frame, WindowEstimate, codec, telemetry_frames
 
-ACTIVE_MODEL, COMMAND, COUNTERS, SLOTS, STORE_COUNTERS, UPLOAD = (
-    od.IDX_ACTIVE_MODEL, od.IDX_COMMAND, od.IDX_COUNTERS, od.IDX_SLOTS, od.IDX_STORE_COUNTERS, od.IDX_UPLOAD)
+ACTIVE_MODEL, ROLLBACK, COUNTERS, SLOTS, STORE_COUNTERS, UPLOAD = (
+    od.IDX_ACTIVE_MODEL, od.IDX_ROLLBACK, od.IDX_COUNTERS, od.IDX_SLOTS, od.IDX_STORE_COUNTERS, od.IDX_UPLOAD)
 
 # SDO abort codes (CiA 301) by meaning, as the node sends them (canopen_od/objects.py is their one source)
 ABORT_NAMES = {code: doc for _, code, doc in od.ABORT_CODES}
+# CiA 302-3 program control commands and flash status codes, by name (the same source)
+PROGRAM_CONTROL = dict(od.PROGRAM_CONTROL)
+FLASH_MEANINGS = {code: doc for _, code, doc in od.FLASH_STATUS}
 
 
 def rpdo_cob_ids(node_id: int) -> dict[str, int]:
@@ -148,17 +153,38 @@ class SlipestMaster:
         return [{f: rec[(s * len(od.SLOT_FIELDS)) + k].raw for k, (f, _) in enumerate(od.SLOT_FIELDS, start=1)}
                 for s in (0, 1)]
 
+    def flash_status(self) -> dict:
+        """0x1F57 sub 1: busy (a download open), the CiA 302-3 error code and its meaning, and the slipest status
+        behind it (bits 16-23, two's complement)."""
+        raw = self.node.sdo[od.IDX_FLASH_STATUS][1].raw
+        code = (raw >> od.FLASH_CODE_SHIFT) & 0x7F
+        st = (raw >> od.FLASH_SLIPEST_SHIFT) & 0xFF
+        return {"busy": bool(raw & od.FLASH_BUSY), "code": code, "meaning": FLASH_MEANINGS.get(code, "CiA 302-3"),
+                "slipest_status": st - 256 if st > 127 else st}
+
+    def software_id(self) -> int:
+        """0x1F56 sub 1: the running model's hash32."""
+        return self.node.sdo[od.IDX_PROGRAM_SWID][1].raw
+
+    def program_control(self, command: str) -> None:
+        """0x1F51 sub 1 = a CiA 302-3 command: stop, start, reset, clear, confirm."""
+        self.node.sdo[od.IDX_PROGRAM_CONTROL][1].raw = PROGRAM_CONTROL[command]
+
     def upload_status(self) -> dict[str, int]:
         rec = self.node.sdo[UPLOAD]
         return {"state": rec[1].raw, "last_store_status": rec[2].raw, "bytes_received": rec[3].raw}
 
     # -- model update ---------------------------------------------------------------------
     def upload(self, image: bytes, block: bool = True, progress: Callable[[int], None] | None = None,
-               chunk: int = 7 * 127) -> None:
-        """Write `image` into the DOMAIN 0x2000 (the inactive slot): SDO block download with CRC
-        (or segmented). Raises canopen.SdoAbortedError with the node's abort code on a refusal."""
-        with self.node.sdo[od.IDX_MODEL_IMAGE].open("wb", size=len(image), block_transfer=block,
-                                                    request_crc_support=True, buffering=0) as f:
+               chunk: int = 7 * 127, clear: bool = True) -> None:
+        """CiA 302-3: clear (0x1F51 = 3), then write `image` into the program data 0x1F50 (the inactive slot): SDO
+        block download with CRC (or segmented). The running model keeps estimating meanwhile (the node clears the
+        other slot, so it need not be stopped). Raises canopen.SdoAbortedError with the node's abort code on a
+        refusal; flash_status() then names it."""
+        if clear:
+            self.clear()
+        with self.node.sdo[od.IDX_PROGRAM_DATA][1].open("wb", size=len(image), block_transfer=block,
+                                                        request_crc_support=True, buffering=0) as f:
             for i in range(0, len(image), chunk):
                 part = image[i:i + chunk]
                 view = memoryview(part)
@@ -168,14 +194,52 @@ class SlipestMaster:
                 if progress is not None:
                     progress(len(part))
 
-    def activate(self) -> None:
-        self.node.sdo[COMMAND][1].raw = 1
+    def activate(self, confirm: bool = True, timeout: float = 5.0) -> None:
+        """CiA 302-3 start (0x1F51 = 1): the downloaded model runs on trial; the node answers, sends its boot-up
+        and is PRE-OPERATIONAL (put into PRE-OPERATIONAL first: program control is refused otherwise). Then, with
+        `confirm`, 0x80 makes it permanent; without, a reset or power cut brings the previous model back."""
+        booted = threading.Event()
+        cob = 0x700 + self.node_id
+
+        def on_frame(_cob: int, data: bytearray, _ts: float) -> None:
+            if len(data) == 1 and data[0] == 0:
+                booted.set()
+
+        if self.node.nmt.state != "PRE-OPERATIONAL":
+            self.node.nmt.state = "PRE-OPERATIONAL"
+            time.sleep(0.02)
+        self.network.subscribe(cob, on_frame)
+        try:
+            self.program_control("start")
+            if not booted.wait(timeout):
+                raise canopen.SdoCommunicationError(f"no boot-up from node {self.node_id} after 0x1F51 start")
+        finally:
+            self.network.unsubscribe(cob, on_frame)
+        if confirm:
+            self.confirm()
+
+    def clear(self) -> None:
+        """0x1F51 = 3 (clear), a PRE-OPERATIONAL service: an OPERATIONAL node is set PRE-OPERATIONAL for it and back
+        (RPDOs between the two NMT commands are not taken; a master streaming telemetry clears before it starts)."""
+        operational = self.node.nmt.state == "OPERATIONAL"
+        if operational:
+            self.node.nmt.state = "PRE-OPERATIONAL"
+            time.sleep(0.02)
+        try:
+            self.program_control("clear")
+        finally:
+            if operational:
+                self.node.nmt.state = "OPERATIONAL"
+                time.sleep(0.02)
+
+    def confirm(self) -> None:
+        """0x1F51 = 0x80: the model on trial becomes permanent (nothing to do when none is on trial)."""
+        self.program_control("confirm")
 
     def rollback(self) -> None:
-        self.node.sdo[COMMAND][2].raw = 1
-
-    def abort_upload(self) -> None:
-        self.node.sdo[COMMAND][3].raw = 1
+        """0x2002 = 1: back to the previous slot's model (CiA 302-3 has no rollback). A download is dropped by
+        clear()."""
+        self.node.sdo[ROLLBACK].raw = 1
 
     # -- CiA 301 store / restore parameters ---------------------------------------------------
     def store_parameters(self) -> None:

@@ -17,6 +17,7 @@ import can
 from .wire.dbc import Frame
 from .binding import CFrame
 from .status_codes import status
+from fleetlab.errors import InputError
 
 # slipest_nvm_t callbacks
 _READ = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32, ctypes.POINTER(ctypes.c_uint8), ctypes.c_uint32)
@@ -38,7 +39,7 @@ def nvm_sectors(lib_path: Path | str, sector_size: int = 256) -> int:
     f.restype, f.argtypes = ctypes.c_uint32, [ctypes.c_uint32]
     n = int(f(sector_size))
     if n == 0:
-        raise ValueError(f"sector size {sector_size}: the model store does not accept it "
+        raise InputError(f"sector size {sector_size}: the model store does not accept it "
                          "(SLIPEST_STORE_SECTOR_MIN..SLIPEST_STORE_SECTOR_MAX in slipest_store.h)")
     return n
 

@@ -29,6 +29,7 @@ from .canopen_node import CanopenBridge, CCanopenNode, RamNvm, nvm_sectors
 from .links import open_can_bus
 from .wire.dbc import Frame
 from .wire.serial_framing import PacketDecoder, Rejected, encode_packet
+from fleetlab.errors import InputError
 
 _channels = itertools.count()
 
@@ -96,7 +97,7 @@ class CanopenSession:
         self.proc: subprocess.Popen | None = None
         if link == "inproc":
             if lib is None:
-                raise ValueError("the inproc link needs the host library (libslipest_host.so)")
+                raise InputError("the inproc link needs the host library (libslipest_host.so)")
             channel = f"fleetlab-canopen-{os.getpid()}-{next(_channels)}"
             self.nvm = nvm if nvm is not None else RamNvm(nvm_sectors(lib))
             self.node = CCanopenNode(lib, node_id, nvm=self.nvm, builtin=builtin_model)
@@ -104,7 +105,7 @@ class CanopenSession:
             master_bus = can.Bus(interface="virtual", channel=channel)
         elif link in ("slcan", "cobs"):
             if emulator is None:
-                raise ValueError(f"the {link} link needs the emulator (slipest_emu)")
+                raise InputError(f"the {link} link needs the emulator (slipest_emu)")
             args = [str(emulator), "--pty", "--link", link, "--profile", "canopen", "--node-id", str(node_id)]
             if nvm_file is not None:
                 args += ["--nvm", str(nvm_file)]
@@ -122,10 +123,10 @@ class CanopenSession:
             master_bus = open_can_bus("slcan", pty, bitrate=500000) if link == "slcan" else CobsCanBus(pty)
         elif link == "bus":
             if bus is None:
-                raise ValueError("link 'bus' needs a python-can bus")
+                raise InputError("link 'bus' needs a python-can bus")
             master_bus = bus
         else:
-            raise ValueError(f"unknown CANopen link {link!r} (inproc, slcan, cobs or bus)")
+            raise InputError(f"unknown CANopen link {link!r} (inproc, slcan, cobs or bus)")
         if wrap_bus is not None:  # e.g. fault injection between master and node
             master_bus = wrap_bus(master_bus)
         self.master = SlipestMaster(master_bus, eds, node_id)
@@ -165,7 +166,7 @@ class CanopenSession:
         """In-process only: the node restarts from its NVM as after a power loss; returns after its
         boot-up message."""
         if self.bridge is None:
-            raise ValueError("power_cycle needs the inproc link (kill and restart the emulator otherwise)")
+            raise InputError("power_cycle needs the inproc link (kill and restart the emulator otherwise)")
         self._expect_bootup(self.bridge.power_cycle, timeout)
 
     def frames_in(self) -> int | None:

@@ -35,6 +35,7 @@ from .links import ALIASES, InprocLink, Link, canonical_link, estimator_links, l
 from .sources import FeatureSource, TelemetrySource, sim_source
 from .verify.reference import Reference
 from .wire.serial_framing import Rejected
+from fleetlab.errors import InputError
 
 LINKS = (*estimator_links(), *ALIASES)  # accepted by --link (aliases last)
 DEFAULT_SCALE = 0.08
@@ -205,7 +206,7 @@ def emulate(
     the reference. A realtime run sends one sample per period on `clock` (the wall clock unless a test gives
     fleetlab.host_tools.pacing's SimulatedClock); its schedule is kept in the segment results' pacers."""
     if link_kind not in LINKS:
-        raise ValueError(f"--link must be one of {', '.join(LINKS)}, got {link_kind!r}")
+        raise InputError(f"--link must be one of {', '.join(LINKS)}, got {link_kind!r}")
     link_kind = canonical_link(link_kind)
     bundle = Path(bundle) if bundle else default_bundle()
     ref = Reference.load(bundle)

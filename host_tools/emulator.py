@@ -25,6 +25,7 @@ from fleetlab.paths import build_root, default_bundle
 from fleetlab.system_tools import need
 from .wire.dbc import DBC_PATH, dbc_path
 from .firmware.build import build_command, configure_command
+from fleetlab.errors import FleetlabError, InputError
 
 EMULATOR_TARGET = "slipest_emu"
 HOST_LIBRARY_TARGET = "slipest_host"
@@ -119,7 +120,7 @@ class EmulatorProcess:
 
     def __init__(self, exe: Path, link: str, start_timeout: float = 10.0, model: Path | None = None):
         if link not in ("slcan", "cobs"):
-            raise ValueError(f"emulator link must be 'slcan' or 'cobs', got {link!r}")
+            raise InputError(f"emulator link must be 'slcan' or 'cobs', got {link!r}")
         self.exe, self.link, self.start_timeout = Path(exe), link, start_timeout
         self.model = Path(model) if model is not None else None  # model.img served instead of the built-in one
         self.proc: subprocess.Popen | None = None
@@ -141,7 +142,8 @@ class EmulatorProcess:
     def start(self) -> str:
         """Start the emulator; returns the pty path it serves."""
         if self.proc is not None:
-            raise RuntimeError("emulator already running")
+            # a second start would leave the first process running with nobody to stop it
+            raise FleetlabError(f"{self.exe.name} is running already (pid {self.proc.pid}): stop it before starting it again")
         model = ["--model", str(self.model)] if self.model is not None else []
         self.proc = subprocess.Popen([str(self.exe), *model, "--pty", "--link", self.link], stdout=subprocess.PIPE,
                                      stderr=subprocess.PIPE, start_new_session=True)

@@ -33,6 +33,7 @@ from fleetlab.data.contracts import CLASS_NAMES, DEFAULT_RATE_HZ
 from fleetlab.data.features_int import SAMPLES_PER_WINDOW
 
 from .sources import FeatureSource, TelemetrySource
+from fleetlab.errors import InputError
 
 ESTIMATE_TOPIC = "/slipest/estimate"
 DIAGNOSTICS_TOPIC = "/diagnostics"
@@ -68,7 +69,7 @@ class EstimateRow:
 def check_path(path: Path) -> None:
     """Refuse an output path this module cannot write, before anything runs."""
     if path.suffix not in SUFFIXES:
-        raise ValueError(f"--estimates {path}: must end in .csv or .mcap")
+        raise InputError(f"--estimates {path}: must end in .csv or .mcap")
 
 
 def window_places(source: TelemetrySource | FeatureSource) -> list[tuple[str, int]]:
@@ -88,12 +89,12 @@ def window_places(source: TelemetrySource | FeatureSource) -> list[tuple[str, in
 def estimate_rows(result, source: TelemetrySource | FeatureSource) -> list[EstimateRow]:
     """The estimator's answer for each window of a clean (one-lifetime) replay of `source`."""
     if len(result.segments) != 1:
-        raise ValueError("--estimates writes the estimates of a plain replay (one estimator lifetime); "
+        raise InputError("--estimates writes the estimates of a plain replay (one estimator lifetime); "
                          "drop --restart-every and --inject restart")
     places = window_places(source)
     verdicts = result.segments[0].verdicts
     if len(verdicts) != len(places):
-        raise ValueError(f"the replay expected {len(verdicts)} windows, the source has {len(places)}")
+        raise InputError(f"the replay expected {len(verdicts)} windows, the source has {len(places)}")
     rows = []
     for k, (v, (log, start)) in enumerate(zip(verdicts, places)):
         g = v.got

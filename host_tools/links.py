@@ -37,6 +37,7 @@ from .wire.serial_framing import (
     slcan_line,
     slcan_malformed_line,
 )
+from fleetlab.errors import InputError
 
 RxItem = tuple[Frame | Rejected, float]
 
@@ -48,7 +49,7 @@ ALIASES = {"serial": "cobs"}
 def register_link(cls: type["Link"]) -> type["Link"]:
     """Class decorator: make `cls` available under `cls.kind`."""
     if cls.kind in _LINKS or cls.kind in ALIASES:
-        raise ValueError(f"link {cls.kind!r} is registered already")
+        raise InputError(f"link {cls.kind!r} is registered already")
     _LINKS[cls.kind] = cls
     return cls
 
@@ -57,7 +58,7 @@ def link_class(name: str) -> type["Link"]:
     """The link class registered under `name` (or one of its aliases)."""
     kind = ALIASES.get(name, name)
     if kind not in _LINKS:
-        raise ValueError(f"unknown link {name!r}; choose from {', '.join(_LINKS)}")
+        raise InputError(f"unknown link {name!r}; choose from {', '.join(_LINKS)}")
     return _LINKS[kind]
 
 
@@ -115,7 +116,7 @@ class Link:
     def over_port(cls, port: str, full_speed: bool = False, **options) -> "Link":
         """Open this link on a serial port or pty (e.g. a started emulator's). `full_speed`:
         write many items per call, to measure the link rather than per-call overhead."""
-        raise ValueError(f"the {cls.kind} link does not run over a serial port")
+        raise InputError(f"the {cls.kind} link does not run over a serial port")
 
     def __init__(self) -> None:
         self.rx: queue.SimpleQueue[RxItem] = queue.SimpleQueue()
@@ -143,7 +144,7 @@ class Link:
 
     def _check_corrupt(self, item: WireItem) -> None:
         if item.corrupt is not None and item.corrupt not in self.corrupt_kinds:
-            raise ValueError(f"{self.name} link cannot carry a {item.corrupt!r} item")
+            raise InputError(f"{self.name} link cannot carry a {item.corrupt!r} item")
 
     def close(self) -> None:
         self._stop.set()

@@ -15,7 +15,7 @@ from typing import Iterator
 import numpy as np
 
 from fleetlab.data.features_int import SAMPLES_PER_WINDOW, quantize_features, quantize_samples
-from fleetlab.errors import first_line
+from fleetlab.errors import InputError, first_line
 
 from .wire.dbc import Frame
 
@@ -62,7 +62,7 @@ def sim_source(seed: int, scale: float) -> TelemetrySource:
             parts.append(q[:n])
             traces.append((f"{role}/{name}", n // SAMPLES_PER_WINDOW))
     if not parts:
-        raise ValueError(f"the simulator gave no whole window at scale {scale}")
+        raise InputError(f"the simulator gave no whole window at scale {scale}")
     return TelemetrySource(f"sim(seed={seed}, scale={scale})", np.concatenate(parts).astype(np.int16), traces)
 
 
@@ -83,7 +83,7 @@ def csv_dir_source(path: Path | str) -> FeatureSource:
     root = Path(path)
     files = sorted(root.glob("*.csv"))
     if not files:
-        raise ValueError(f"{root}: no *.csv window files")
+        raise InputError(f"{root}: no *.csv window files")
     table = WindowTable.concat([read_windows_csv(f) for f in files])
     # rows holding NaN/Inf cannot be sent as features: the reader drops them, and the name says how many
     dropped = f", {table.rejected_nonfinite} rows with NaN/Inf dropped" if table.rejected_nonfinite else ""
@@ -104,7 +104,7 @@ def imported_source(path: Path | str) -> TelemetrySource:
     for f in raw_files(root):
         samples, rate = read_raw(f)
         if rate != DEFAULT_RATE_HZ or len(samples) % SAMPLES_PER_WINDOW:
-            raise ValueError(f"{f}: {len(samples)} samples at {rate:g} Hz are not whole windows of the estimator "
+            raise InputError(f"{f}: {len(samples)} samples at {rate:g} Hz are not whole windows of the estimator "
                              f"({SAMPLES_PER_WINDOW} samples at {DEFAULT_RATE_HZ:g} Hz)")
         if len(samples):
             parts.append(quantize_samples(samples))
@@ -112,7 +112,7 @@ def imported_source(path: Path | str) -> TelemetrySource:
             with np.load(f) as z:
                 starts.append(np.asarray(z["window_start_ns"], dtype=np.int64))
     if not parts:
-        raise ValueError(f"{root}: no imported raw samples (*{RAW_SUFFIX}); make them with 'fleetlab data import'")
+        raise InputError(f"{root}: no imported raw samples (*{RAW_SUFFIX}); make them with 'fleetlab data import'")
     return TelemetrySource(f"import({root}, {len(parts)} files)", np.concatenate(parts).astype(np.int16), traces,
                            np.concatenate(starts), _imported_logs(root))
 
@@ -140,7 +140,7 @@ def log_messages(path: Path | str) -> Iterator:
     try:
         messages = iter(can.LogReader(str(p)))
     except Exception as e:  # an unknown suffix, an unreadable header
-        raise ValueError(f"{p}: not a python-can log ({type(e).__name__}: {first_line(e)})") from None
+        raise InputError(f"{p}: not a python-can log ({type(e).__name__}: {first_line(e)})") from None
     read = 0
     while True:
         try:
@@ -148,7 +148,7 @@ def log_messages(path: Path | str) -> Iterator:
         except StopIteration:
             return
         except Exception as e:
-            raise ValueError(f"{p}: malformed python-can log after {read} frames "
+            raise InputError(f"{p}: malformed python-can log after {read} frames "
                              f"({type(e).__name__}: {first_line(e)})") from None
         read += 1
         yield msg
@@ -174,12 +174,12 @@ def resolve(spec: str, seed: int, scale: float, bundle: Path | str | None) -> Te
         return sim_source(seed, scale)
     if spec == "vectors":
         if bundle is None:
-            raise ValueError("--source vectors needs --bundle")
+            raise InputError("--source vectors needs --bundle")
         return vectors_source(bundle)
     p = Path(spec)
     if p.is_dir():
         from fleetlab.data.log_import import REPORT_NAME
 
         return imported_source(p) if (p / REPORT_NAME).exists() else csv_dir_source(p)
-    raise ValueError(f"--source {spec!r}: expected 'sim', 'vectors', a 'fleetlab data import' folder (raw samples "
+    raise InputError(f"--source {spec!r}: expected 'sim', 'vectors', a 'fleetlab data import' folder (raw samples "
                      "replayed) or a folder of window CSV files")

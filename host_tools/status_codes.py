@@ -9,6 +9,7 @@ from functools import cache
 from pathlib import Path
 
 from fleetlab.paths import repo_root
+from fleetlab.errors import InputError
 
 _ENTRY = re.compile(r"^\s*(SLIPEST_(?:OK|E_[A-Z_]+))\s*=\s*(-?\d+)\s*,?", re.MULTILINE)
 
@@ -24,7 +25,7 @@ def status() -> dict[str, int]:
     body = text[text.index("typedef enum {"):text.index("} slipest_status_t;")]
     codes = {name: int(value) for name, value in _ENTRY.findall(body)}
     if "SLIPEST_OK" not in codes or len(set(codes.values())) != len(codes):
-        raise ValueError(f"{header()}: cannot read slipest_status_t")
+        raise InputError(f"{header()}: cannot read slipest_status_t")
     return codes
 
 
@@ -40,5 +41,5 @@ def meanings() -> dict[int, tuple[str, str]]:
     body = text[text.index("typedef enum {"):text.index("} slipest_status_t;")]
     out = {int(value): (name, doc) for name, value, doc in _MEANING.findall(body)}
     if set(out) != set(status().values()):
-        raise ValueError(f"{header()}: a status code without its /**< meaning */ comment")
+        raise InputError(f"{header()}: a status code without its /**< meaning */ comment")
     return out

@@ -1,8 +1,9 @@
 """`fleetlab upload`: send a bundle's model image to a running slipest CANopen node, activate it
 when asked, and read back the active model's version and hash.
 
-The transfer is an SDO block download (CRC-checked) of the DOMAIN object 0x2000 by python
-`canopen`; the same CAN frames go over a CAN bus (any python-can interface: slcan adapter,
+The update is CiA 302-3 program download by python `canopen`: clear (0x1F51 = 3), an SDO block download
+(CRC-checked) of the program data 0x1F50, start (0x1F51 = 1: the new model on trial, the node boots up) and,
+unless asked not to, confirm (0x1F51 = 0x80); the flash status 0x1F57 names a refusal; the same CAN frames go over a CAN bus (any python-can interface: slcan adapter,
 socketcan, ...) or over the serial link's COBS packets. Every frame of the transfer is counted
 and its bits on a CAN bus are computed (stuff bits exactly), so the report states the bus time
 at a given bit rate.
@@ -27,6 +28,7 @@ from .canopen_master import ABORT_NAMES, SlipestMaster
 from .canopen_session import CanopenSession
 from .status_codes import meanings
 from .wire.can_bits import frame_bits
+from fleetlab.errors import InputError
 
 
 class SdoTap(can.BusABC):
@@ -72,6 +74,7 @@ class UploadReport:
     bus_time_s_at_500k: float
     wall_time_s: float
     activated: bool
+    confirmed: bool
     active_version: int
     active_hash32: str
     active_sha256: str | None
@@ -107,7 +110,7 @@ def refusal_status(master: SlipestMaster | None, emcy_from: int = 0) -> int | No
         if entry.code in _EMCY_STORE and entry.data:
             return int.from_bytes(entry.data[:1], "little", signed=True)
     try:
-        st = master.upload_status()["last_store_status"]
+        st = master.flash_status()["slipest_status"]  # 0x1F57 bits 16-23
     except (canopen.SdoAbortedError, canopen.SdoCommunicationError):
         return None
     return st or None
@@ -124,32 +127,45 @@ def explain(e: Exception, master: SlipestMaster | None = None, emcy_from: int = 
         return (f"the node refused the image: size: {image_bytes} bytes is more than its slots take "
                 f"(SLIPEST_STORE_IMAGE_MAX of its build); {abort}")
     st = refusal_status(master, emcy_from) if e.code in _STORE_ABORTS else None
+    flash = _flash_text(master)
     if st is not None and st in meanings():
         name, meaning = meanings()[st]
         kind = REFUSAL_KINDS.get(name.removeprefix("SLIPEST_E_"), "refused")
-        return f"the node refused the image: {kind}: {meaning} ({name} {st}); {abort}"
-    return f"the node refused: {abort}"
+        return f"the node refused the image: {kind}: {meaning} ({name} {st}); {flash}{abort}"
+    return f"the node refused: {flash}{abort}"
+
+
+def _flash_text(master: SlipestMaster | None) -> str:
+    """'flash status N (meaning); ' from 0x1F57 when the node names an error there, else ''."""
+    if master is None:
+        return ""
+    try:
+        fs = master.flash_status()
+    except (canopen.SdoAbortedError, canopen.SdoCommunicationError, KeyError):
+        return ""
+    return f"0x1F57 flash status {fs['code']} ({fs['meaning']}); " if fs["code"] else ""
 
 
 def upload_image(session: CanopenSession, tap: SdoTap, image: bytes, activate: bool, block: bool = True,
-                 progress: Callable[[int], None] | None = None) -> UploadReport:
-    """Upload (and activate) on an open session whose master bus is `tap`. A refusal is an OSError whose one line
-    says why (explain())."""
+                 progress: Callable[[int], None] | None = None, confirm: bool = True,
+                 clear: bool = True) -> UploadReport:
+    """Upload (and activate: start, then confirm unless `confirm` is False) on an open session whose master bus is
+    `tap`. A refusal is an OSError whose one line says why (explain())."""
     m = session.master
     tap.reset()
     emcy_from = len(m.node.emcy.log)
     t0 = time.perf_counter()
     try:
-        m.upload(image, block=block, progress=progress)
+        m.upload(image, block=block, progress=progress, clear=clear)
         if activate:
-            m.activate()
+            m.activate(confirm=confirm)
     except (canopen.SdoAbortedError, canopen.SdoCommunicationError) as e:
         raise OSError(explain(e, m, emcy_from, len(image))) from None
     wall = time.perf_counter() - t0
     frames, bits = tap.frames, tap.bits
     model = m.active_model()
-    return UploadReport(len(image), frames, bits, bits / 500_000, wall, activate, model["version"],
-                        f"{model['hash32']:08x}", model["sha256"])
+    return UploadReport(len(image), frames, bits, bits / 500_000, wall, activate, activate and confirm,
+                        model["version"], f"{model['hash32']:08x}", model["sha256"])
 
 
 NO_PREVIOUS_MODEL = ("no previous model to roll back to (none was active before this one, or an upload since has "
@@ -157,7 +173,7 @@ NO_PREVIOUS_MODEL = ("no previous model to roll back to (none was active before 
 
 
 def rollback_model(session: CanopenSession) -> dict:
-    """0x2002 sub 2: the node re-activates its previous model. Returns the active model after it (active_model());
+    """0x2002 = 1: the node re-activates its previous model. Returns the active model after it (active_model());
     OSError with one line when there is none (NO_PREVIOUS_MODEL) or the node refuses otherwise."""
     m = session.master
     emcy_from = len(m.node.emcy.log)
@@ -192,10 +208,12 @@ def read_image(bundle: Path) -> bytes:
 
 def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Path, boot_bundle: Path,
              windows: int, seed: int = 1, scale: float = 0.3, block: bool = True,
-             progress: Callable[[int], None] | None = None) -> dict:
+             progress: Callable[[int], None] | None = None, confirm: bool = True) -> dict:
     """The after-landing update on a running node, checked: telemetry windows stream while the image
-    is uploaded (every window must be answered, by the boot model, bit-exact), the image is activated
-    between two windows, then the next windows must equal the new model's torch integer reference."""
+    is uploaded (every window must be answered, by the boot model, bit-exact), the image is started on trial
+    between two windows (CiA 302-3 start: the node boots up into PRE-OPERATIONAL and is set OPERATIONAL again),
+    then the next windows must equal the new model's torch integer reference. Only then, and with `confirm`, is
+    the new model confirmed (0x1F51 = 0x80); a failed rehearsal leaves it on trial, so the next reset reverts it."""
     import numpy as np
 
     from fleetlab.data import features_int as fi
@@ -207,7 +225,7 @@ def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Pat
 
     samples = sim_source(seed, scale).samples_q
     if len(samples) < 2 * windows * fi.SAMPLES_PER_WINDOW:
-        raise ValueError(f"the simulator gave {len(samples) // fi.SAMPLES_PER_WINDOW} windows at scale {scale}; "
+        raise InputError(f"the simulator gave {len(samples) // fi.SAMPLES_PER_WINDOW} windows at scale {scale}; "
                          f"{2 * windows} needed")
     first = samples[: windows * fi.SAMPLES_PER_WINDOW]
     second = samples[windows * fi.SAMPLES_PER_WINDOW: 2 * windows * fi.SAMPLES_PER_WINDOW]
@@ -215,6 +233,10 @@ def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Pat
     counters_start, store_start = m.counters(), m.store_counters()  # the node may have run before
     m.node.tpdo.read()
     col = EstimateCollector(m.node)
+    try:
+        m.clear()  # 0x1F51 = 3 while PRE-OPERATIONAL, before the telemetry streams: no window is lost to it
+    except canopen.SdoAbortedError as e:
+        raise OSError(explain(e, m)) from None
     m.node.nmt.state = "OPERATIONAL"
     time.sleep(0.05)
     before = m.active_model()
@@ -229,7 +251,7 @@ def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Pat
                           "before; reset it (NMT reset node) to rehearse on it")
         raise OSError("the node sends no estimates (is it operational?)")
     t0 = time.monotonic()
-    report = upload_image(session, tap, image, activate=False, block=block, progress=progress)
+    report = upload_image(session, tap, image, activate=False, block=block, progress=progress, clear=False)
     t1 = time.monotonic()
     streamer.join(60)
     if not sent or not col.wait_for(sent[0], 20):
@@ -238,11 +260,15 @@ def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Pat
     phase1 = np.array([e.logits for e in col.estimates])
     exact1 = phase1.shape == (windows, 3) and bool(np.array_equal(
         phase1, Reference.load(boot_bundle).q_logits(fi.featurise_int(first).features)[0]))
+    mid_counters = m.counters()
     try:
-        m.activate()  # between two frames: the next window is the new model's
-    except canopen.SdoAbortedError as e:
+        m.activate(confirm=False)  # between two windows, on trial: the next window is the new model's
+    except (canopen.SdoAbortedError, canopen.SdoCommunicationError) as e:
         raise OSError(explain(e, m)) from None
     after = m.active_model()
+    post_counters = m.counters()  # the start restarted the node's application: its counters begin again
+    m.node.nmt.state = "OPERATIONAL"
+    time.sleep(0.05)
     n1 = col.count()
     n = stream_telemetry(session, second, col, first_counter=len(first))
     if not col.wait_for(n1 + n, 20):
@@ -250,6 +276,16 @@ def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Pat
     phase2 = np.array([e.logits for e in col.estimates[n1:]])
     counters, store = m.counters(), m.store_counters()
     ref2 = Reference.load(new_bundle).q_logits(fi.featurise_int(second).features)[0]
+    new_exact = bool(np.array_equal(phase2, ref2))
+    confirmed = False
+    if new_exact and exact1 and n1 == windows and confirm:
+        m.node.nmt.state = "PRE-OPERATIONAL"  # program control is a PRE-OPERATIONAL service
+        time.sleep(0.02)
+        m.confirm()
+        confirmed = True
+        m.node.nmt.state = "OPERATIONAL"
+    since = counters_since(mid_counters, counters_start)
+    since2 = counters_since(counters, post_counters)
     return {
         "upload": report.as_dict() | {"windows_during_upload": during},
         "before": {"version": before["version"], "hash32": f"{before['hash32']:08x}"},
@@ -258,10 +294,12 @@ def rehearse(session: CanopenSession, tap: SdoTap, image: bytes, new_bundle: Pat
         "windows_answered_during_upload_phase": n1,
         "boot_model_bit_exact": exact1,
         "windows_after_activation": int(len(phase2)),
-        "new_model_bit_exact": bool(np.array_equal(phase2, ref2)),
-        # what this rehearsal did to the node's counters (it may have run before), and the node's totals
+        "new_model_bit_exact": new_exact,
+        "confirmed": confirmed,
+        # what this rehearsal did to the node's counters (it may have run before; the start restarts them), and
+        # the node's totals
         "store_counters": counters_since(store, store_start),
-        "counters": counters_since(counters, counters_start),
+        "counters": {k: since[k] + since2.get(k, 0) for k in since},
         "store_counters_total": store,
         "counters_total": counters,
     }

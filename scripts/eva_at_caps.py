@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
             print("  " + a)
         ok = reached and not res.alarms
         if not args.no_control:
-            src = planted_src(Path(tmp), "slipest_infer_q.c", LAYER_E_CLAMP, LAYER_E_UNCLAMPED)
+            src = planted_src(Path(tmp), "slipest_infer_table_q.c", LAYER_E_CLAMP, LAYER_E_UNCLAMPED)
             t0 = time.perf_counter()
             (ctl,) = analysers.frama_c_eva(bundle, entries=["eva_infer_q"], src_dir=src)
             found = any("e_ * e_" in a for a in ctl.alarms)

@@ -6,7 +6,7 @@ It times one optimiser step of `models/train.py`'s loop (zero_grad, forward, cla
 backward, Adam) for SN-S and SN-D at the two batch sizes fleetlab trains with: 32 (source models and
 fine-tuning, paper's reference setup) and 200 (one D_Cal, as AdaMerging and distillation see it).
 Ways, each a median over `--steps` steps after a warm-up:
-- cpu-1: one CPU thread, how an `evaluate` job trains (mccv.py pins one thread per job);
+- cpu-1: one CPU thread, how an `evaluate` job trains (evaluation/protocol.py pins one thread per job);
 - cpu-N: all of torch's CPU threads;
 - cuda: eager on the GPU;
 - cuda-graph: fleetlab's captured step (models/train.py `_CapturedSteps`: forward, loss, backward and

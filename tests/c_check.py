@@ -9,7 +9,9 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 INCLUDE = REPO / "firmware_c" / "include"
-KERNELS = [REPO / "firmware_c" / "src" / "slipest_infer_q.c", REPO / "firmware_c" / "src" / "slipest_infer_f32.c"]
+# the fixed-point entry point with the SN-S kernel, the layer-table kernel, the float kernel
+KERNELS = [REPO / "firmware_c" / "src" / "slipest_infer_q.c", REPO / "firmware_c" / "src" / "slipest_infer_table_q.c",
+           REPO / "firmware_c" / "src" / "slipest_infer_f32.c"]
 # model validation and the one vectors.bin reader, linked beside the kernels
 SUPPORT = [REPO / "firmware_c" / "src" / "slipest_model.c", REPO / "firmware_c" / "common" / "slipest_vectors.c",
            REPO / "firmware_c" / "src" / "slipest_model_hash.c"]

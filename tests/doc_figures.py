@@ -4,7 +4,7 @@ them fails when the code moves a figure and the docs are not updated in the same
 - docs/integrating_slipest.md, "Cost on each CPU target": instructions per inference (fixed-point, float)
   and per telemetry sample of each target (`fleetlab bench c --target all --json`);
 - docs/assurance.md, "Worst-case instruction counts": the measured maximum of each function on the
-  reference target (`python -m fleetlab.assurance.wcet`)."""
+  reference target (`fleetlab assure wcet`)."""
 
 from __future__ import annotations
 

@@ -103,7 +103,7 @@ def bundle(out: Path) -> None:
 
 
 def example(out: Path) -> None:
-    """The example bundle's generator (`python -m fleetlab.export.example`) at a small scale."""
+    """The example bundle's generator (`python -m fleetlab.cli.example_bundle`) at a small scale."""
     from fleetlab.export.example import make_example
 
     make_example(out / "example", seed=1, scale=0.05, epochs=2)

@@ -22,7 +22,7 @@ def planted_src(dest: Path, file: str, real: str, planted: str) -> Path:
     return dest
 
 
-# The layer-table kernel's clamp of e to 2^14 in centre_pass (slipest_infer_q.c), and the same line without
+# The layer-table kernel's clamp of e to 2^14 in centre_pass (slipest_infer_table_q.c), and the same line without
 # it: EVA must then report e_ * e_ (tests/test_export_arch.py, scripts/eva_at_caps.py).
 LAYER_E_CLAMP = "SAT(rsr_h(SAT(nh * hp_ - sum, 30), half, k2), 14)"
 LAYER_E_UNCLAMPED = "rsr_h(SAT(nh * hp_ - sum, 30), half, k2)"

@@ -179,7 +179,8 @@ def test_big_endian_ctest_of_a_24_9_bundle(matrix):
 def test_bench_c(matrix, shape, capsys):
     """`fleetlab bench c --bundle X --target cortex-m4 --json` measures X: its own kernel, and its own model
     store and CANopen node (the node's image is X's model.img), or says why a figure is not measured."""
-    from fleetlab.host_tools.firmware import bench as bench_c
+    from fleetlab.cli import bench_c
+    from fleetlab.host_tools.firmware.bench import format_result
     from fleetlab.host_tools.firmware import targets
 
     need_tools("cmake", *targets.get("cortex-m4").tools)
@@ -205,7 +206,7 @@ def test_bench_c(matrix, shape, capsys):
         assert res["m4_canopen_node_ram_bytes"] > 0 and res["m4_ram_bytes_model_slots"] > 0
         # the node was measured with this bundle's own image, not one left in the folder by another bundle
         assert co["image_bytes"] == (bundle / "model.img").stat().st_size
-    text = bench_c.format_result(res, "m4")
+    text = format_result(res, "m4")
     assert ("not measured for this bundle" in text) == (shape == "256,256,256,256")
 
 

@@ -116,7 +116,8 @@ def read_everything(session: CanopenSession) -> dict[tuple[int, int], bytes]:
             meaning = {code: doc for _, code, doc in od.ABORT_CODES}.get(err.code, "?")
             pytest.fail(f"0x{e.index:04X} sub {e.sub} ({e.parent + ': ' if e.parent else ''}{e.name}) aborts "
                         f"0x{err.code:08X} ({meaning})")
-        assert len(values[(e.index, e.sub)]) == od.TYPE_BYTES[e.dtype], (hex(e.index), e.sub)
+        if e.dtype != od.DOMAIN:  # a DOMAIN's length is its content's (0x1F50: the active slot's image, or empty)
+            assert len(values[(e.index, e.sub)]) == od.TYPE_BYTES[e.dtype], (hex(e.index), e.sub)
     return values
 
 
@@ -149,8 +150,12 @@ def test_every_readable_object_answers_in_every_boot_state(bdir, tmp_path, new_b
     want = expected.get(state, new)
     assert sha == (want.content_hash if want is not None else ZERO_SHA), state
     assert version == (want.manifest["model_version"] if want is not None else 0)
-    # the sha256 and hash32 are one hash: hash32 is its first 4 bytes, big-endian
+    # the sha256 and hash32 are one hash: hash32 is its first 4 bytes, big-endian; 0x1F56 (CiA 302-3) is hash32 too
     assert int.from_bytes(values[(od.IDX_ACTIVE_MODEL, 2)], "little") == int(sha[:8], 16)
+    assert values[(od.IDX_PROGRAM_SWID, 1)] == values[(od.IDX_ACTIVE_MODEL, 2)]
+    # 0x1F50 reads the active slot's image, empty while no slot model runs
+    image = (new_bundle / "model.img").read_bytes() if state.startswith("uploaded") else b""
+    assert values[(od.IDX_PROGRAM_DATA, 1)] == image, state
     if state.startswith("no store"):  # no slots: both empty, every store counter 0; storing is not offered
         assert all(values[(od.IDX_SLOTS, k)] == bytes(od.TYPE_BYTES[t])
                    for k, (_, t) in enumerate(od.SLOT_FIELDS * 2, start=1))

@@ -54,7 +54,8 @@ def test_eds_is_loaded_by_canopens_parser_and_matches_the_source(bdir):
         assert obj.data_type == e.dtype, (hex(e.index), e.sub)
     assert od_py[0x1018][2].default == od.PRODUCT_CODE
     assert od_py[0x1800][1].default == 0x180 + NODE_ID  # $NODEID resolved by canopen's parser
-    assert od_py[0x2000].data_type == canopen.objectdictionary.DOMAIN
+    assert od_py[od.IDX_PROGRAM_DATA][1].data_type == canopen.objectdictionary.DOMAIN
+    assert 0x2000 not in od_py  # OD 4.0: the image is 0x1F50 sub 1 only
 
 
 def test_pdo_payloads_are_the_dbc_frames_and_cob_ids_the_predefined_set():
@@ -134,7 +135,8 @@ def test_nmt_heartbeat_and_sdo_reads(bdir, tmp_path, link):
         # the built-in model: no slot; its sha256 known at build time (tests/test_canopen_conformance.py reads every
         # object in every boot state)
         assert model["sha256"] == example.content_hash and model["slot"] is None
-        for index, sub, code in ((0x3000, 0, 0x06020000), (0x1018, 9, 0x06090011), (0x2000, 0, 0x06010001)):
+        for index, sub, code in ((0x3000, 0, 0x06020000), (0x1018, 9, 0x06090011), (0x2000, 0, 0x06020000),
+                                 (0x2002, 0, 0x06010001)):
             with pytest.raises(canopen.SdoAbortedError) as e:
                 node.sdo.upload(index, sub)
             assert e.value.code == code
@@ -142,7 +144,7 @@ def test_nmt_heartbeat_and_sdo_reads(bdir, tmp_path, link):
             node.sdo.download(0x1018, 1, b"\x01\x00\x00\x00")
         assert e.value.code == 0x06010002
         with pytest.raises(canopen.SdoAbortedError) as e:
-            node.sdo[od.IDX_COMMAND][1].raw = 1  # nothing uploaded: nothing to activate
+            node.sdo[od.IDX_ROLLBACK].raw = 1  # the built-in model runs: nothing to roll back to
         assert e.value.code == od.ABORT["STATE"]
 
 

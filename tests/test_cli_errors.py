@@ -154,3 +154,69 @@ def test_a_broken_pipe_elsewhere_is_still_an_error(monkeypatch, capsys):
     monkeypatch.setattr(data, "run", broken)
     assert cli.main(["data", "info", "x"]) == 1
     assert capsys.readouterr().err == "fleetlab data: error: [Errno 32] Broken pipe\n"
+
+
+def _raising(error: BaseException):
+    def run(args):
+        raise error
+    return run
+
+
+def test_an_unexpected_error_is_an_internal_error_not_bad_input(monkeypatch, capsys):
+    """A ValueError fleetlab did not raise on purpose (numpy's, a bug's) is not the user's mistake: one line that
+    says so and how to see the traceback, and its own exit status (before: "error: ..." and exit 1, as bad input)."""
+    from fleetlab import cli
+    from fleetlab.cli import data
+
+    monkeypatch.setattr(data, "run", _raising(ValueError("operands could not be broadcast together")))
+    assert cli.main(["data", "info", "x"]) == cli.INTERNAL_EXIT != 1
+    err = capsys.readouterr().err
+    assert err.splitlines() == [
+        "fleetlab data: internal error (ValueError: operands could not be broadcast together); "
+        "rerun with `fleetlab --debug data ...` for the traceback and report it"], err
+
+
+def test_debug_shows_the_traceback(monkeypatch, tmp_path):
+    """`fleetlab --debug COMMAND` lets the error end with its traceback: in this process it is raised, and run as
+    a command the interpreter prints it."""
+    from fleetlab import cli
+    from fleetlab.cli import data
+
+    monkeypatch.setattr(data, "run", _raising(ValueError("planted")))
+    with pytest.raises(ValueError, match="planted"):
+        cli.main(["--debug", "data", "info", "x"])
+    monkeypatch.undo()
+    res = _fleetlab(["--debug", "data", "info", str(tmp_path / "no-such-folder")], tmp_path)
+    assert res.returncode == 1 and "Traceback (most recent call last)" in res.stderr, res.stderr
+    assert "no-such-folder" in res.stderr.strip().splitlines()[-1]
+
+
+def test_a_deliberate_input_error_is_still_one_line(capsys):
+    """The errors the layers raise on purpose (InputError) keep their one line and exit 1, with --debug off."""
+    from fleetlab import cli
+    from fleetlab.errors import InputError
+
+    assert issubclass(InputError, ValueError)  # every `except ValueError` of a layer still catches them
+    assert cli.main(["bench", "data", "--samples", "10"]) == 1
+    assert capsys.readouterr().err == "fleetlab bench: error: --samples must be >= 100 and --repeats >= 1\n"
+    assert cli.main(["evaluate", "--data", "no-such-folder", "--label-noise-sweep", "nonsense"]) == 1
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err and err.startswith("fleetlab evaluate: error: "), err
+
+
+def test_no_runtime_error_is_raised_on_purpose():
+    """A RuntimeError reads as a bug (an internal error, exit 70): what fleetlab refuses on purpose is a
+    FleetlabError (or InputError) with its one line."""
+    import ast
+
+    from fleetlab.paths import repo_root
+
+    raised = []
+    for folder in ("toolchain", "export", "host_tools", "dbc", "canopen_od"):
+        for path in (repo_root() / folder).rglob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, ast.Raise) and node.exc is not None:
+                    call = node.exc.func if isinstance(node.exc, ast.Call) else node.exc
+                    if isinstance(call, ast.Name) and call.id == "RuntimeError":
+                        raised.append(f"{path.relative_to(repo_root())}:{node.lineno}")
+    assert not raised, raised

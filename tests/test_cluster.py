@@ -25,7 +25,9 @@ import pytest
 
 from fleetlab.cli import main
 from fleetlab.data.dataset import load_dataset
-from fleetlab.evaluation.mccv import RUNS_DIR, EvalSettings, job_file, run_mccv, write_atomic
+from fleetlab.evaluation.executor import RUNS_DIR, job_file, write_atomic
+from fleetlab.evaluation.mccv import run_mccv
+from fleetlab.evaluation.protocol import EvalSettings
 from fleetlab.fusion.registry import Budget
 
 SETTINGS = EvalSettings(protocol="paper", cal_sizes=(150,), runs=6, seed=3, epochs=1,

@@ -11,7 +11,7 @@ HEADER = repo_root() / "firmware_c" / "src" / "slipest_erf_f32.h"
 
 
 def test_committed_header_is_generated():
-    assert HEADER.read_text() == erf_table.header(), "regenerate: python -m fleetlab.export.erf_table > " + str(HEADER)
+    assert HEADER.read_text() == erf_table.header(), "regenerate: python -m fleetlab.cli.erf_table > " + str(HEADER)
 
 
 def test_float32_error_below_1e7():

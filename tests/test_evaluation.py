@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from fleetlab.cli import main
-from fleetlab.cores import usable_cores
+from fleetlab.compute import usable_cores
 from fleetlab.data.dataset import load_dataset
-from fleetlab.evaluation.mccv import EvalSettings, run_mccv
+from fleetlab.evaluation.mccv import run_mccv
+from fleetlab.evaluation.protocol import EvalSettings
 from fleetlab.evaluation.methods import default_methods, parse_methods, selectable
 from fleetlab.evaluation.metrics import balanced_accuracy, classification_metrics
 from fleetlab.evaluation.tables import markdown_table

@@ -162,7 +162,7 @@ def caps_eva(caps_bundle, snd_bundle, tmp_path_factory):
     from fleetlab.assurance import analysers
     from fleetlab.assurance.sources import concurrently
 
-    src = planted_src(tmp_path_factory.mktemp("unclamped"), "slipest_infer_q.c", LAYER_E_CLAMP, LAYER_E_UNCLAMPED)
+    src = planted_src(tmp_path_factory.mktemp("unclamped"), "slipest_infer_table_q.c", LAYER_E_CLAMP, LAYER_E_UNCLAMPED)
     options = analysers.EVA_OPTIONS + CAPS_PRECISION
     (clean,), (planted,), (snd,) = concurrently([
         lambda: analysers.frama_c_eva(caps_bundle, entries=["eva_infer_q"], options=options),
@@ -293,10 +293,10 @@ def irregular_bundle(tmp_path_factory):
     the saturation count of every vector is compared too (the DSP cores count from the Q flag and recount)."""
     from fleetlab.export import bundle as bundle_mod
 
-    quantize_net = bundle_mod.quantize_net
+    quantize = bundle_mod.quantize
 
     def saturating(fn, *args, **kwargs):
-        qn = quantize_net(fn, *args, **kwargs)
+        qn = quantize(fn, *args, **kwargs)
         for blk, sign, n in zip(qn.blocks, (1, -1), (3, 2)):
             blk.g[:n] = 32767
             blk.bb[:n] = sign * (30000 << (blk.fy - 12))
@@ -304,7 +304,7 @@ def irregular_bundle(tmp_path_factory):
 
     out = tmp_path_factory.mktemp("irr") / "bundle"
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(bundle_mod, "quantize_net", saturating)
+        mp.setattr(bundle_mod, "quantize", saturating)
         export_bundle(quick_model(IRREGULAR), out, inputs=draw_inputs(1000, None, seed=3))
     sats = np.load(out / "vectors.npz")["q_saturations"]
     assert sats.sum() > 1000

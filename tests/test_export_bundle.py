@@ -14,10 +14,10 @@ import pytest
 import torch
 
 from fleetlab.data.features_int import FEATURE_LSB, quantize_features
-from fleetlab.export import headers, manifest
+from fleetlab.export import headers, manifest, sns_profile
 from fleetlab.export.bundle import check_bundle, load_bundle
 from fleetlab.export.onnx_export import onnx_logits
-from fleetlab.export.quant import FloatParams, quantize
+from fleetlab.export.quant import FloatNet, quantize
 from fleetlab.export.vectors import read_vectors, read_vectors_bin
 from fleetlab.models import build, save_model
 
@@ -102,25 +102,27 @@ def test_manifest_and_headers_agree(exported) -> None:
     from fleetlab.models import load_model
 
     m = json.loads((b / "manifest.json").read_text())
-    qsc, qarr, qhash, qhash32 = headers.read_q_header(b / "slipest_model_q.h")
-    farr, eps, fhash, fhash32 = headers.read_f32_header(b / "slipest_model_f32.h")
+    qnet, qhash, qhash32 = headers.read_q_header(b / "slipest_model_q.h")
+    fnet, fhash, fhash32 = headers.read_f32_header(b / "slipest_model_f32.h")
     assert qhash == fhash == m["content_hash"]
     assert qhash32 == fhash32 == int(m["content_hash32"], 16) == int(m["content_hash"][:8], 16)
-    for key, value in qsc.items():
-        assert m["quantization"][key] == value, key
+    qarr, farr = sns_profile.q_arrays(qnet), sns_profile.f32_arrays(fnet)
+    for key, value in sns_profile.scalars(qnet).items():
+        if key not in ("s1", "s2", "logit_scale"):  # the scales are the manifest's alone
+            assert m["quantization"][key] == value, key
     for attr, ctype, _, _ in headers.Q_ARRAYS:
         assert list(qarr[attr].shape) == m["quantization"]["arrays"][headers.Q_MEMBERS[attr]]["shape"]
     # the headers hold exactly what quantize() makes of the model, and its exact float32 weights
     model, _ = load_model(model_path)
-    fp = FloatParams.from_model(model)
+    fp = FloatNet.from_model(model)
     qp = quantize(fp)
-    for name in ("w1", "b1", "g", "bb", "w2", "b2", "gelu", "rsqrt_seed"):
-        assert np.array_equal(qarr[name], getattr(qp, name)), name
-    for name in FloatParams.ARRAYS:
-        assert np.array_equal(farr[name], getattr(fp, name)), name
-    assert eps == np.float32(1e-5)
+    for name, arr in sns_profile.q_arrays(qp).items():
+        assert np.array_equal(qarr[name], arr), name
+    for name, arr in sns_profile.f32_arrays(fp).items():
+        assert np.array_equal(farr[name], arr), name
+    assert fnet.eps == np.float32(1e-5)
     assert m["content_hash"] == manifest.content_hash(qp, fp)
-    assert m["quantization"]["fy"] == qp.fy and m["quantization"]["logit_scale"] == qp.logit_scale
+    assert m["quantization"]["fy"] == qp.blocks[0].fy and m["quantization"]["logit_scale"] == qp.logit_scale
     # the header defines one const model struct named after the bundle, over arrays sized by the public API
     text = (b / "slipest_model_q.h").read_text()
     assert "static const slipest_model_q_t slipest_main_q = {" in text and ".n_hidden = 30," in text
@@ -223,6 +225,46 @@ def test_c_float_literals_round_trip() -> None:
         assert np.float32(float(s[:-1])) == np.float32(v)
     with pytest.raises(ValueError):
         headers.c_float(float("nan"))
+
+
+@pytest.mark.parametrize("hidden, flat", [((30,), True), ((24,), False), ((24, 9), False)])
+def test_one_header_writer_and_reader_for_every_network(hidden, flat, tmp_path) -> None:
+    """One writer and one reader serve every network: an SN-S (one block of 30) gets the flat struct of the
+    small-flash kernel, any other network (one block of another width included) the layer table, and both read
+    back as the same network."""
+    from fleetlab.models.mlp import SlipNet
+
+    torch.manual_seed(1)
+    fn = FloatNet.from_model(SlipNet(hidden).eval())
+    qn = quantize(fn)
+    assert sns_profile.fits(qn) is flat
+    h = manifest.content_hash(qn, fn)
+    paths = headers.write_headers(tmp_path, qn, fn, h)
+    assert [p.name for p in paths] == [headers.F32_HEADER, headers.Q_HEADER]
+    text = (tmp_path / headers.Q_HEADER).read_text()
+    assert (".n_hidden = 30," in text) is flat and ("slipest_main_q_layers[" in text) is not flat
+    got, gh, gh32 = headers.read_q_header(tmp_path / headers.Q_HEADER)
+    gf, fh, fh32 = headers.read_f32_header(tmp_path / headers.F32_HEADER)
+    assert gh == fh == h and gh32 == fh32 == manifest.hash32(h)
+    assert got.hidden == gf.hidden == hidden
+    for a, b in zip(got.blocks, qn.blocks):
+        assert all(np.array_equal(getattr(a, k), getattr(b, k)) for k in ("w", "b", "g", "bb", "gelu"))
+        assert (a.fg, a.fy, a.eps_m, a.eps_e) == (b.fg, b.fy, b.eps_m, b.eps_e)
+    assert all(np.array_equal(getattr(got, k), getattr(qn, k)) for k in ("w_out", "b_out", "rsqrt_seed"))
+    for a, b in zip(gf.blocks, fn.blocks):
+        assert all(np.array_equal(getattr(a, k), getattr(b, k)) for k in ("w", "b", "gamma", "beta"))
+    assert np.array_equal(gf.w_out, fn.w_out) and np.array_equal(gf.b_out, fn.b_out) and gf.eps == np.float32(fn.eps)
+
+
+def test_sn_s_header_members_must_be_the_schemes(tmp_path) -> None:
+    """A flat SN-S header whose shifts are not those the scheme gives its width is refused by name."""
+    fn = FloatNet.from_model(build("sn-s", seed=2))
+    qn = quantize(fn)
+    headers.write_headers(tmp_path, qn, fn, manifest.content_hash(qn, fn))
+    q = tmp_path / headers.Q_HEADER
+    q.write_text(q.read_text().replace(".h_bits = 24,", ".h_bits = 23,"))
+    with pytest.raises(ValueError, match=r"\.h_bits = 23, the scheme gives 24"):
+        headers.read_q_header(q)
 
 
 def test_committed_example_bundle_is_current() -> None:

@@ -96,12 +96,12 @@ def test_layer_table_kernel_stack_follows_the_caps(width, tmp_path) -> None:
     cc = need(ARM_GCC)
     obj = tmp_path / "k.o"
     res = subprocess.run([cc, *STRICT, "-Os", "-mcpu=cortex-m0", "-mthumb", "-mfloat-abi=soft", "-fstack-usage",
-                          f"-I{INCLUDE}", f"-DSLIPEST_MAX_WIDTH={width}", "-c", str(KERNELS[0]), "-o", str(obj)],
+                          f"-I{INCLUDE}", f"-DSLIPEST_MAX_WIDTH={width}", "-c", str(KERNELS[1]), "-o", str(obj)],
                          capture_output=True, text=True, cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     su = (tmp_path / "k.su").read_text()
     frames = {m[1]: int(m[2]) for m in re.finditer(r":(\w+)(?:\.\w+)*\t(\d+)\t", su)}
-    assert 6 * width <= frames["infer_layers"] <= 6 * width + 128, su
+    assert 6 * width <= frames["slipest_infer_table_q"] <= 6 * width + 128, su
     nm = subprocess.run([need("arm-none-eabi-nm"), "-u", str(obj)], capture_output=True, text=True).stdout
     assert not re.search(r"__aeabi_[fd]|__(add|sub|mul|div)[sd]f3|__float|__fix", nm), nm
 
@@ -112,15 +112,16 @@ def test_c_counts_saturations_and_breaks_ties_like_the_reference(tmp_path) -> No
     import numpy as np
 
     from fleetlab.export import headers, manifest, vectors
-    from fleetlab.export.quant import FloatParams, gelu_table, quantize
+    from fleetlab.export.quant import FloatNet, gelu_table, quantize
     from fleetlab.models import build
 
-    fp = FloatParams.from_model(build("sn-s", seed=4))
+    fp = FloatNet.from_model(build("sn-s", seed=4))
     qp = quantize(fp)
-    qp.fy, qp.fg, qp.gelu = 12, 14, gelu_table(12)
-    qp.g = np.full(30, 32767, np.int16)  # gamma ~ 2 ...
-    qp.bb = np.full(30, 30000, np.int32)  # ... + beta ~ 7.3 in Q12: any z > 0.34 saturates u
-    qp.w2[2], qp.b2[2] = qp.w2[1], qp.b2[1]  # logit 2 == logit 1 on every input
+    blk = qp.blocks[0]
+    blk.fy, blk.fg, blk.gelu = 12, 14, gelu_table(12)
+    blk.g = np.full(30, 32767, np.int16)  # gamma ~ 2 ...
+    blk.bb = np.full(30, 30000, np.int32)  # ... + beta ~ 7.3 in Q12: any z > 0.34 saturates u
+    qp.w_out[2], qp.b_out[2] = qp.w_out[1], qp.b_out[1]  # logit 2 == logit 1 on every input
     headers.write_headers(tmp_path, qp, fp, manifest.content_hash(qp, fp))
     v = vectors.make_vectors(fp.to_model(), qp, draw_inputs(1000, None, seed=5))
     assert v.q_saturations.sum() > 1000
@@ -171,14 +172,15 @@ def test_two_bundles_in_one_image(tmp_path) -> None:
     qp, fp = b.qparams, b.fparams
     (tmp_path / "earth_q.h").write_text(headers.q_header_text(qp, b.content_hash, "earth"))
     delta = 1 << 20
-    qp.b2 = qp.b2.copy()
-    qp.b2[0] += delta
+    qp.b_out = qp.b_out.copy()
+    qp.b_out[0] += delta
     (tmp_path / "fused_q.h").write_text(headers.q_header_text(qp, manifest.content_hash(qp, fp), "fused", version=2))
     src = tmp_path / "two.c"
     src.write_text(TWO_MODELS_C)
     exe = tmp_path / "two"
     cmd = [need("gcc"), *STRICT, "-O2", "-fsanitize=undefined", "-fno-sanitize-recover=all", f"-DDELTA={delta}",
-           f"-I{INCLUDE}", f"-I{tmp_path}", str(src), str(KERNELS[0]), str(SUPPORT[0]), str(SUPPORT[2]), "-o", str(exe)]
+           f"-I{INCLUDE}", f"-I{tmp_path}", str(src), str(KERNELS[0]), str(KERNELS[1]), str(SUPPORT[0]), str(SUPPORT[2]),
+           "-o", str(exe)]
     res = subprocess.run(cmd, capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     res = subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)

@@ -15,8 +15,8 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fleetlab.export import intref
-from fleetlab.export.quant import FloatBlock, FloatNet, FloatParams, QParams, quantize, quantize_net, rsqrt_seed_table
+from fleetlab.export import intref, sns_profile
+from fleetlab.export.quant import FloatBlock, FloatNet, quantize, rsqrt_seed_table
 from fleetlab.models import build
 
 I32 = (-(2**31), 2**31 - 1)
@@ -101,9 +101,8 @@ def spec_block(blk, seed_table, x: list[int]) -> tuple[list[int], int]:
     return out, sat
 
 
-def spec_infer(qp, x: list[int]) -> tuple[list[int], int]:
-    """One window, straight from the written scheme (QParams or QNet). Returns (logits, saturations)."""
-    net = qp.net() if isinstance(qp, QParams) else qp
+def spec_infer(net, x: list[int]) -> tuple[list[int], int]:
+    """One window, straight from the written scheme. Returns (logits, saturations)."""
     sat = 0
     for blk in net.blocks:
         x, s = spec_block(blk, net.rsqrt_seed, x)
@@ -115,10 +114,11 @@ def spec_infer(qp, x: list[int]) -> tuple[list[int], int]:
     return logits, sat
 
 
-def random_params(rng: np.random.Generator, scale: float) -> FloatParams:
+def random_params(rng: np.random.Generator, scale: float) -> FloatNet:
+    """A random SN-S (one block of 30 units)."""
     f = lambda *s: (rng.normal(size=s) * scale).astype(np.float32)  # noqa: E731
-    return FloatParams(w1=f(30, 12), b1=f(30), gamma=(1 + f(30)).astype(np.float32), beta=f(30) * 0.3,
-                       w2=f(3, 30), b2=f(3))
+    blk = FloatBlock(w=f(30, 12), b=f(30), gamma=(1 + f(30)).astype(np.float32), beta=f(30) * 0.3)
+    return FloatNet([blk], w_out=f(3, 30), b_out=f(3))
 
 
 def random_inputs(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -150,33 +150,35 @@ def test_worst_case_inputs_cannot_overflow() -> None:
     rng = np.random.default_rng(7)
     for scale in (0.01, 1.0, 100.0):
         fp = random_params(rng, scale)
-        fp.b1 = (np.sign(fp.b1) * 1e4).astype(np.float32)  # biases that force the bias limit
+        fp.blocks[0].b = (np.sign(fp.blocks[0].b) * 1e4).astype(np.float32)  # biases that force the bias limit
         qp = quantize(fp)
-        sc = qp.scalars()
+        sc = sns_profile.scalars(qp)
         assert sc["acc1_bound"] <= 2**31 - 1 - 2**8 and sc["acc2_bound"] <= 2**31 - 1
+        w1, b1 = qp.blocks[0].w, qp.blocks[0].b
         rows = []
         for i in range(30):
-            s = np.where(qp.w1[i] >= 0, 1, -1)
+            s = np.where(w1[i] >= 0, 1, -1)
             rows += [np.where(s > 0, 32767, -32768), np.where(s > 0, -32768, 32767)]
         x = np.array(rows, dtype=np.int16)
         logits, _ = intref.run(qp, x)
         for row in range(0, len(x), 7):
             assert spec_infer(qp, x[row].astype(int).tolist())[0] == logits[row].tolist()
-        h = x.astype(np.int64) @ qp.w1.T.astype(np.int64) + qp.b1
+        h = x.astype(np.int64) @ w1.T.astype(np.int64) + b1
         assert np.abs(h).max() <= 2**31 - 1
 
 
-def _model_params(seed: int = 3) -> FloatParams:
-    return FloatParams.from_model(build("sn-s", seed=seed).eval())
+def _model_params(seed: int = 3) -> FloatNet:
+    return FloatNet.from_model(build("sn-s", seed=seed).eval())
 
 
 def test_saturation_is_counted() -> None:
     """A Q(FY) chosen too fine makes u leave int16: the reference and the spec count the same events."""
     qp = quantize(_model_params())
-    qp.fy = 12
-    qp.bb = np.full(30, 30000, np.int32)  # beta ~ 7.3 in Q12 ...
-    qp.g = np.full(30, 32767, np.int16)  # ... + gamma ~ 2 at FG = 14: any z > 0.34 leaves int16
-    qp.fg = 14
+    blk = qp.blocks[0]
+    blk.fy = 12
+    blk.bb = np.full(30, 30000, np.int32)  # beta ~ 7.3 in Q12 ...
+    blk.g = np.full(30, 32767, np.int16)  # ... + gamma ~ 2 at FG = 14: any z > 0.34 leaves int16
+    blk.fg = 14
     x = random_inputs(np.random.default_rng(1), 50)
     logits, sat = intref.run(qp, x)
     assert sat.sum() > 0
@@ -188,9 +190,10 @@ def test_saturation_is_counted() -> None:
 def test_eps_cap_counts_a_saturation() -> None:
     """When eps dominates (near-constant hidden layer), eps is capped at 2^30 and counted once."""
     qp = quantize(_model_params())
-    qp.w1 = np.zeros_like(qp.w1)
-    qp.b1 = np.full(30, 5, np.int32)  # constant layer: variance 0, k1 = k2 = 0
-    qp.eps_m, qp.eps_e = 2**14, 20
+    blk = qp.blocks[0]
+    blk.w = np.zeros_like(blk.w)
+    blk.b = np.full(30, 5, np.int32)  # constant layer: variance 0, k1 = k2 = 0
+    blk.eps_m, blk.eps_e = 2**14, 20
     logits, sat = intref.run(qp, np.zeros((1, 12), np.int16))
     assert sat.tolist() == [1]
     assert spec_infer(qp, [0] * 12) == (logits[0].tolist(), 1)
@@ -216,7 +219,7 @@ def test_rsqrt_matches_float_and_stays_bounded() -> None:
 def test_fixed_point_follows_float_on_random_model() -> None:
     """On an untrained SN-S and typical inputs the integer logits track the float ones."""
     model = build("sn-s", seed=11).eval()
-    qp = quantize(FloatParams.from_model(model))
+    qp = quantize(FloatNet.from_model(model))
     rng = np.random.default_rng(2)
     xq = rng.integers(-3000, 3000, size=(500, 12)).astype(np.int16)
     from fleetlab.data.features_int import FEATURE_LSB
@@ -255,7 +258,7 @@ def test_any_architecture_intref_equals_spec(seed: int, hidden: tuple[int, ...],
     """Random architectures within the caps, random models, random int16 inputs (a third at the rails):
     the torch reference equals the specification, and spec_block asserts every intermediate's C type."""
     rng = np.random.default_rng(seed)
-    net = quantize_net(random_net(rng, hidden, scale))
+    net = quantize(random_net(rng, hidden, scale))
     assert net.hidden == hidden
     x = random_inputs(rng, 3)
     x[0] = 0
@@ -271,7 +274,7 @@ def test_caps_worst_case_inputs_cannot_overflow(hidden) -> None:
     rng = np.random.default_rng(5)
     fn = random_net(rng, hidden, 100.0)
     fn.blocks[0].b = (np.sign(fn.blocks[0].b) * 1e4).astype(np.float32)
-    net = quantize_net(fn)
+    net = quantize(fn)
     w = net.blocks[0].w
     rows = [np.where(w[i] >= 0, 32767, -32768) for i in range(0, w.shape[0], max(1, w.shape[0] // 4))]
     x = np.array(rows + [-r - 1 for r in rows], dtype=np.int16)
@@ -297,7 +300,7 @@ def test_fixed_point_follows_float_on_a_deep_random_model() -> None:
 
     for arch in ("sn-d", "24,9"):
         model = build(arch, seed=11).eval()
-        net = quantize_net(FloatNet.from_model(model))
+        net = quantize(FloatNet.from_model(model))
         xq = np.random.default_rng(2).integers(-3000, 3000, size=(500, 12)).astype(np.int16)
         with torch.no_grad():
             fl = model(torch.from_numpy((xq * FEATURE_LSB).astype(np.float32))).numpy()

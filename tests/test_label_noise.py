@@ -11,7 +11,7 @@ from fleetlab.cli import main
 from fleetlab.data.label_noise import LabelNoise, VoModel
 from fleetlab.data.labels import slip_class, slip_ratio
 from fleetlab.evaluation import noise_sweep
-from fleetlab.evaluation.mccv import EvalSettings, Target, run_jobs
+from fleetlab.evaluation.protocol import EvalSettings, Target, run_jobs
 from fleetlab.fusion import registry
 from fleetlab.fusion.fitness import CalibrationFitness
 from fleetlab.fusion.label_audit import flag_labels

@@ -16,6 +16,7 @@ import pytest
 import torch
 
 from fleetlab.cli import main
+from fleetlab.compute import resolve_device
 from fleetlab.fusion.acomerge import AcoMergeConfig, acomerge, checked_inputs, construct_ants
 from fleetlab.fusion.bench import synthetic_calibration
 from fleetlab.fusion.finetune import finetune
@@ -23,7 +24,6 @@ from fleetlab.fusion.fitness import CalibrationFitness
 from fleetlab.fusion.lockstep import (
     StackedFitness,
     construct_ants_dense,
-    resolve_device,
     run_acomerge_many,
     search_lockstep,
 )
@@ -122,7 +122,7 @@ def test_device_cuda_is_a_one_line_error_without_a_gpu(capsys, tmp_path):
 
 def test_threads_follow_the_free_cores():
     """With every core taken by a spinning process, a run gets one thread (not a barrier per core)."""
-    from fleetlab.fusion.acomerge import busy_cores, default_threads
+    from fleetlab.compute import busy_cores, default_threads
     from fleetlab.fusion.bench import busy_processes
 
     cores = os.cpu_count() or 1
@@ -135,7 +135,7 @@ def test_a_run_takes_no_more_threads_than_the_cores_it_may_use():
     """A process confined to one core (taskset, a container's cpuset, a batch slot) counts one core and
     gives a run one thread, however many the machine has."""
     code = ("import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); "
-            "from fleetlab.cores import usable_cores; from fleetlab.fusion.acomerge import default_threads; "
+            "from fleetlab.compute import default_threads, usable_cores; "
             "print(usable_cores(), default_threads())")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     assert out == ["1", "1"]

@@ -41,6 +41,9 @@ HASH_RE = re.compile(r"model_hash=([0-9a-f]{8}) (PASS|FAIL)")
 
 @pytest.fixture(scope="module")
 def emu() -> Path:
+    """The emulator of this tree; FLEETLAB_TEST_EMU names another build (e.g. an older commit's, to see a test fail)."""
+    if os.environ.get("FLEETLAB_TEST_EMU"):
+        return Path(os.environ["FLEETLAB_TEST_EMU"])
     return find_artifact(build(None, targets=(EMULATOR_TARGET,)), EMULATOR_TARGET)
 
 
@@ -210,6 +213,59 @@ def test_power_loss_when_the_upload_overwrites_the_rollback_target(emu, models, 
     assert len(outcomes) >= 50
     # v3 has the old model's parameters (and hash): "old" here means v3 is served
     check_switch(outcomes, "new", "old", "second-generation upload")
+
+
+# ----------------------------------------------------------------------- trial activation (issue 45 item 2)
+# An activation on trial (the CiA 302-3 "start", slipest_store_try()) writes one commit record marked "trial"; a
+# confirm (0x1F51 = 0x80, slipest_store_confirm()) one more without the mark; a boot that finds the mark reverts to
+# the previous model with one record (slipest_store_open()). Each of those NVM operations is cut in the three modes.
+
+def test_power_loss_during_upload_and_trial_activation(emu, models, tmp_path) -> None:
+    """Every cut of an upload + activation on trial leaves the old model serving after the reboot: before the trial
+    record it was never replaced, after it the boot reverts the unconfirmed model."""
+    sector = 256
+    base, work = tmp_path / "base.nvm", tmp_path / "work.nvm"
+    make_base(emu, base, sector, models)
+    outcomes = cut_sweep(emu, base, work, sector, models, ["--upload", str(models["new"][0]), "--try"])
+    assert len(outcomes) >= 50 and outcomes == ["old"] * len(outcomes), outcomes
+    # no cut: on trial until the process ends; the next boot reverts it, says so, and writes the revert once
+    shutil.copyfile(base, work)
+    res = run(emu, "--nvm", str(work), "--upload", str(models["new"][0]), "--try")
+    assert res.returncode == 0 and "on trial: slot 1" in res.stderr, res.stderr
+    res = run(emu, "--nvm", str(work))
+    assert "version 1, trial reverted" in res.stderr and nvm_ops(res) == 2, res.stderr
+    res = run(emu, "--nvm", str(work))
+    assert "trial" not in res.stderr and nvm_ops(res) == 0, res.stderr
+
+
+def test_power_loss_during_trial_and_confirm(emu, models, tmp_path) -> None:
+    """Upload, activation on trial and its confirm in one run: every cut before the confirm's record program leaves
+    the old model (the trial reverted at the reboot), a cut after it the new one, confirmed (no revert at the
+    reboot)."""
+    sector = 256
+    base, work = tmp_path / "base.nvm", tmp_path / "work.nvm"
+    make_base(emu, base, sector, models)
+    outcomes = cut_sweep(emu, base, work, sector, models,
+                         ["--upload", str(models["new"][0]), "--try", "--confirm"])
+    check_switch(outcomes, "old", "new", "trial + confirm")
+    shutil.copyfile(base, work)
+    assert run(emu, "--nvm", str(work), "--upload", str(models["new"][0]), "--try", "--confirm").returncode == 0
+    res = run(emu, "--nvm", str(work))
+    assert "version 2" in res.stderr and "trial" not in res.stderr and nvm_ops(res) == 0, res.stderr
+
+
+def test_power_loss_during_the_revert_of_a_trial(emu, models, tmp_path) -> None:
+    """The NVM holds a model on trial; the boot reverts it (erase and program of one record sector). A cut in any
+    mode of either leaves the old model serving after the next boot, which finishes the revert."""
+    sector = 256
+    base, work = tmp_path / "base.nvm", tmp_path / "work.nvm"
+    make_base(emu, base, sector, models)
+    res = run(emu, "--nvm", str(base), "--upload", str(models["new"][0]), "--try")
+    assert res.returncode == 0 and "on trial" in res.stderr, res.stderr
+    outcomes = cut_sweep(emu, base, work, sector, models, [])
+    assert outcomes == ["old"] * 6, outcomes  # two operations, three modes each
+    res = run(emu, "--nvm", str(work))
+    assert "version 1" in res.stderr and "trial" not in res.stderr and nvm_ops(res) == 0, res.stderr
 
 
 def test_refused_uploads_keep_the_old_model(emu, models, tmp_path) -> None:

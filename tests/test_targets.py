@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fleetlab.host_tools.firmware import bench, build, figures, targets
+from fleetlab.cli import bench_c
+from fleetlab.host_tools.firmware import build, figures, targets
 from fleetlab.paths import repo_root
 from doc_figures import assert_near
 from doc_figures import target_costs as published_costs
@@ -37,8 +38,8 @@ def _list(capsys, monkeypatch, extra_dir: Path | None = None) -> dict:
     if extra_dir is not None:
         monkeypatch.setenv(targets.ENV_DIRS, str(extra_dir))
     parser = argparse.ArgumentParser()
-    bench.add_arguments(parser)
-    assert bench.run(parser.parse_args(["--list-targets", "--json"])) == 0
+    bench_c.add_arguments(parser)
+    assert bench_c.run(parser.parse_args(["--list-targets", "--json"])) == 0
     return json.loads(capsys.readouterr().out)
 
 

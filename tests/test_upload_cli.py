@@ -28,8 +28,9 @@ def test_upload_activates_and_reads_back(bdir, new_bundle, tmp_path, capsys, lin
     assert r["before"] == {"version": 1, "hash32": "4e583ed2"}
     assert r["active_version"] == 2 and r["active_sha256"] == new.content_hash and r["activated"]
     n_seg = -(-r["image_bytes"] // 7)
-    # initiate + segments + one ack per 127 segments + end, each answered, + the activation's pair
-    assert r["sdo_frames"] == 2 + n_seg + -(-n_seg // 127) + 2 + 2
+    # CiA 302-3: the clear, then initiate + segments + one ack per 127 segments + end, each answered, then the
+    # start and the confirm, each a request and its answer
+    assert r["sdo_frames"] == 2 + 2 + n_seg + -(-n_seg // 127) + 2 + 2 + 2
     assert 0.1 < r["bus_time_s_at_500k"] < 0.2
     # the NVM file keeps the model: a second run finds version 2 active and refuses a re-upload of it
     assert main(["upload", "--bundle", str(new_bundle), "--link", link, "--emulate", "--nvm", str(nvm)]) == 1
@@ -109,3 +110,22 @@ def test_sn_d_image_is_refused_by_an_sn_s_only_node(snd_bundle, tmp_path):
     with session, pytest.raises(Exception) as e:
         upload_image(session, tap, (snd_bundle / "model.img").read_bytes(), activate=True)
     assert "0x06070012" in explain(e.value)
+
+
+def test_upload_no_confirm_leaves_a_trial_that_the_next_boot_reverts(bdir, new_bundle, tmp_path, capsys):
+    """--activate --no-confirm: the new model runs on trial (CiA 302-3 start without the 0x80 confirm); the next
+    emulator process on the same NVM file boots the previous model. Without --no-confirm it stays."""
+    nvm = tmp_path / "nvm.bin"
+    assert main(["upload", "--bundle", str(new_bundle), "--emulate", "--nvm", str(nvm), "--activate", "--no-confirm",
+                 "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["active_version"] == 2 and r["activated"] and not r["confirmed"]
+    assert main(["upload", "--rollback", "--emulate", "--nvm", str(nvm), "--json"]) == 1  # reverted: nothing to roll to
+    capsys.readouterr()
+    assert main(["upload", "--bundle", str(new_bundle), "--emulate", "--nvm", str(nvm), "--activate", "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["before"]["version"] == 1 and r["active_version"] == 2 and r["confirmed"]
+    assert main(["upload", "--bundle", str(new_bundle), "--emulate", "--nvm", str(nvm)]) == 1  # v2 stayed: stale
+    assert "stale version" in capsys.readouterr().err
+    assert main(["upload", "--no-confirm", "--bundle", str(new_bundle), "--emulate"]) == 1
+    assert "--no-confirm needs --activate" in capsys.readouterr().err

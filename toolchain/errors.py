@@ -1,5 +1,6 @@
-"""The one error type for what a user can fix: a mistake in the input, a missing tool, a missing part of
-the installation. `fleetlab` prints its message as one line and exits 2; a bug still shows its traceback.
+"""The error types for what a user can fix: a mistake in the input (`InputError`, exit 1), a missing tool or
+part of the installation (`FleetlabError`, exit 2). `fleetlab` prints their message as one line. Any other
+exception is a bug: one "internal error" line (exit 70), and its traceback with `fleetlab --debug`.
 """
 
 from __future__ import annotations
@@ -14,6 +15,12 @@ def first_line(error: BaseException) -> str:
 
 class FleetlabError(Exception):
     """Something the user can fix; the message says what is wrong and how to fix it, in one line."""
+
+
+class InputError(FleetlabError, ValueError):
+    """A mistake in what the user gave: an option's value, a file's contents, a dataset that cannot serve the
+    request. Raised on purpose by every layer where it checks its input; `fleetlab` exits 1 with the line.
+    A ValueError too, so that a caller that tries an input and falls back (`except ValueError`) still can."""
 
 
 class MissingTool(FleetlabError):

@@ -6,7 +6,7 @@
  *   slipest_emu --vectors vectors.bin [--f32-tol T] [--verbose]   batch check of a bundle's vectors
  *   --model model.img (any mode)                      serve / check the model of that image instead
  *                                                     of the built-in bundle (no rebuild per bundle)
- *   --nvm FILE [--upload model.img [--activate]] [--rollback] (any mode)
+ *   --nvm FILE [--upload model.img [--activate | --try]] [--confirm] [--rollback] (any mode)
  *                                                     boot from A/B model slots kept in FILE (emu_nvm.c;
  *                                                     the built-in model when no slot is valid), upload
  *                                                     an image into the inactive slot, activate it
@@ -166,9 +166,11 @@ static int open_store(const char *path, uint32_t sector)
         return 2;
     }
     use_store_model();
-    fprintf(stderr, "slipest_emu: store boot: %s, slot %d, model %s version %lu\n",
+    fprintf(stderr, "slipest_emu: store boot: %s, slot %d, model %s version %lu%s\n",
             st == SLIPEST_OK ? "slot model" : "built-in model", slipest_store_active_slot(&store), model_hex,
-            (unsigned long)model_q->version);
+            (unsigned long)model_q->version,
+            slipest_store_trial_state(&store) == SLIPEST_TRIAL_REVERTED ? ", trial reverted"
+            : (slipest_store_trial_state(&store) == SLIPEST_TRIAL_RUNNING ? ", on trial" : ""));
     return 0;
 }
 
@@ -187,13 +189,14 @@ static int upload_image(const char *path, int activate)
         st = slipest_store_write(&store, (uint32_t)off, buf + off, n - off < 7u ? n - off : 7u);
     }
     if (st == SLIPEST_OK) st = slipest_store_finish(&store);
-    if (st == SLIPEST_OK && activate) st = slipest_store_activate(&store);
+    if (st == SLIPEST_OK && activate) st = (activate == 2) ? slipest_store_try(&store) : slipest_store_activate(&store);
     if (st != SLIPEST_OK) {
         fprintf(stderr, "slipest_emu: upload refused: %s (%d)\n", slipest_status_str(st), st);
         return 3;
     }
     use_store_model();
-    fprintf(stderr, "slipest_emu: upload ok%s: slot %d, model %s version %lu\n", activate ? ", activated" : "",
+    fprintf(stderr, "slipest_emu: upload ok%s: slot %d, model %s version %lu\n",
+            activate == 2 ? ", on trial" : (activate ? ", activated" : ""),
             slipest_store_active_slot(&store), model_hex, (unsigned long)model_q->version);
     return 0;
 }
@@ -315,8 +318,8 @@ static int serve(emu_t *e)
             return 1;
         }
         if (profile_canopen) {
-            slipest_frame_t t[2];
-            queue_frames(e, t, emu_co_tick(t, 2u));
+            slipest_frame_t t[SLIPEST_CO_MAX_OUT]; /* heartbeat, SDO timeout, or the segments of a block upload */
+            queue_frames(e, t, emu_co_tick(t, SLIPEST_CO_MAX_OUT));
         }
         if (out_idx >= 0 && (p[out_idx].revents & (POLLOUT | POLLERR))) {
             if (flush_some(e) != 0) {
@@ -428,6 +431,8 @@ static void usage(FILE *to)
             "  --nvm-sector N NVM sector size of FILE (default 256)\n"
             "  --upload IMG   write a model image into the inactive slot and validate it (needs --nvm)\n"
             "  --activate     activate the uploaded image; --rollback: re-activate the previous slot\n"
+            "  --try          activate the uploaded image on trial: the next boot reverts it unless --confirm\n"
+            "  --confirm      confirm the model on trial (the store's commit record)\n"
             "  test hook: --nvm-cut-after K [--nvm-cut-mode before|torn|after] dies by SIGKILL inside the\n"
             "             K-th NVM write/erase (before it, after half a sector, or after all of it)\n");
 }
@@ -436,7 +441,7 @@ int main(int argc, char **argv)
 {
     static emu_t e; /* 64 KB queue: not on the stack */
     const char *port = NULL, *vectors = NULL, *nvm_path = NULL, *upload = NULL;
-    int use_stdio = 0, use_pty = 0, verbose = 0, i, rc, slave_keep = -1, activate = 0, rollback = 0;
+    int use_stdio = 0, use_pty = 0, verbose = 0, i, rc, slave_keep = -1, activate = 0, rollback = 0, confirm = 0;
     int print_version = 0;
     const slipest_model_q_t *boot_q;
     const slipest_model_f32_t *boot_f;
@@ -481,6 +486,8 @@ int main(int argc, char **argv)
         }
         else if (strcmp(argv[i], "--upload") == 0 && i + 1 < argc) upload = argv[++i];
         else if (strcmp(argv[i], "--activate") == 0) activate = 1;
+        else if (strcmp(argv[i], "--try") == 0) activate = 2;
+        else if (strcmp(argv[i], "--confirm") == 0) confirm = 1;
         else if (strcmp(argv[i], "--rollback") == 0) rollback = 1;
         else if (strcmp(argv[i], "--profile") == 0 && i + 1 < argc) {
             const char *k = argv[++i];
@@ -527,11 +534,22 @@ int main(int argc, char **argv)
                     SLIPEST_STORE_SECTOR_MAX);
             return 2;
         }
+        /* armed before the boot: the hook cuts the revert of a model on trial that the boot makes (the only NVM
+         * write a boot can make), then an upload/activation/confirm/rollback */
+        nvm_file.cut_after = (uint32_t)cut_after;
+        nvm_file.mode = cut_mode;
         rc = open_store(nvm_path, (uint32_t)sector);
         if (rc != 0) return rc;
-        nvm_file.cut_after = (uint32_t)cut_after; /* armed after boot: the hook cuts an upload/activation */
-        nvm_file.mode = cut_mode;
         if (upload != NULL && (rc = upload_image(upload, activate)) != 0) return rc;
+        if (confirm) {
+            rc = slipest_store_confirm(&store);
+            if (rc != SLIPEST_OK) {
+                fprintf(stderr, "slipest_emu: confirm refused: %s (%d)\n", rc == SLIPEST_E_STATE ? "no model on trial"
+                                : slipest_status_str(rc), rc);
+                return 3;
+            }
+            fprintf(stderr, "slipest_emu: confirmed: slot %d, model %s\n", slipest_store_active_slot(&store), model_hex);
+        }
         if (rollback) {
             rc = slipest_store_rollback(&store);
             if (rc == SLIPEST_E_STATE) {
@@ -548,8 +566,8 @@ int main(int argc, char **argv)
                     slipest_store_active_slot(&store), model_hex, (unsigned long)model_q->version);
         }
         fprintf(stderr, "slipest_emu: nvm ops=%lu\n", (unsigned long)nvm_file.ops);
-    } else if (upload != NULL || rollback) {
-        fprintf(stderr, "slipest_emu: --upload / --rollback need --nvm FILE\n");
+    } else if (upload != NULL || rollback || confirm) {
+        fprintf(stderr, "slipest_emu: --upload / --rollback / --confirm need --nvm FILE\n");
         return 2;
     }
     if (print_version) {
@@ -617,13 +635,13 @@ int main(int argc, char **argv)
         e.in_fd = e.out_fd = fd;
     }
     if (profile_canopen) {
-        slipest_frame_t boot;
-        rc = emu_co_start((uint8_t)node_id, nvm_path != NULL ? &store : NULL, boot_q, boot_f, boot_sha256, &boot, 1u);
+        slipest_frame_t boot[3]; /* boot-up, the no-model EMCY, the trial-reverted EMCY */
+        rc = emu_co_start((uint8_t)node_id, nvm_path != NULL ? &store : NULL, boot_q, boot_f, boot_sha256, boot, 3u);
         if (rc < 0) {
             fprintf(stderr, "slipest_emu: CANopen node: %s\n", slipest_status_str(rc));
             return 2;
         }
-        queue_frames(&e, &boot, rc); /* the boot-up message */
+        queue_frames(&e, boot, rc); /* the boot-up message and its EMCYs */
     }
     fprintf(stderr, "slipest_emu: ready link=%s profile=%s model=%s lib=%u.%u\n",
             e.link == LINK_SLCAN ? "slcan" : "cobs", profile_canopen ? "canopen" : "dbc", model_hex,

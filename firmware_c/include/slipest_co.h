@@ -9,8 +9,10 @@
  * - a heartbeat producer (0x1017), whose time CiA 301 store / restore (0x1010 / 0x1011 sub 1, signatures "save" /
  *   "load") keeps in the store's commit record across resets and power cycles,
  * - an SDO server (expedited and segmented upload and download, block download with the CiA 301
- *   CRC): the model image is the DOMAIN object 0x2000, written into the inactive slot of a
- *   slipest_store_t and activated by writing 1 to 0x2002 sub 1,
+ *   CRC): the model image is the CiA 302-3 program: 0x1F50 sub 1 (DOMAIN) written into the inactive slot of a
+ *   slipest_store_t after a clear and read back as the active image, 0x1F51 sub 1 program control (stop, clear,
+ *   start on trial, 0x80 confirm, reset), 0x1F56 sub 1 the running model's hash32, 0x1F57 sub 1 the flash
+ *   status; 0x2002 (write 1) rolls back to the previous slot's model, which 302-3 has no command for,
  * - static PDOs: RPDO1..3 carry the three telemetry frames, TPDO1..3 the estimate, TPDO4 the
  *   active model's hash32 and version. Their payload bytes are those of the DBC frames, so the
  *   estimates are those of the plain profile, bit for bit,
@@ -67,6 +69,7 @@ typedef struct {
     uint8_t crc_on;   /**< block download with CRC */
     uint8_t seq_ok;   /**< last in-order sequence number of the current block */
     uint8_t seq_bad;  /**< a segment of this block came out of order */
+    uint8_t blksize;  /**< block upload: segments per block, as the client asked */
     uint8_t buf[32];  /**< value being uploaded, or a small value being downloaded */
 } slipest_co_sdo_t;
 
@@ -86,7 +89,12 @@ typedef struct {
     uint8_t nmt;                         /**< SLIPEST_CO_NMT_* */
     uint8_t err_reg;                     /**< error register 0x1001 */
     uint8_t from_store;                  /**< the active model is the store's */
-    int8_t last_store_status;            /**< last status of a store call (0x2006 sub 2) */
+    int8_t last_store_status;            /**< last status of a store call (0x2006 sub 2, 0x1F57 bits 16-23) */
+    uint8_t flash;                       /**< CiA 302-3 flash status code (0x1F57 bits 1-7, SLIPEST_CO_FLASH_*) */
+    uint8_t prog_stopped;                /**< 0x1F51 "stop": no estimates until "start" (SDO, heartbeat go on) */
+    uint8_t cleared;                     /**< 0x1F51 "clear" since the last 0x1F50 download: the next may begin */
+    uint8_t restart;                     /**< after the frame's answer: 0 none, 1 start, 2 reset (0x1F51), 3 NMT reset */
+    uint32_t reverts_seen;               /**< the store's trial_reverts the last boot EMCY reported */
     uint8_t pdo[SLIPEST_CO_N_PDO][8];    /**< last payload of each PDO */
 } slipest_co_t;
 
@@ -104,7 +112,7 @@ typedef struct {
  * @param[out] co        node context
  * @param[in]  node_id   CANopen node id, 1..127
  * @param[in]  serial    identity serial number (0x1018 sub 4)
- * @param[in]  store     an opened model store, or NULL (then 0x2000 refuses downloads)
+ * @param[in]  store     an opened model store, or NULL (then 0x1F50 refuses downloads)
  * @param[in]  builtin_q model used while no slot holds one (validated, e.g. slipest_bundle_model_q()),
  *                       or NULL for none
  * @param[in]  builtin_f its float model, or NULL
@@ -144,11 +152,12 @@ int slipest_co_handle(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_
                       size_t cap);
 
 /**
- * @brief Let time pass: heartbeat when due, SDO transfer timeout. Call at least every few ms.
+ * @brief Let time pass: heartbeat when due, SDO transfer timeout, and the next segments of an SDO block upload
+ *        (0x1F50 read back), as many as out has room for. Call at least every few ms.
  * @param[in,out] co      an initialised node
  * @param[in]     now_ms  current tick (ms)
- * @param[out]    out     receives up to 2 frames
- * @param[in]     cap     capacity of out (>= 2)
+ * @param[out]    out     receives up to cap frames
+ * @param[in]     cap     capacity of out (>= 2; a larger one sends a block upload faster)
  * @return frames written, or SLIPEST_E_NULL / SLIPEST_E_OVERFLOW
  */
 int slipest_co_tick(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out, size_t cap);

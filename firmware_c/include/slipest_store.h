@@ -152,7 +152,15 @@ typedef struct {
     uint32_t rollbacks;         /**< successful slipest_store_rollback() calls */
     uint32_t nvm_errors;        /**< NVM callbacks that returned an error */
     uint32_t boot_fallbacks;    /**< boots where the newest record was torn or its slot invalid */
+    uint32_t trial_reverts;     /**< models on trial that a reset found unconfirmed and replaced by the previous one */
 } slipest_store_counters_t;
+
+/** Trial state of the active model (slipest_store_trial_state()). */
+typedef enum {
+    SLIPEST_TRIAL_NONE = 0,     /**< the active model is confirmed (or there is none) */
+    SLIPEST_TRIAL_RUNNING = 1,  /**< the active model runs on trial: confirm it, or a reset reverts it */
+    SLIPEST_TRIAL_REVERTED = 2  /**< an unconfirmed trial was reverted since the store was opened */
+} slipest_trial_state_t;
 
 /** Upload state of the store. */
 typedef enum {
@@ -171,6 +179,7 @@ typedef struct {
     uint32_t version[SLIPEST_STORE_N_SLOTS];            /**< model version per slot */
     uint32_t hash32[SLIPEST_STORE_N_SLOTS];             /**< content hash32 per slot */
     uint8_t params_len;                                 /**< bytes of params stored (0: the defaults) */
+    uint8_t trial;                                      /**< 1: the active slot runs on trial (not confirmed) */
     uint8_t params[SLIPEST_STORE_PARAMS_MAX];           /**< the stored parameters */
 } slipest_store_record_t;
 
@@ -192,6 +201,7 @@ typedef struct {
     uint8_t buf[SLIPEST_STORE_SECTOR_MAX]; /**< one sector: write buffer and read-back buffer */
     uint8_t sha256[32];                   /**< trailer sha256 of the active image */
     uint8_t have_model;                   /**< mq (and mf) hold the active slot's model */
+    uint8_t reverted;                     /**< a trial was reverted since slipest_store_open() */
     slipest_model_q_t mq;                 /**< active fixed-point model (arrays in qs or tqs) */
     slipest_image_q_storage_t qs;         /**< its arrays, from a format-1 image */
 #ifndef SLIPEST_Q_ONLY
@@ -213,7 +223,8 @@ typedef struct {
 /**
  * @brief Open the store at boot: read both commit records, take the newest valid one whose
  *        active slot fully validates (CRC, hash, every model check, HMAC when auth is given),
- *        and load that slot's model into RAM.
+ *        and load that slot's model into RAM. When that record says the model runs on trial (slipest_store_try(),
+ *        never confirmed), the reset that led here reverts it: slipest_store_revert().
  * @param[out] store    store state to initialise
  * @param[in]  nvm      NVM interface (copied)
  * @param[in]  auth     image authentication (SLIPEST_STORE_AUTH_HMAC_SHA256()), or NULL for none;
@@ -282,6 +293,67 @@ slipest_status_t slipest_store_finish(slipest_store_t *store);
  *         because the RAM model may be partly overwritten. SLIPEST_E_NULL
  */
 slipest_status_t slipest_store_activate(slipest_store_t *store);
+
+/**
+ * @brief As slipest_store_activate(), but the new model runs on trial: the commit record says so, and until
+ *        slipest_store_confirm() every reset (slipest_store_open(), slipest_store_revert()) brings the previous
+ *        model back. While on trial no upload can begin (it would take the slot of the model to revert to).
+ * @param[in,out] store  the store
+ * @return as slipest_store_activate()
+ */
+slipest_status_t slipest_store_try(slipest_store_t *store);
+
+/**
+ * @brief Make the model on trial permanent: one commit record write (the same slots, the trial mark cleared), so
+ *        a power loss leaves it on trial (reverted at the next boot) or confirmed, never neither.
+ * @param[in,out] store  the store
+ * @return SLIPEST_OK; SLIPEST_E_STATE (no model on trial); SLIPEST_E_NVM (the trial stands); SLIPEST_E_NULL
+ */
+slipest_status_t slipest_store_confirm(slipest_store_t *store);
+
+/**
+ * @brief Revert an unconfirmed trial, as a reset does (slipest_store_open() calls it at every boot): one commit
+ *        record names the previous slot active again (or, when the trial model was the first one, none) and the
+ *        trial slot as no image; the previous model is loaded into RAM; trial_reverts counts it and
+ *        slipest_store_trial_state() says SLIPEST_TRIAL_REVERTED. A power loss during it leaves the trial record,
+ *        which the next boot reverts again.
+ * @param[in,out] store  the store
+ * @return SLIPEST_OK; SLIPEST_E_STATE (no trial); SLIPEST_E_NVM; or the previous slot's load failure (as
+ *         slipest_store_activate()); SLIPEST_E_NULL
+ */
+slipest_status_t slipest_store_revert(slipest_store_t *store);
+
+/**
+ * @brief Whether the active model runs on trial, or a trial was reverted since the store was opened.
+ * @param[in] store  the store, or NULL (SLIPEST_TRIAL_NONE)
+ * @return the trial state
+ */
+slipest_trial_state_t slipest_store_trial_state(const slipest_store_t *store);
+
+/**
+ * @brief Read bytes of the active slot's image as stored (for reading the running model back).
+ * @param[in]  store   the store
+ * @param[in]  offset  image offset
+ * @param[out] buf     receives len bytes
+ * @param[in]  len     bytes to read; offset + len must not pass the active image's length
+ * @return SLIPEST_OK; SLIPEST_E_STATE (no active slot); SLIPEST_E_LENGTH; SLIPEST_E_NVM; SLIPEST_E_NULL
+ */
+slipest_status_t slipest_store_read_active(slipest_store_t *store, uint32_t offset, uint8_t *buf, uint32_t len);
+
+/**
+ * @brief Open the store again on its own NVM interface and authentication, as at a reset (slipest_store_open():
+ *        an open upload is dropped, the counters start again, a model on trial is reverted).
+ * @param[in,out] store  an opened store
+ * @return as slipest_store_open()
+ */
+slipest_status_t slipest_store_reopen(slipest_store_t *store);
+
+/**
+ * @brief Bytes of the active slot's image.
+ * @param[in] store  the store
+ * @return its length, 0 when no slot is active (or store is NULL)
+ */
+uint32_t slipest_store_active_length(const slipest_store_t *store);
 
 /**
  * @brief Re-activate the previous slot's image (one command; no model version check). Refused

@@ -3,13 +3,16 @@
 #include <stddef.h>
 #include <string.h>
 
-#include "slipest_co_internal.h"
+#include "slipest_bytes.h"
+#include "slipest_co_model.h"
+#include "slipest_co_sdo.h"
 
 #define NMT_START 0x01u
 #define NMT_STOP 0x02u
 #define NMT_PRE_OPERATIONAL 0x80u
 #define NMT_RESET_NODE 0x81u
 #define NMT_RESET_COMMUNICATION 0x82u
+#define RESTART_NMT 3u /* co->restart: NMT reset node (beside SLIPEST_CO_RESTART_START / _RESET of 0x1F51) */
 
 size_t slipest_co_size(void) { return sizeof(slipest_co_t); }
 size_t slipest_co_store_size(void) { return sizeof(slipest_store_t); }
@@ -43,7 +46,7 @@ static int bootup(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
     const uint8_t *stored = slipest_store_params(co->store, &len); /* 0x1010's record, NULL: the defaults */
     co->hb_ms = (uint16_t)SLIPEST_CO_HEARTBEAT_DEFAULT_MS;
     if (stored != NULL && len >= SLIPEST_CO_PARAMS_BYTES) {
-        co->hb_ms = (uint16_t)slipest_co_get_le(stored, SLIPEST_CO_PARAMS_BYTES); /* objects.STORED_PARAMS */
+        co->hb_ms = (uint16_t)slipest_le_get(stored, SLIPEST_CO_PARAMS_BYTES); /* objects.STORED_PARAMS */
     }
     co->hb_last_ms = now_ms;
     co->err_reg &= (uint8_t)~SLIPEST_CO_ERR_COMM;
@@ -83,14 +86,42 @@ static slipest_status_t reset_application(slipest_co_t *co)
     return st;
 }
 
-/* Boot-up message, then, when no model can run, the no-model EMCY (out has room for both). */
-static int boot(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
+/* Boot-up message, then, when no model can run, the no-model EMCY, and when the store reverted a model on trial
+ * since the last boot, the trial-reverted EMCY (each while out has room: room >= 1 frames). */
+static int boot(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out, size_t room)
 {
+    const slipest_store_counters_t *c = slipest_store_counters(co->store);
+    uint32_t reverts = (c == NULL) ? 0u : c->trial_reverts; /* counted since the store was opened */
     int n = bootup(co, now_ms, out);
-    if (slipest_node_model_q(&co->est) == NULL) {
+    if (slipest_node_model_q(&co->est) == NULL && (size_t)n < room) {
         n += slipest_co_emcy(co, SLIPEST_CO_EMCY_NO_MODEL, SLIPEST_CO_ERR_MANUFACTURER, SLIPEST_E_STATE, &out[n]);
     }
+    if (reverts > co->reverts_seen && (size_t)n < room) {
+        n += slipest_co_emcy(co, SLIPEST_CO_EMCY_TRIAL_REVERTED, SLIPEST_CO_ERR_MANUFACTURER, SLIPEST_OK, &out[n]);
+    }
+    co->reverts_seen = reverts;
     return n;
+}
+
+/* NMT reset node, 0x1F51 "start" and "reset": the application restarts on the store's active model, then boot-up.
+ * "reset" re-reads the store from NVM, an NMT reset reverts a model on trial (both as a power cycle would); "start"
+ * keeps the store as the activation left it. */
+static int restart(slipest_co_t *co, unsigned how, uint32_t now_ms, slipest_frame_t *out)
+{
+    uint32_t nmt_count = co->cnt[SLIPEST_CO_CNT_NMT_COMMANDS];
+    slipest_co_sdo_reset(co);
+    if (how == SLIPEST_CO_RESTART_RESET) {
+        (void)slipest_store_reopen(co->store); /* no store: nothing to re-read */
+    } else if (how == RESTART_NMT) {
+        (void)slipest_store_revert(co->store); /* no model on trial: nothing to revert */
+    } else {
+        /* "start": the activation on trial is what runs */
+    }
+    co->restart = 0u;
+    co->prog_stopped = 0u;
+    if (reset_application(co) != SLIPEST_OK) return 0;
+    co->cnt[SLIPEST_CO_CNT_NMT_COMMANDS] = nmt_count;
+    return boot(co, now_ms, out, 3u);
 }
 
 int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_store_t *store,
@@ -109,7 +140,7 @@ int slipest_co_init(slipest_co_t *co, uint8_t node_id, uint32_t serial, slipest_
     co->builtin_f = builtin_f;
     st = reset_application(co);
     if (st != SLIPEST_OK) return st;
-    return boot(co, now_ms, out);
+    return boot(co, now_ms, out, cap);
 }
 
 void slipest_co_set_builtin_sha256(slipest_co_t *co, const uint8_t *sha256)
@@ -119,6 +150,7 @@ void slipest_co_set_builtin_sha256(slipest_co_t *co, const uint8_t *sha256)
     }
 }
 
+/* NMT command; a reset node is left in co->restart, for slipest_co_handle()'s one call of restart() */
 static int nmt(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, slipest_frame_t *out)
 {
     if (in->dlc != 2u || (in->data[1] != 0u && in->data[1] != co->node_id)) {
@@ -132,13 +164,7 @@ static int nmt(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, sli
         co->nmt = SLIPEST_CO_NMT_STOPPED;
         return 0;
     case NMT_PRE_OPERATIONAL: co->nmt = SLIPEST_CO_NMT_PRE_OPERATIONAL; return 0;
-    case NMT_RESET_NODE: {
-        uint32_t nmt_count = co->cnt[SLIPEST_CO_CNT_NMT_COMMANDS];
-        slipest_co_sdo_reset(co);
-        if (reset_application(co) != SLIPEST_OK) return 0;
-        co->cnt[SLIPEST_CO_CNT_NMT_COMMANDS] = nmt_count;
-        return boot(co, now_ms, out);
-    }
+    case NMT_RESET_NODE: co->restart = RESTART_NMT; return 0;
     case NMT_RESET_COMMUNICATION: return bootup(co, now_ms, out);
     default: return ignored(co); /* unknown command (NMT has no answer) */
     }
@@ -159,8 +185,8 @@ static int to_tpdo(slipest_co_t *co, const slipest_frame_t *f, slipest_frame_t *
         (void)memset(out->data, 0, sizeof out->data);
         if (p->payload == SLIPEST_CO_PAYLOAD_MODEL_STATUS) {
             const slipest_model_q_t *m = slipest_node_model_q(&co->est);
-            slipest_co_put_le(&out->data[0], slipest_model_hash32(m), 4u);
-            slipest_co_put_le(&out->data[4], m->version, 4u);
+            slipest_put_le32(&out->data[0], slipest_model_hash32(m));
+            slipest_put_le32(&out->data[4], m->version);
         } else {
             (void)memcpy(out->data, f->data, p->dlc); /* the DBC frame's bytes, little-endian already */
         }
@@ -170,13 +196,6 @@ static int to_tpdo(slipest_co_t *co, const slipest_frame_t *f, slipest_frame_t *
     return 0;
 }
 
-/* A 16-bit two's complement wire value as int16_t (no implementation-defined conversion). */
-static int16_t wire_s16(uint32_t u)
-{
-    int32_t v = (u > 0x7FFFu) ? ((int32_t)u - 65536) : (int32_t)u; /* u < 2^16 */
-    return (int16_t)v;
-}
-
 static int rpdo(slipest_co_t *co, unsigned k, const slipest_frame_t *in, slipest_frame_t *out)
 {
     const slipest_co_pdo_t *p = &slipest_co_pdos[k];
@@ -184,8 +203,8 @@ static int rpdo(slipest_co_t *co, unsigned k, const slipest_frame_t *in, slipest
     int16_t v[3] = {0, 0, 0};
     unsigned j;
     int r, i, n = 0;
-    if (co->nmt != SLIPEST_CO_NMT_OPERATIONAL) {
-        return ignored(co); /* PDOs only when operational */
+    if (co->nmt != SLIPEST_CO_NMT_OPERATIONAL || co->prog_stopped != 0u) {
+        return ignored(co); /* PDOs only when operational; no estimates while 0x1F51 says stopped */
     }
     co->cnt[SLIPEST_CO_CNT_RPDO_RECEIVED]++;
     if (in->dlc != p->dlc) {
@@ -206,9 +225,9 @@ static int rpdo(slipest_co_t *co, unsigned k, const slipest_frame_t *in, slipest
     /* RPDO k carries telemetry frame type k: UNSIGNED16 sample counter, then INTEGER16 signals,
      * little-endian (canopen_od/generate.py refuses any other layout) */
     for (j = 0; (j < 3u) && (((2u * j) + 4u) <= (unsigned)p->dlc); j++) {
-        v[j] = wire_s16(slipest_co_get_le(&in->data[2u + (2u * j)], 2u));
+        v[j] = slipest_s16(slipest_le16(&in->data[2u + (2u * j)]));
     }
-    r = slipest_node_telemetry(&co->est, k, (uint16_t)slipest_co_get_le(in->data, 2u), v, est_out,
+    r = slipest_node_telemetry(&co->est, k, slipest_le16(in->data), v, est_out,
                                SLIPEST_NODE_MAX_OUT);
     for (i = 0; i < r; i++) {
         n += to_tpdo(co, &est_out[i], &out[n]);
@@ -220,20 +239,29 @@ int slipest_co_handle(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_
                       size_t cap)
 {
     unsigned k;
+    int n;
     if (co == NULL || in == NULL || out == NULL) return SLIPEST_E_NULL;
     if (cap < SLIPEST_CO_MAX_OUT) return SLIPEST_E_OVERFLOW;
     if ((in->id & SLIPEST_FRAME_EXT) != 0u) {
         return ignored(co); /* CANopen uses 11-bit identifiers */
     }
-    if (in->id == 0u) return nmt(co, in, now_ms, out);
-    if (co->nmt == SLIPEST_CO_NMT_STOPPED) {
+    if (in->id == 0u) {
+        n = nmt(co, in, now_ms, out);
+    } else if (co->nmt == SLIPEST_CO_NMT_STOPPED) {
         return ignored(co); /* stopped: NMT only */
+    } else if (in->id == 0x600u + co->node_id) {
+        n = slipest_co_sdo_request(co, in, now_ms, out);
+    } else {
+        for (k = 0; k < SLIPEST_CO_N_RPDO; k++) {
+            if (in->id == (uint32_t)slipest_co_pdos[k].cob_base + co->node_id) return rpdo(co, k, in, out);
+        }
+        return ignored(co); /* another node's traffic */
     }
-    if (in->id == 0x600u + co->node_id) return slipest_co_sdo_request(co, in, now_ms, out);
-    for (k = 0; k < SLIPEST_CO_N_RPDO; k++) {
-        if (in->id == (uint32_t)slipest_co_pdos[k].cob_base + co->node_id) return rpdo(co, k, in, out);
+    /* NMT reset node, 0x1F51 start / reset (after the SDO answer): one call site, so one copy of restart() */
+    if (co->restart != 0u) {
+        n += restart(co, co->restart, now_ms, &out[n]);
     }
-    return ignored(co); /* another node's traffic */
+    return n;
 }
 
 int slipest_co_tick(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out, size_t cap)
@@ -245,6 +273,6 @@ int slipest_co_tick(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out, siz
         co->hb_last_ms = now_ms;
         n += nmt_state_frame(co, co->nmt, &out[n]);
     }
-    n += slipest_co_sdo_tick(co, now_ms, &out[n]);
+    n += slipest_co_sdo_tick(co, now_ms, &out[n], cap - (size_t)n); /* cap >= 2, n <= 1 */
     return n;
 }

@@ -3,7 +3,10 @@
 #include <stddef.h>
 #include <string.h>
 
-#include "slipest_co_internal.h"
+#include "slipest_co_od_access.h"
+
+#include "slipest_bytes.h"
+#include "slipest_co_model.h"
 
 const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32_t *abort_code, uint16_t *entry)
 {
@@ -84,7 +87,7 @@ static uint32_t read_model(const slipest_co_t *co, unsigned what, uint8_t buf[32
     }
     default: v = slipest_lib_version(); break; /* SLIPEST_CO_MODEL_LIBRARY_VERSION */
     }
-    slipest_co_put_le(buf, v, *len);
+    slipest_le_put(buf, v, *len);
     return 0u;
 }
 
@@ -125,6 +128,24 @@ uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e,
     }
     case SLIPEST_CO_KIND_STORE_CNT: v = store_counter(slipest_store_counters(co->store), arg); break;
     case SLIPEST_CO_KIND_PARAMS: v = (co->store != NULL) ? (uint32_t)1u : (uint32_t)0u; break; /* bit 0: on command (CiA 301) */
+    case SLIPEST_CO_KIND_PROG_CTRL:
+        v = (slipest_node_model_q(&co->est) == NULL) ? SLIPEST_CO_PROG_STATE_NO_PROGRAM
+                                                     : ((co->prog_stopped != 0u) ? SLIPEST_CO_PROG_STATE_STOPPED
+                                                                                 : SLIPEST_CO_PROG_STATE_STARTED);
+        break;
+    case SLIPEST_CO_KIND_FLASH:
+        /* bit 0 busy (a download open), bits 1-7 the 302-3 code, bits 16-23 the slipest status behind it */
+        v = ((uint32_t)co->flash << SLIPEST_CO_FLASH_CODE_SHIFT) |
+            ((uint32_t)(uint8_t)co->last_store_status << SLIPEST_CO_FLASH_SLIPEST_SHIFT);
+        if (slipest_store_upload_state(co->store) == SLIPEST_UPLOAD_RECEIVING) {
+            v |= SLIPEST_CO_FLASH_BUSY;
+        }
+        break;
+    case SLIPEST_CO_KIND_DOMAIN:
+        /* 0x1F50 read: the active slot's image, streamed from the NVM by the SDO server; no slot model (the built-in
+         * one, or none): an empty DOMAIN, so the object answers in every state */
+        *len = slipest_store_active_length(co->store);
+        return 0u;
     case SLIPEST_CO_KIND_UPLOAD:
         if (arg == SLIPEST_CO_UPLOAD_STATE) {
             v = (co->store == NULL) ? 0u : (uint32_t)slipest_store_upload_state(co->store);
@@ -136,7 +157,7 @@ uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e,
         break;
     default: return SLIPEST_CO_ABORT_GENERAL;
     }
-    slipest_co_put_le(buf, v, *len);
+    slipest_le_put(buf, v, *len);
     return 0u;
 }
 
@@ -150,7 +171,7 @@ uint32_t slipest_co_od_write(slipest_co_t *co, const slipest_co_entry_t *e, cons
     if (size == 0u || size > 4u) return SLIPEST_CO_ABORT_UNSUPPORTED; /* DOMAIN: via the transfer */
     if (len > size) return SLIPEST_CO_ABORT_TOO_HIGH;
     if (len < size) return SLIPEST_CO_ABORT_TOO_LOW;
-    v = slipest_co_get_le(data, len);
+    v = slipest_le_get(data, len);
     switch (SLIPEST_CO_KIND(*e)) {
     case SLIPEST_CO_KIND_HB_TIME:
         co->hb_ms = (uint16_t)v;
@@ -164,6 +185,7 @@ uint32_t slipest_co_od_write(slipest_co_t *co, const slipest_co_entry_t *e, cons
     case SLIPEST_CO_KIND_COMMAND:
         if (v != 1u) return SLIPEST_CO_ABORT_VALUE; /* a command is started by writing 1 */
         return slipest_co_model_command(co, arg, out, n);
+    case SLIPEST_CO_KIND_PROG_CTRL: return slipest_co_program_control(co, v, out, n);
     case SLIPEST_CO_KIND_PARAMS: {
         /* CiA 301 0x1010 / 0x1011 sub 1: with its signature, the stored communication parameters (objects.STORED_PARAMS,
          * in order: the heartbeat time, as generate.py checks) go into the store's commit record, or none (the
@@ -173,7 +195,7 @@ uint32_t slipest_co_od_write(slipest_co_t *co, const slipest_co_entry_t *e, cons
         if (v != ((arg == SLIPEST_CO_PARAMS_SAVE) ? SLIPEST_CO_SIGNATURE_SAVE : SLIPEST_CO_SIGNATURE_LOAD)) {
             return SLIPEST_CO_ABORT_STORE;
         }
-        slipest_co_put_le(rec, co->hb_ms, SLIPEST_CO_PARAMS_BYTES);
+        slipest_le_put(rec, co->hb_ms, SLIPEST_CO_PARAMS_BYTES);
         st = slipest_store_params_save(co->store, rec, (arg == SLIPEST_CO_PARAMS_SAVE) ? SLIPEST_CO_PARAMS_BYTES : 0u);
         /* no store: 0x08000022; an upload open: 0x08000022; NVM: 0x06060000 and EMCY 0x5000 */
         return (st == SLIPEST_OK) ? 0u : slipest_co_store_failed(co, st, out, n);

@@ -1,9 +1,13 @@
 /* CANopen SDO server (CiA 301): expedited and segmented upload and download, block download
- * with the optional CRC. The model image (DOMAIN 0x2000) streams into the store's inactive slot
- * as it arrives, so no image-sized buffer exists in RAM. */
+ * with the optional CRC, block upload of the DOMAIN. The model image (CiA 302-3 program data, DOMAIN 0x1F50 sub 1)
+ * streams into the store's inactive slot as it arrives, so no image-sized buffer exists in RAM. */
 #include <string.h>
 
-#include "slipest_co_internal.h"
+#include "slipest_co_sdo.h"
+
+#include "slipest_bytes.h"
+#include "slipest_co_model.h"
+#include "slipest_co_od_access.h"
 
 /* client command specifiers (byte 0 >> 5) */
 #define CCS_DOWNLOAD_SEGMENT 0u
@@ -11,6 +15,7 @@
 #define CCS_UPLOAD_INITIATE 2u
 #define CCS_UPLOAD_SEGMENT 3u
 #define CCS_ABORT 4u
+#define CCS_BLOCK_UPLOAD 5u
 #define CCS_BLOCK_DOWNLOAD 6u
 
 static void frame8(slipest_co_t *co, slipest_frame_t *f)
@@ -22,7 +27,7 @@ static void frame8(slipest_co_t *co, slipest_frame_t *f)
 
 static void put_mux(slipest_frame_t *f, uint16_t index, uint8_t sub)
 {
-    slipest_co_put_le(&f->data[1], index, 2u);
+    slipest_le_put(&f->data[1], index, 2u);
     f->data[3] = sub;
 }
 
@@ -35,7 +40,8 @@ static int is_domain(const slipest_co_t *co)
  * refused the image) is left as it is, and so is 0x2006 sub 2, which keeps the refusal's status. */
 static void end_transfer(slipest_co_t *co, int abandon)
 {
-    if (abandon && co->sdo.state != SLIPEST_CO_SDO_IDLE && co->sdo.state != SLIPEST_CO_SDO_UPLOAD && is_domain(co) &&
+    if (abandon && co->sdo.state != SLIPEST_CO_SDO_IDLE && co->sdo.state != SLIPEST_CO_SDO_UPLOAD &&
+        co->sdo.state < SLIPEST_CO_SDO_UP_START && is_domain(co) &&
         slipest_store_upload_state(co->store) == SLIPEST_UPLOAD_RECEIVING) {
         co->last_store_status = (int8_t)slipest_store_abort(co->store);
     }
@@ -48,7 +54,7 @@ static int abort_frame(slipest_co_t *co, uint16_t index, uint8_t sub, uint32_t c
     frame8(co, out);
     out->data[0] = 0x80u;
     put_mux(out, index, sub);
-    slipest_co_put_le(&out->data[4], code, 4u);
+    slipest_put_le32(&out->data[4], code);
     co->cnt[SLIPEST_CO_CNT_SDO_ABORTS_SENT]++;
     return 1;
 }
@@ -73,10 +79,12 @@ static const slipest_co_entry_t *open_entry(slipest_co_t *co, const slipest_fram
 {
     uint32_t code = 0u;
     const slipest_co_entry_t *e;
-    co->sdo.index = (uint16_t)slipest_co_get_le(&in->data[1], 2u);
+    /* the transfer in progress ends first, while co->sdo still names its object: a model download that a new
+     * request interrupts is then abandoned in the store (not left receiving until the next clear) */
+    end_transfer(co, 1);
+    co->sdo.index = slipest_le16(&in->data[1]);
     co->sdo.sub = in->data[3];
     e = slipest_co_od_find(co->sdo.index, co->sdo.sub, &code, &co->sdo.entry);
-    end_transfer(co, 1);
     if (e == NULL) {
         (void)abort_cur(co, code, out);
     }
@@ -88,13 +96,23 @@ void slipest_co_sdo_reset(slipest_co_t *co)
     end_transfer(co, 1);
 }
 
-/* Open a DOMAIN download of `size` bytes into the store; 0 or an abort code. */
+/* Open a DOMAIN download of `size` bytes into the store; 0 or an abort code. 0x1F50 takes one download per
+ * 0x1F51 "clear", as CiA 302-3 asks (the clear is spent whatever the download's fate). */
 static uint32_t domain_begin(slipest_co_t *co, uint32_t size, slipest_frame_t *out, int *n)
 {
     slipest_status_t st;
+    uint8_t cleared = co->cleared;
+    co->cleared = 0u;
     if (co->store == NULL) return SLIPEST_CO_ABORT_STATE;
+    if (cleared == 0u) {
+        co->flash = (uint8_t)SLIPEST_CO_FLASH_NOT_CLEARED;
+        return SLIPEST_CO_ABORT_STATE; /* docs/model_update.md: 0x08000022, 0x1F57 code 4 */
+    }
+    co->flash = (uint8_t)SLIPEST_CO_FLASH_ADDRESS_ERROR;
     if (size > SLIPEST_STORE_IMAGE_MAX) return SLIPEST_CO_ABORT_TOO_HIGH; /* the slot size of this build */
+    co->flash = (uint8_t)SLIPEST_CO_FLASH_FORMAT_ERROR;
     if (size < SLIPEST_IMAGE_HEADER_SIZE + SLIPEST_IMAGE_TRAILER_SIZE) return SLIPEST_CO_ABORT_TOO_LOW;
+    co->flash = (uint8_t)SLIPEST_CO_FLASH_OK;
     if (slipest_store_upload_state(co->store) == SLIPEST_UPLOAD_RECEIVING) {
         (void)slipest_store_abort(co->store); /* a new transfer replaces a stalled one */
     }
@@ -145,7 +163,7 @@ static int download_initiate(slipest_co_t *co, const slipest_frame_t *in, slipes
         /* segmented: the size must be indicated (a DOMAIN needs it to open the slot) */
         code = SLIPEST_CO_ABORT_LENGTH;
     } else {
-        co->sdo.size = slipest_co_get_le(&in->data[4], 4u);
+        co->sdo.size = slipest_le32(&in->data[4]);
         co->sdo.done = 0u;
         co->sdo.toggle = 0u;
         if (SLIPEST_CO_KIND(*e) == SLIPEST_CO_KIND_DOMAIN) {
@@ -212,15 +230,14 @@ static int upload_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_
     const slipest_co_entry_t *e = open_entry(co, in, out);
     if (e == NULL) return 1;
     code = slipest_co_od_read(co, e, co->sdo.buf, &len);
-    if (code == 0u && len == 0u) code = SLIPEST_CO_ABORT_WRITE_ONLY; /* the DOMAIN is write-only */
     if (code != 0u) return abort_cur(co, code, out);
-    if (len <= 4u) { /* expedited, size indicated */
+    if (len <= 4u && !is_domain(co)) { /* expedited, size indicated (a DOMAIN, even an empty one, goes segmented) */
         answer(co, (uint8_t)(0x43u | ((4u - len) << 2)), out);
         (void)memcpy(&out->data[4], co->sdo.buf, len);
         return 1;
     }
     answer(co, 0x41u, out); /* segmented, size indicated */
-    slipest_co_put_le(&out->data[4], len, 4u);
+    slipest_put_le32(&out->data[4], len);
     co->sdo.size = len;
     co->sdo.done = 0u;
     co->sdo.toggle = 0u;
@@ -242,7 +259,14 @@ static int upload_segment(slipest_co_t *co, const slipest_frame_t *in, slipest_f
         len = 7u;
     }
     frame8(co, out);
-    (void)memcpy(&out->data[1], &co->sdo.buf[co->sdo.done], len);
+    if (is_domain(co)) {
+        /* 0x1F50: the active image, read from its slot as stored */
+        if (len > 0u && slipest_store_read_active(co->store, co->sdo.done, &out->data[1], len) != SLIPEST_OK) {
+            return abort_cur(co, SLIPEST_CO_ABORT_HARDWARE, out);
+        }
+    } else {
+        (void)memcpy(&out->data[1], &co->sdo.buf[co->sdo.done], len);
+    }
     co->sdo.done += len;
     out->data[0] = (uint8_t)((co->sdo.toggle << 4) | ((7u - len) << 1));
     if (co->sdo.done >= co->sdo.size) {
@@ -263,7 +287,7 @@ static int block_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_f
     /* block transfers carry the model image only; small values go expedited */
     if (SLIPEST_CO_KIND(*e) != SLIPEST_CO_KIND_DOMAIN) return abort_cur(co, SLIPEST_CO_ABORT_UNSUPPORTED, out);
     if ((cmd & 0x02u) == 0u) return abort_cur(co, SLIPEST_CO_ABORT_LENGTH, out);
-    co->sdo.size = slipest_co_get_le(&in->data[4], 4u);
+    co->sdo.size = slipest_le32(&in->data[4]);
     co->sdo.done = 0u;
     code = domain_begin(co, co->sdo.size, &out[1], &n);
     if (code != 0u) {
@@ -338,7 +362,7 @@ static int block_end(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_
         ((co->sdo.size % 7u) == 0u && unused != 0u)) {
         return abort_cur(co, SLIPEST_CO_ABORT_LENGTH, out);
     }
-    if (co->sdo.crc_on != 0u && (uint16_t)slipest_co_get_le(&in->data[1], 2u) != co->sdo.crc) {
+    if (co->sdo.crc_on != 0u && slipest_le16(&in->data[1]) != co->sdo.crc) {
         return abort_cur(co, SLIPEST_CO_ABORT_CRC, out);
     }
     code = domain_finish(co, &out[1], &n);
@@ -350,6 +374,93 @@ static int block_end(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_
     frame8(co, out);
     out->data[0] = 0xA1u;
     return n;
+}
+
+/* Block upload (CiA 301) of the 0x1F50 image, read from its slot: the segments of a block go out as room allows
+ * (the rest at the next calls, slipest_co_sdo_tick()), the client acknowledges each block and its last in-order
+ * segment; what it missed is sent again from there. No CRC is offered (the initiate response says so): each frame
+ * has CAN's, and a master compares the bytes with its own image. */
+static int up_send(slipest_co_t *co, slipest_frame_t *out, size_t room)
+{
+    int n = 0;
+    /* at most room frames (<= SLIPEST_CO_MAX_OUT), and at most blksize (<= 127) per block */
+    while (co->sdo.state == SLIPEST_CO_SDO_UP_SEND && (size_t)n < room) {
+        uint32_t off = co->sdo.done + 7u * co->sdo.seq_ok;
+        uint32_t len = co->sdo.size - off;
+        if (len > 7u) {
+            len = 7u;
+        }
+        frame8(co, &out[n]);
+        if (slipest_store_read_active(co->store, off, &out[n].data[1], len) != SLIPEST_OK) {
+            return n + abort_cur(co, SLIPEST_CO_ABORT_HARDWARE, &out[n]);
+        }
+        co->sdo.seq_ok++;
+        out[n].data[0] = co->sdo.seq_ok;
+        if (off + len >= co->sdo.size) {
+            out[n].data[0] |= 0x80u; /* the last segment of the transfer */
+            co->sdo.state = SLIPEST_CO_SDO_UP_ACK;
+        } else if (co->sdo.seq_ok >= co->sdo.blksize) {
+            co->sdo.state = SLIPEST_CO_SDO_UP_ACK;
+        } else {
+            /* the block goes on */
+        }
+        n++;
+    }
+    return n;
+}
+
+static int block_upload(slipest_co_t *co, const slipest_frame_t *in, slipest_frame_t *out)
+{
+    uint32_t len = 0u, code;
+    const slipest_co_entry_t *e;
+    switch (in->data[0] & 0x03u) {
+    case 0u: /* initiate: the DOMAIN only (small values go expedited) */
+        e = open_entry(co, in, out);
+        if (e == NULL) return 1;
+        if (SLIPEST_CO_KIND(*e) != SLIPEST_CO_KIND_DOMAIN) return abort_cur(co, SLIPEST_CO_ABORT_UNSUPPORTED, out);
+        code = slipest_co_od_read(co, e, co->sdo.buf, &len);
+        if (code == 0u && len == 0u) code = SLIPEST_CO_ABORT_NO_DATA; /* an empty DOMAIN: read it segmented */
+        if (code == 0u && (in->data[4] == 0u || in->data[4] > 127u)) code = SLIPEST_CO_ABORT_COMMAND; /* blksize */
+        if (code != 0u) return abort_cur(co, code, out);
+        co->sdo.size = len;
+        co->sdo.done = 0u;
+        co->sdo.blksize = in->data[4];
+        co->sdo.state = SLIPEST_CO_SDO_UP_START;
+        answer(co, 0xC2u, out); /* size indicated, no CRC */
+        slipest_put_le32(&out->data[4], len);
+        return 1;
+    case 3u: /* start */
+        if (co->sdo.state != SLIPEST_CO_SDO_UP_START) {
+            break;
+        }
+        co->sdo.seq_ok = 0u;
+        co->sdo.state = SLIPEST_CO_SDO_UP_SEND;
+        return up_send(co, out, SLIPEST_CO_MAX_OUT);
+    case 2u: /* a block acknowledged up to its in-order segment data[1]; the next block has data[2] segments */
+        if (co->sdo.state != SLIPEST_CO_SDO_UP_ACK && co->sdo.state != SLIPEST_CO_SDO_UP_SEND) break;
+        if (in->data[1] > co->sdo.seq_ok || in->data[2] == 0u || in->data[2] > 127u) {
+            return abort_cur(co, SLIPEST_CO_ABORT_SEQUENCE, out);
+        }
+        co->sdo.done += 7u * in->data[1];
+        co->sdo.seq_ok = 0u;
+        co->sdo.blksize = in->data[2];
+        if (co->sdo.done >= co->sdo.size) {
+            uint32_t last = co->sdo.size % 7u;
+            co->sdo.state = SLIPEST_CO_SDO_UP_END;
+            frame8(co, out);
+            out->data[0] = (uint8_t)(0xC1u | ((last == 0u ? 0u : 7u - last) << 2)); /* unused bytes of the last */
+            return 1;
+        }
+        co->sdo.state = SLIPEST_CO_SDO_UP_SEND;
+        return up_send(co, out, SLIPEST_CO_MAX_OUT);
+    default: /* 1: end */
+        if (co->sdo.state != SLIPEST_CO_SDO_UP_END) {
+            break;
+        }
+        co->sdo.state = SLIPEST_CO_SDO_IDLE;
+        return 0;
+    }
+    return abort_cur(co, SLIPEST_CO_ABORT_COMMAND, out);
 }
 
 int slipest_co_sdo_request(slipest_co_t *co, const slipest_frame_t *in, uint32_t now_ms, slipest_frame_t *out)
@@ -375,21 +486,28 @@ int slipest_co_sdo_request(slipest_co_t *co, const slipest_frame_t *in, uint32_t
         co->cnt[SLIPEST_CO_CNT_SDO_ABORTS_RECEIVED]++;
         end_transfer(co, 1);
         return 0; /* no answer to an abort */
+    case CCS_BLOCK_UPLOAD: return block_upload(co, in, out);
     case CCS_BLOCK_DOWNLOAD:
         if ((in->data[0] & 0x01u) == 0u) return block_initiate(co, in, out);
         if (co->sdo.state != SLIPEST_CO_SDO_BLOCK_END) {
             return abort_cur(co, SLIPEST_CO_ABORT_COMMAND, out);
         }
         return block_end(co, in, out);
-    default: /* block upload and anything else */
-        return abort_frame(co, (uint16_t)slipest_co_get_le(&in->data[1], 2u), in->data[3], SLIPEST_CO_ABORT_COMMAND,
+    default: /* anything else */
+        return abort_frame(co, slipest_le16(&in->data[1]), in->data[3], SLIPEST_CO_ABORT_COMMAND,
                            out);
     }
 }
 
-int slipest_co_sdo_tick(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out)
+int slipest_co_sdo_tick(slipest_co_t *co, uint32_t now_ms, slipest_frame_t *out, size_t room)
 {
     if (co->sdo.state == SLIPEST_CO_SDO_IDLE) return 0;
-    if ((uint32_t)(now_ms - co->sdo.last_ms) < SLIPEST_CO_SDO_TIMEOUT_MS) return 0;
-    return abort_cur(co, SLIPEST_CO_ABORT_TIMEOUT, out);
+    if ((uint32_t)(now_ms - co->sdo.last_ms) >= SLIPEST_CO_SDO_TIMEOUT_MS) {
+        return abort_cur(co, SLIPEST_CO_ABORT_TIMEOUT, out);
+    }
+    if (co->sdo.state == SLIPEST_CO_SDO_UP_SEND) {
+        co->sdo.last_ms = now_ms; /* a block being sent is not a stalled transfer */
+        return up_send(co, out, room);
+    }
+    return 0;
 }

@@ -1,10 +1,12 @@
-/* The format-2 (layer-table) parts of the one model-image validator (slipest_image.c's stream; writer:
+/* The format-2 (layer-table) visitor of the model-image stream (slipest_image_stream.c; writer:
  * export/model_image.py, every offset and size from slipest_image_layout.h, generated from
- * export/image_layout.py). Kept apart from the format-1 reader so that a build without layer tables does not
+ * export/image_layout.py). Kept apart from the format-1 visitor so that a build without layer tables does not
  * link it. The header's table is checked against the build's caps, and the payload size against the size the
  * table gives, before any payload byte is taken; the payload is then a list of segments derived from the
  * table (per block w, b, gamma, beta, GELU; the head's w, b; the seeds; then the float arrays), each element
- * checked as it arrives and stored when the caller gave storage. */
+ * checked as it arrives and stored when the caller gave storage. It calls no other image file: the stream
+ * calls it, and the whole-buffer reader (slipest_image_read_table(), slipest_image_buffer.c) sits on top. */
+#include "slipest_bytes.h"
 #include "slipest_image_table.h"
 #include "slipest_image.h"
 #include "slipest_image_internal.h"
@@ -14,17 +16,6 @@
 
 /* the byte offset of record k of the layer table */
 static size_t rec_at(unsigned k) { return SLIPEST_IMAGE_V2_TABLE_AT + ((size_t)k * SLIPEST_IMAGE_V2_RECORD_SIZE); }
-
-/* an unsigned 16-bit field from its little-endian bytes */
-static uint16_t u16_at(const uint8_t *p) { return (uint16_t)((unsigned)p[0] | ((unsigned)p[1] << 8)); }
-
-static int16_t i16_at(const uint8_t *p) { return slipest_image_s16(u16_at(p)); }
-static int32_t i32_at(const uint8_t *p) { return slipest_image_s32(slipest_image_le32(p)); }
-
-uint16_t slipest_image_format_of(const uint8_t *img, size_t len)
-{
-    return (img == NULL || len < SLIPEST_IMAGE_V2_OFF_FORMAT + 2u) ? 0u : u16_at(img + SLIPEST_IMAGE_V2_OFF_FORMAT);
-}
 
 /* The table's widths (checked against the caps) and the payload size they give; SLIPEST_OK or a status. */
 static slipest_status_t table_sizes(const uint8_t *img, unsigned n_layers, uint16_t *width, size_t *q_bytes,
@@ -39,7 +30,7 @@ static slipest_status_t table_sizes(const uint8_t *img, unsigned n_layers, uint1
         }
     }
     for (k = 0u; k < n_layers; ++k) {
-        width[k] = u16_at(img + (rec_at(k) + SLIPEST_IMAGE_V2_REC_WIDTH));
+        width[k] = slipest_le16(img + (rec_at(k) + SLIPEST_IMAGE_V2_REC_WIDTH));
         if (width[k] < 2u || width[k] > (unsigned)SLIPEST_MAX_WIDTH) return SLIPEST_E_ARCH;
         weights += (size_t)width[k] * n_in;
         units += width[k];
@@ -68,8 +59,8 @@ static void record_scalars(const uint8_t *hdr, unsigned k, uint16_t width, slipe
     l->fg = hdr[r + SLIPEST_IMAGE_V2_REC_FG];
     l->fy = hdr[r + SLIPEST_IMAGE_V2_REC_FY];
     l->eps_e = (int8_t)((eps_e > 127u) ? ((int)eps_e - 256) : (int)eps_e);
-    l->eps_m = i16_at(hdr + r + SLIPEST_IMAGE_V2_REC_EPS_M);
-    l->c = i32_at(hdr + r + SLIPEST_IMAGE_V2_REC_C);
+    l->eps_m = slipest_s16(slipest_le16(hdr + r + SLIPEST_IMAGE_V2_REC_EPS_M));
+    l->c = slipest_s32(slipest_le32(hdr + r + SLIPEST_IMAGE_V2_REC_C));
 }
 
 /* the payload's segments, in order: per block W B GAMMA BETA GELU, the head's W B, the seeds; with the float
@@ -101,12 +92,13 @@ slipest_status_t slipest_image_v2_header(slipest_image_stream_t *w)
     uint16_t f;
     /* the magic was checked, and len >= header + trailer, when the format field said 2 */
     n_layers = img[SLIPEST_IMAGE_V2_OFF_N_LAYERS];
-    if (u16_at(img + SLIPEST_IMAGE_V2_OFF_ARCH) != SLIPEST_IMAGE_ARCH_TABLE || u16_at(img + SLIPEST_IMAGE_V2_OFF_HEADER_SIZE) != SLIPEST_IMAGE_V2_HEADER_SIZE ||
+    if (slipest_le16(img + SLIPEST_IMAGE_V2_OFF_ARCH) != SLIPEST_IMAGE_ARCH_TABLE ||
+        slipest_le16(img + SLIPEST_IMAGE_V2_OFF_HEADER_SIZE) != SLIPEST_IMAGE_V2_HEADER_SIZE ||
         img[SLIPEST_IMAGE_V2_OFF_N_IN] != SLIPEST_N_FEATURES || img[SLIPEST_IMAGE_V2_OFF_N_OUT] != SLIPEST_N_CLASSES || img[SLIPEST_IMAGE_V2_OFF_GELU_N] != SLIPEST_Q_GELU_N ||
         img[SLIPEST_IMAGE_V2_OFF_RSQRT_SEED_N] != SLIPEST_Q_RSQRT_SEED_N || n_layers < 1u || n_layers > SLIPEST_MAX_LAYERS) {
         return SLIPEST_E_ARCH;
     }
-    f = u16_at(img + SLIPEST_IMAGE_V2_OFF_FLAGS);
+    f = slipest_le16(img + SLIPEST_IMAGE_V2_OFF_FLAGS);
     if ((f & ~(SLIPEST_IMAGE_FLAG_F32 | SLIPEST_IMAGE_FLAG_HMAC)) != 0u) return SLIPEST_E_FORMAT;
     for (i = SLIPEST_IMAGE_V2_OFF_RESERVED; i < SLIPEST_IMAGE_V2_TABLE_AT; ++i) {
         if (img[i] != 0u) return SLIPEST_E_FORMAT;
@@ -117,7 +109,7 @@ slipest_status_t slipest_image_v2_header(slipest_image_stream_t *w)
     }
     st = table_sizes(img, n_layers, w->width, &q_bytes, &f_bytes);
     if (st != SLIPEST_OK) return st;
-    payload = slipest_image_le32(img + SLIPEST_IMAGE_V2_OFF_PAYLOAD_SIZE);
+    payload = slipest_le32(img + SLIPEST_IMAGE_V2_OFF_PAYLOAD_SIZE);
     if ((size_t)payload != q_bytes + (((f & SLIPEST_IMAGE_FLAG_F32) != 0u) ? f_bytes : 0u)) return SLIPEST_E_LENGTH;
     tail = SLIPEST_IMAGE_TRAILER_SIZE + (((f & SLIPEST_IMAGE_FLAG_HMAC) != 0u) ? SLIPEST_IMAGE_HMAC_SIZE : 0u);
     if (w->len != SLIPEST_IMAGE_V2_HEADER_SIZE + (size_t)payload + tail) return SLIPEST_E_LENGTH;
@@ -126,7 +118,7 @@ slipest_status_t slipest_image_v2_header(slipest_image_stream_t *w)
     w->n_layers = (uint8_t)n_layers;
     w->width[n_layers] = SLIPEST_N_CLASSES; /* the head */
     /* the model checks of the scalars: every block's shifts (each one's row bound with them), the eps cap */
-    if (i32_at(img + SLIPEST_IMAGE_V2_OFF_EPS_CAP) != 1073741824) {
+    if (slipest_s32(slipest_le32(img + SLIPEST_IMAGE_V2_OFF_EPS_CAP)) != 1073741824) {
         defer(w, SLIPEST_E_RANGE);
     }
     for (k = 0u; k < n_layers; ++k) {
@@ -227,7 +219,7 @@ static void visit_f32(slipest_image_stream_t *w, uint32_t raw)
  * every index inside the caps that size the storage. */
 static void visit_q(slipest_image_stream_t *w, uint32_t raw, unsigned size)
 {
-    int32_t v = (size == 2u) ? (int32_t)slipest_image_s16((uint16_t)raw) : slipest_image_s32(raw);
+    int32_t v = (size == 2u) ? (int32_t)slipest_s16((uint16_t)raw) : slipest_s32(raw);
     uint32_t i = w->idx;
     slipest_image_table_q_t *t = w->tqs;
     switch (w->seg) {
@@ -313,9 +305,9 @@ slipest_status_t slipest_image_v2_model(const slipest_image_stream_t *w, slipest
     q->gelu_n = img[SLIPEST_IMAGE_V2_OFF_GELU_N];
     q->rsqrt_seed_n = img[SLIPEST_IMAGE_V2_OFF_RSQRT_SEED_N];
     q->gelu_step_log2 = img[SLIPEST_IMAGE_V2_OFF_GELU_STEP_LOG2];
-    q->eps_cap = i32_at(img + SLIPEST_IMAGE_V2_OFF_EPS_CAP);
-    q->version = slipest_image_le32(img + SLIPEST_IMAGE_V2_OFF_MODEL_VERSION);
-    q->hash32 = slipest_image_le32(img + SLIPEST_IMAGE_V2_OFF_HASH32);
+    q->eps_cap = slipest_s32(slipest_le32(img + SLIPEST_IMAGE_V2_OFF_EPS_CAP));
+    q->version = slipest_le32(img + SLIPEST_IMAGE_V2_OFF_MODEL_VERSION);
+    q->hash32 = slipest_le32(img + SLIPEST_IMAGE_V2_OFF_HASH32);
     if (w->deferred != SLIPEST_OK) {
         return w->deferred;
     }
@@ -379,19 +371,4 @@ slipest_status_t slipest_image_v2_model(const slipest_image_stream_t *w, slipest
     (void)mf;
 #endif
     return SLIPEST_OK;
-}
-
-slipest_status_t slipest_image_read_table(const uint8_t *img, size_t len, uint32_t expect32, slipest_model_q_t *mq,
-                                          slipest_image_table_q_t *qs, slipest_model_f32_t *mf,
-                                          slipest_image_table_f32_t *fs)
-{
-    slipest_image_stream_t w;
-    slipest_status_t st;
-
-    if (img == NULL || mq == NULL || qs == NULL || (mf != NULL && fs == NULL)) return SLIPEST_E_NULL;
-    /* the one validator, fed the whole buffer, format 2 only: floats are checked when the float model is asked for */
-    st = slipest_image_stream_init(&w, len, NULL, NULL, (mf != NULL) ? 1 : 0);
-    if (st != SLIPEST_OK) return st;
-    slipest_image_stream_table(&w, qs, (mf != NULL) ? fs : NULL, 1);
-    return slipest_image_stream_read(&w, img, len, expect32, mq, mf);
 }

@@ -2,6 +2,8 @@
  * unpacked to bytes big-endian by shifts, never by copying memory. */
 #include "slipest_sha256.h"
 
+#include "slipest_bytes.h"
+
 #include <string.h>
 
 static uint32_t rotr(uint32_t x, unsigned n) { return (x >> n) | (x << (32u - n)); }
@@ -23,8 +25,7 @@ static void compress(uint32_t h[8], const uint8_t *p)
     uint32_t a, b, c, d, e, f, g, k, t1, t2, wt;
     unsigned i;
     for (i = 0; i < 16u; ++i) {
-        w[i] = ((uint32_t)p[4u * i] << 24) | ((uint32_t)p[4u * i + 1u] << 16) | ((uint32_t)p[4u * i + 2u] << 8) |
-               (uint32_t)p[4u * i + 3u];
+        w[i] = slipest_be32(&p[4u * i]);
     }
     a = h[0]; b = h[1]; c = h[2]; d = h[3]; e = h[4]; f = h[5]; g = h[6]; k = h[7];
     for (i = 0; i < 64u; ++i) {

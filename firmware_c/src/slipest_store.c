@@ -10,6 +10,7 @@
 #include <stddef.h>
 #include <string.h>
 
+#include "slipest_bytes.h"
 #include "slipest_image_internal.h"
 
 #define REC_LAYOUT 2u                             /* 2: with the stored parameters (1: 52 bytes, without) */
@@ -26,15 +27,6 @@
 #if REC_PARAMS + SLIPEST_STORE_PARAMS_MAX != REC_BODY || SLIPEST_STORE_RECORD_SIZE > SLIPEST_STORE_SECTOR_MIN
 #error "slipest_store.c: the commit record's layout (parameters before the CRC, all of it in the smallest sector)"
 #endif
-
-/* ------------------------------------------------------------------ byte order helpers */
-static void put_le32(uint8_t *p, uint32_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    p[2] = (uint8_t)(v >> 16);
-    p[3] = (uint8_t)(v >> 24);
-}
 
 /* ------------------------------------------------------------------ NVM access */
 static uint32_t slot_addr(const slipest_store_t *s, unsigned slot)
@@ -154,7 +146,7 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t re
     if (st != SLIPEST_OK) {
         return st;
     }
-    id->crc = slipest_image_le32(&w->tail[SLIPEST_IMAGE_TRAILER_OFF_CRC32]);
+    id->crc = slipest_le32(&w->tail[SLIPEST_IMAGE_TRAILER_OFF_CRC32]);
     id->version = q.version;
     id->hash32 = q.hash32;
     if (load == 0) {
@@ -168,15 +160,23 @@ static slipest_status_t walk_slot(slipest_store_t *s, unsigned slot, uint32_t re
     return SLIPEST_OK;
 }
 
-/* Load slot's image as the active model; on failure no model is active. */
-static slipest_status_t load_slot(slipest_store_t *s, unsigned slot)
+/* Walk slot's image at the length the current record gives it and check that it is the image the record names (its
+ * CRC-32); with load, decode it too. One path for the activation's load and the rollback's check. */
+static slipest_status_t walk_recorded(slipest_store_t *s, unsigned slot, int load)
 {
     image_id_t id = {0u, 0u, 0u}; /* set by a walk that passed; gcc -fanalyzer cannot follow the status out of
                                      the image stream's calls in another file */
+    slipest_status_t st = walk_slot(s, slot, s->rec.length[slot], load, &id);
+    if (st == SLIPEST_OK && id.crc != s->rec.crc[slot]) st = SLIPEST_E_CRC; /* not the image the record names */
+    return st;
+}
+
+/* Load slot's image as the active model; on failure no model is active. */
+static slipest_status_t load_slot(slipest_store_t *s, unsigned slot)
+{
     slipest_status_t st;
     s->have_model = 0u;
-    st = walk_slot(s, slot, s->rec.length[slot], 1, &id);
-    if (st == SLIPEST_OK && id.crc != s->rec.crc[slot]) st = SLIPEST_E_CRC; /* not the image the record names */
+    st = walk_recorded(s, slot, 1);
     if (st == SLIPEST_OK) {
         s->have_model = 1u;
     }
@@ -234,15 +234,16 @@ static void record_encode(const slipest_store_record_t *r, uint8_t *p)
     memset(p, 0, REC_BODY);
     memcpy(p, rec_magic, sizeof rec_magic);
     p[4] = (uint8_t)REC_LAYOUT;
-    put_le32(&p[8], r->seq);
+    slipest_put_le32(&p[8], r->seq);
     p[12] = (uint8_t)r->active; /* NO_SLOT (-1) is 0xFF: parameters only, no model activated yet */
     p[13] = (uint8_t)r->prev;
     p[14] = r->params_len;
+    p[15] = r->trial; /* 0 in every record before trial activation: those read as confirmed */
     for (j = 0; j < REC_SLOT_WORDS; ++j) {
-        put_le32(&p[16u + 4u * j], field[j % 4u][j / 4u]);
+        slipest_put_le32(&p[16u + 4u * j], field[j % 4u][j / 4u]);
     }
     memcpy(&p[REC_PARAMS], r->params, SLIPEST_STORE_PARAMS_MAX);
-    put_le32(&p[REC_BODY], slipest_crc32(p, REC_BODY));
+    slipest_put_le32(&p[REC_BODY], slipest_crc32(p, REC_BODY));
 }
 
 /* 1 and *r filled when p holds a valid record; 0 and r->seq 0 otherwise */
@@ -252,16 +253,17 @@ static int record_decode(const uint8_t *p, slipest_store_record_t *r)
     unsigned j;
     unsigned a = p[12], b = p[13];
     r->seq = 0u;
-    if (memcmp(p, rec_magic, sizeof rec_magic) != 0 || p[4] != REC_LAYOUT || slipest_image_le32(&p[REC_BODY]) != slipest_crc32(p, REC_BODY)) {
+    if (memcmp(p, rec_magic, sizeof rec_magic) != 0 || p[4] != REC_LAYOUT || slipest_le32(&p[REC_BODY]) != slipest_crc32(p, REC_BODY)) {
         return 0;
     }
     /* active a, previous b: without a previous slot (0xFF), a is a slot or none (0xFF: a record of parameters
      * only, no model activated yet); with one, they are the two slots (N_SLOTS is 2: a + b == 1) */
     if (((b == 0xFFu) ? ((a + 1u) & 0xFFu) > SLIPEST_STORE_N_SLOTS : (a + b) != 1u) ||
-        p[14] > SLIPEST_STORE_PARAMS_MAX) {
-        return 0;
+        p[14] > SLIPEST_STORE_PARAMS_MAX || p[15] > 1u || (p[15] != 0u && a == 0xFFu)) {
+        return 0; /* a trial names the slot on trial */
     }
     r->params_len = p[14];
+    r->trial = p[15];
     r->active = NO_SLOT;
     if (a != 0xFFu) {
         r->active = (int8_t)a; /* checked above: 0 or 1 */
@@ -271,11 +273,28 @@ static int record_decode(const uint8_t *p, slipest_store_record_t *r)
         r->prev = (int8_t)b; /* checked above: 0 or 1 */
     }
     for (j = 0; j < REC_SLOT_WORDS; ++j) {
-        field[j % 4u][j / 4u] = slipest_image_le32(&p[16u + 4u * j]);
+        field[j % 4u][j / 4u] = slipest_le32(&p[16u + 4u * j]);
     }
     memcpy(r->params, &p[REC_PARAMS], SLIPEST_STORE_PARAMS_MAX);
-    r->seq = slipest_image_le32(&p[8]); /* a record with sequence number 0 is no record */
+    r->seq = slipest_le32(&p[8]); /* a record with sequence number 0 is no record */
     return r->seq != 0u;
+}
+
+/* The start of every new commit record (activation, confirm, revert, rollback, parameters): the record in force
+ * (the same slots and parameters) with the next sequence number; the caller changes what its operation changes and
+ * hands it to record_commit(). One copy of this, not one per operation: flash (docs/model_update.md). */
+static void next_record(const slipest_store_t *s, slipest_store_record_t *r)
+{
+    *r = s->rec;
+    r->seq = s->rec.seq + 1u;
+}
+
+/* r is the record in force, read from or written into record sector `sector`; one copy of the record assignment
+ * (a 44-byte struct copy is inline code) for the commit and both places of slipest_store_open() */
+static void take_record(slipest_store_t *s, const slipest_store_record_t *r, unsigned sector)
+{
+    s->rec = *r;
+    s->rec_sector = (uint8_t)sector;
 }
 
 /* Write r into the record sector not holding the current record: erase, then one program. */
@@ -293,8 +312,7 @@ static slipest_status_t record_commit(slipest_store_t *s, const slipest_store_re
     if (st != SLIPEST_OK) {
         return st;
     }
-    s->rec = *r;
-    s->rec_sector = target;
+    take_record(s, r, target);
     return SLIPEST_OK;
 }
 
@@ -311,6 +329,43 @@ static void derive_slot_states(slipest_store_t *s)
             s->slot_state[(unsigned)s->rec.prev] = SLIPEST_SLOT_PREVIOUS;
         }
     }
+}
+
+/* slot's fields of r: the image info describes (and its CRC-32), or all 0 with info NULL */
+static void record_set_slot(slipest_store_record_t *r, unsigned slot, const slipest_slot_info_t *info, uint32_t crc)
+{
+    r->length[slot] = (info != NULL) ? info->length : 0u;
+    r->crc[slot] = crc;
+    r->version[slot] = (info != NULL) ? info->version : 0u;
+    r->hash32[slot] = (info != NULL) ? info->hash32 : 0u;
+}
+
+/* The active model is on trial (rec.trial, have_model): one record names the previous slot active (none when the
+ * trial model was the first) and the trial slot as no image, so the unconfirmed model is no rollback target either;
+ * then the previous model is loaded. The record write is the one NVM operation: a power loss before or inside it
+ * leaves the trial record, which the next boot reverts again. */
+static slipest_status_t revert_trial(slipest_store_t *s)
+{
+    slipest_store_record_t r;
+    int8_t prev = s->rec.prev;
+    slipest_status_t st;
+    next_record(s, &r);
+    r.trial = 0u;
+    r.active = prev;
+    r.prev = NO_SLOT;
+    record_set_slot(&r, (unsigned)s->rec.active, NULL, 0u);
+    st = record_commit(s, &r);
+    if (st != SLIPEST_OK) {
+        return st; /* the trial record stands: the model on trial serves until the next reset */
+    }
+    s->have_model = 0u;
+    s->reverted = 1u;
+    s->c.trial_reverts++;
+    if (prev != NO_SLOT) {
+        st = load_slot(s, (unsigned)prev);
+    }
+    derive_slot_states(s);
+    return st;
 }
 
 /* ------------------------------------------------------------------ public API */
@@ -363,8 +418,7 @@ slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t 
         if (cand[r].seq == 0u) {
             continue;
         }
-        store->rec = cand[r];
-        store->rec_sector = (uint8_t)r;
+        take_record(store, &cand[r], r);
         loaded = 0u;
         if (cand[r].active != NO_SLOT) {
             loaded = (load_slot(store, (unsigned)cand[r].active) == SLIPEST_OK) ? 1u : 0u;
@@ -380,10 +434,17 @@ slipest_status_t slipest_store_open(slipest_store_t *store, const slipest_nvm_t 
     }
     if ((store->have_model == 0u) && (cand[newest].seq != 0u)) {
         /* no record validates: keep the newest one only to place the next record */
-        store->rec = cand[newest];
-        store->rec_sector = (uint8_t)newest;
+        take_record(store, &cand[newest], newest);
     }
     derive_slot_states(store);
+    if ((store->have_model != 0u) && (store->rec.trial != 0u)) {
+        /* the model on trial met a reset before its confirm: the previous one comes back. When that fails (NVM), the
+         * trial record stands and the next boot tries again; meanwhile the model on trial serves */
+        (void)revert_trial(store);
+        if (store->have_model == 0u) {
+            st = SLIPEST_E_STATE; /* the trial model was the first one: no slot model, the built-in one serves */
+        }
+    }
     return st;
 }
 
@@ -408,8 +469,8 @@ slipest_status_t slipest_store_begin(slipest_store_t *store, uint32_t total_len,
     if (store == NULL) {
         return SLIPEST_E_NULL;
     }
-    if (store->upload == SLIPEST_UPLOAD_RECEIVING) {
-        return SLIPEST_E_STATE;
+    if (store->upload == SLIPEST_UPLOAD_RECEIVING || (store->rec.trial != 0u && store->have_model != 0u)) {
+        return SLIPEST_E_STATE; /* on trial: the inactive slot holds the model a reset reverts to */
     }
     if (flags != 0u) {
         return SLIPEST_E_RANGE;
@@ -545,16 +606,7 @@ static slipest_status_t switch_to(slipest_store_t *s, const slipest_store_record
     return st;
 }
 
-/* slot's fields of r: the image info describes (and its CRC-32), or all 0 with info NULL */
-static void record_set_slot(slipest_store_record_t *r, unsigned slot, const slipest_slot_info_t *info, uint32_t crc)
-{
-    r->length[slot] = (info != NULL) ? info->length : 0u;
-    r->crc[slot] = crc;
-    r->version[slot] = (info != NULL) ? info->version : 0u;
-    r->hash32[slot] = (info != NULL) ? info->hash32 : 0u;
-}
-
-slipest_status_t slipest_store_activate(slipest_store_t *store)
+static slipest_status_t activate(slipest_store_t *store, uint8_t trial)
 {
     slipest_store_record_t r;
     unsigned slot;
@@ -566,13 +618,13 @@ slipest_status_t slipest_store_activate(slipest_store_t *store)
         return SLIPEST_E_STATE;
     }
     slot = (unsigned)store->upload_slot;
-    r = store->rec;
-    r.seq = store->rec.seq + 1u;
+    next_record(store, &r);
     r.prev = NO_SLOT;
     if (store->have_model != 0u) {
         r.prev = store->rec.active;
     }
     r.active = (int8_t)slot;
+    r.trial = trial;
     record_set_slot(&r, slot, &store->ready, store->ready_crc);
     if (r.prev == NO_SLOT) {
         record_set_slot(&r, 1u - slot, NULL, 0u); /* no previous model: the other slot names no image */
@@ -583,15 +635,61 @@ slipest_status_t slipest_store_activate(slipest_store_t *store)
     store->upload_slot = NO_SLOT;
     if (st == SLIPEST_OK) {
         store->c.activations++;
+        store->reverted = 0u;
     }
     return st;
+}
+
+slipest_status_t slipest_store_activate(slipest_store_t *store)
+{
+    return activate(store, 0u);
+}
+
+slipest_status_t slipest_store_try(slipest_store_t *store)
+{
+    return activate(store, 1u);
+}
+
+slipest_status_t slipest_store_confirm(slipest_store_t *store)
+{
+    slipest_store_record_t r;
+    if (store == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (store->rec.trial == 0u || store->have_model == 0u) {
+        return SLIPEST_E_STATE;
+    }
+    next_record(store, &r);
+    r.trial = 0u; /* the same slots: only the mark changes */
+    return record_commit(store, &r);
+}
+
+slipest_status_t slipest_store_revert(slipest_store_t *store)
+{
+    if (store == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    if (store->rec.trial == 0u || store->have_model == 0u) {
+        return SLIPEST_E_STATE;
+    }
+    return revert_trial(store);
+}
+
+slipest_trial_state_t slipest_store_trial_state(const slipest_store_t *store)
+{
+    if (store == NULL) {
+        return SLIPEST_TRIAL_NONE;
+    }
+    if (store->have_model != 0u && store->rec.trial != 0u) {
+        return SLIPEST_TRIAL_RUNNING;
+    }
+    return (store->reverted != 0u) ? SLIPEST_TRIAL_REVERTED : SLIPEST_TRIAL_NONE;
 }
 
 slipest_status_t slipest_store_rollback(slipest_store_t *store)
 {
     slipest_store_record_t r;
     unsigned prev;
-    image_id_t id;
     slipest_status_t st;
     if (store == NULL) {
         return SLIPEST_E_NULL;
@@ -603,10 +701,7 @@ slipest_status_t slipest_store_rollback(slipest_store_t *store)
     if (store->slot_state[prev] != SLIPEST_SLOT_PREVIOUS) {
         return SLIPEST_E_STATE;
     }
-    st = walk_slot(store, prev, store->rec.length[prev], 0, &id);
-    if (st == SLIPEST_OK && id.crc != store->rec.crc[prev]) {
-        st = SLIPEST_E_CRC;
-    }
+    st = walk_recorded(store, prev, 0);
     if (st != SLIPEST_OK) {
         if (st != SLIPEST_E_NVM) {
             /* the slot no longer holds the image the record names: an upload since began there (the record
@@ -617,10 +712,10 @@ slipest_status_t slipest_store_rollback(slipest_store_t *store)
         }
         return st;
     }
-    r = store->rec;
-    r.seq = store->rec.seq + 1u;
+    next_record(store, &r);
     r.active = (int8_t)prev;
     r.prev = store->rec.active;
+    r.trial = 0u; /* a rollback is an operator's decision, on trial or not */
     st = switch_to(store, &r);
     if (st == SLIPEST_OK) {
         store->c.rollbacks++;
@@ -653,8 +748,7 @@ slipest_status_t slipest_store_params_save(slipest_store_t *store, const uint8_t
         return SLIPEST_E_STATE; /* buf holds the upload's unwritten bytes */
     }
     /* the record in force with the new parameters: the same slots (with no record yet: none active) */
-    r = store->rec;
-    r.seq = store->rec.seq + 1u;
+    next_record(store, &r);
     r.params_len = (uint8_t)len;
     memset(r.params, 0, sizeof r.params);
     if (len > 0u) {
@@ -697,6 +791,37 @@ uint32_t slipest_store_active_hash32(const slipest_store_t *store)
 const uint8_t *slipest_store_active_sha256(const slipest_store_t *store)
 {
     return (store == NULL || store->have_model == 0u) ? NULL : store->sha256;
+}
+
+slipest_status_t slipest_store_reopen(slipest_store_t *store)
+{
+    slipest_nvm_t nvm;
+    if (store == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    nvm = store->nvm; /* slipest_store_open() clears the store before it copies the interface */
+    return slipest_store_open(store, &nvm, store->auth);
+}
+
+uint32_t slipest_store_active_length(const slipest_store_t *store)
+{
+    return (store == NULL || store->have_model == 0u) ? 0u : store->rec.length[(unsigned)store->rec.active];
+}
+
+slipest_status_t slipest_store_read_active(slipest_store_t *store, uint32_t offset, uint8_t *buf, uint32_t len)
+{
+    uint32_t n;
+    if (store == NULL || buf == NULL) {
+        return SLIPEST_E_NULL;
+    }
+    n = slipest_store_active_length(store);
+    if (n == 0u) {
+        return SLIPEST_E_STATE;
+    }
+    if (offset > n || len > n - offset) {
+        return SLIPEST_E_LENGTH;
+    }
+    return nvm_read(store, slot_addr(store, (unsigned)store->rec.active) + offset, buf, len);
 }
 
 int slipest_store_active_slot(const slipest_store_t *store)

@@ -1,8 +1,9 @@
 /* The CANopen node on a CPU target (QEMU), in its flight configuration: no built-in model. The
  * launch model (the bundle's model.img) is provisioned into slot A through the store, as at
  * integration; the node boots on it; the "fused" model (the same image as a newer version)
- * arrives by SDO block download (with the CiA 301 CRC), is activated, then one window of
- * telemetry RPDOs must give its estimate TPDOs.
+ * arrives as a CiA 302-3 master sends it: clear (0x1F51 = 3), SDO block download of the program data 0x1F50 sub 1
+ * (with the CiA 301 CRC), start (0x1F51 = 1: on trial, the node's boot-up follows), confirm (0x1F51 = 0x80); then
+ * one window of telemetry RPDOs must give its estimate TPDOs.
  * Built with CO_NODE_AUTH, the node authenticates images (HMAC-SHA256, a test key): it must refuse
  * the bundle's unsigned image, and both images are signed here before they go in. The two builds
  * give `fleetlab bench c` the keyless and the authenticating node's flash.
@@ -128,6 +129,13 @@ static uint32_t sdo(const uint8_t req[8], uint8_t expect, int measure, uint32_t 
     return (expect != 0u && out[0].data[0] != expect) ? out[0].data[0] : 0u;
 }
 
+/* 0x1F51 sub 1 = cmd (expedited, 1 byte); 0 when the node answered the download response */
+static uint32_t program_control(uint8_t cmd, int measure, uint32_t *stack)
+{
+    const uint8_t req[8] = {0x2Fu, 0x51u, 0x1Fu, 1u, cmd, 0u, 0u, 0u};
+    return sdo(req, 0x60u, measure, stack);
+}
+
 int main(void)
 {
     slipest_nvm_t nvm;
@@ -158,7 +166,10 @@ int main(void)
     }
     check(wrote, "provisioning: write");
     check(slipest_store_finish(&store) == SLIPEST_OK, "provisioning: image validated");
-    check(slipest_store_activate(&store) == SLIPEST_OK && slipest_store_active_slot(&store) == 0,
+    /* activated as the node activates a download, on trial then confirmed (slipest_store_activate() would be a
+     * function the node itself does not link: this image's flash is the node's) */
+    check(slipest_store_try(&store) == SLIPEST_OK && slipest_store_confirm(&store) == SLIPEST_OK &&
+              slipest_store_active_slot(&store) == 0,
           "provisioning: slot A active");
     /* power cycle: the store reopens on slot A, the node boots on it (no built-in model linked) */
     r = slipest_store_open(&store, &nvm, AUTH);
@@ -172,11 +183,13 @@ int main(void)
     version = slipest_store_model_q(&store)->version + 1u;
     crc32 = seal(version);
 
-    /* SDO block download of the image into 0x2000, CRC requested */
+    /* CiA 302-3: clear, then an SDO block download of the image into 0x1F50 sub 1, CRC requested */
+    check(program_control(SLIPEST_CO_PROG_CLEAR, 0, &s) == 0u, "0x1F51 clear");
+    memset(req, 0, sizeof req);
     req[0] = 0xC6u; /* block download, CRC supported, size indicated */
-    req[1] = 0x00u;
-    req[2] = 0x20u;
-    req[3] = 0u;
+    req[1] = 0x50u;
+    req[2] = 0x1Fu;
+    req[3] = 1u;
     req[4] = (uint8_t)len;
     req[5] = (uint8_t)(len >> 8);
     req[6] = (uint8_t)(len >> 16);
@@ -205,14 +218,12 @@ int main(void)
     req[2] = (uint8_t)(crc >> 8);
     check(sdo(req, 0xA1u, 1, &stack_finish) == 0u, "block download end: image validated");
 
-    /* activate: write 1 to 0x2002 sub 1 (expedited, 1 byte) */
-    memset(req, 0, sizeof req);
-    req[0] = 0x2Fu;
-    req[1] = 0x02u;
-    req[2] = 0x20u;
-    req[3] = 1u;
-    req[4] = 1u;
-    check(sdo(req, 0x60u, 1, &stack_activate) == 0u, "activation");
+    /* start: the new model on trial, then the node's boot-up (PRE-OPERATIONAL); confirm makes it permanent */
+    check(program_control(SLIPEST_CO_PROG_START, 1, &stack_activate) == 0u && n_out == 2 &&
+              out[1].id == 0x700u + NODE_ID && out[1].data[0] == 0u,
+          "0x1F51 start: answer, then boot-up");
+    /* (no slipest_store_trial_state() here: this image's flash is the node's, and the node does not call it) */
+    check(program_control(SLIPEST_CO_PROG_CONFIRM, 0, &s) == 0u, "0x1F51 confirm");
     check(slipest_store_active_slot(&store) == 1 && slipest_node_model_q(slipest_co_estimator(&co))->version == version,
           "slot B active with the fused model");
 

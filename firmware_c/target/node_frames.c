@@ -33,17 +33,9 @@ int main(void)
                                           SLIPEST_DBC_TELEM_ATTITUDE_FRAME_ID};
     slipest_vectors_t v;
     slipest_frame_t f, st[SLIPEST_NODE_MAX_OUT];
-    const uint8_t *file = 0;
-    const char *why = "";
-    size_t len = 0;
     uint32_t i, n_out = 0;
     int bad = 0, n, k;
-    if (target_vectors(&file, &len) != 0) return 2;
-    if (slipest_vectors_parse(file, len, &v, &why) != 0) {
-        semihost_puts(why);
-        semihost_puts("\n");
-        return 2;
-    }
+    if (target_vectors_parsed(&v) != 0) return 2;
     if (slipest_node_init(&node, slipest_bundle_model_q(), NULL) != SLIPEST_OK) return 2;
     /* every vector as a feature set (four FEATURES_k frames) */
     for (i = 0; i < v.n; i++) {

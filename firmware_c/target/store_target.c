@@ -71,9 +71,7 @@ int main(void)
 {
     slipest_nvm_t nvm;
     slipest_vectors_t v;
-    const char *why = "";
-    const uint8_t *file = 0;
-    size_t len = 0, n = (size_t)(slipest_store_image_end - slipest_store_image), off;
+    size_t n = (size_t)(slipest_store_image_end - slipest_store_image), off;
     uint32_t i, q_fail = 0;
     int fails = 0, st = SLIPEST_OK;
 
@@ -90,12 +88,7 @@ int main(void)
     fails += step("node", slipest_node_init(&node, slipest_store_model_q(&store), 0), SLIPEST_OK);
     if (fails != 0) return 1;
 
-    if (target_vectors(&file, &len) != 0) return 2;
-    if (slipest_vectors_parse(file, len, &v, &why) != 0) {
-        semihost_puts(why);
-        semihost_puts("\n");
-        return 2;
-    }
+    if (target_vectors_parsed(&v) != 0) return 2;
     for (i = 0; i < v.n; i++) {
         int32_t q[3];
         if (slipest_vectors_check_q(&v, slipest_node_model_q(&node), i, q) != 0) q_fail++;

@@ -37,3 +37,17 @@ int target_vectors(const uint8_t **buf, size_t *len)
     return 0;
 }
 #endif
+
+int target_vectors_parsed(slipest_vectors_t *v)
+{
+    const uint8_t *file = 0;
+    const char *why = "";
+    size_t len = 0;
+    if (target_vectors(&file, &len) != 0) return -1;
+    if (slipest_vectors_parse(file, len, v, &why) != 0) {
+        semihost_puts(why);
+        semihost_puts("\n");
+        return -1;
+    }
+    return 0;
+}

@@ -5,6 +5,11 @@
 #define TARGET_VECTORS_H
 #include <stddef.h>
 #include <stdint.h>
+
+#include "slipest_vectors.h"
 /* 0 and the file's bytes in *buf / *len, or a negative value (message already printed). */
 int target_vectors(const uint8_t **buf, size_t *len);
+/* 0 and the bundle's vectors parsed into *v (slipest_vectors.h), or a negative value (the reason printed):
+ * what every test image that checks the vectors starts with. */
+int target_vectors_parsed(slipest_vectors_t *v);
 #endif

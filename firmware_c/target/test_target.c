@@ -38,17 +38,9 @@ static int check_extractor(void)
 int main(void)
 {
     slipest_vectors_t v;
-    const char *why = "";
-    const uint8_t *file = 0;
-    size_t len = 0;
     uint32_t i, q_fail = 0, f_fail = 0;
     int ex_fail;
-    if (target_vectors(&file, &len) != 0) return 2;
-    if (slipest_vectors_parse(file, len, &v, &why) != 0) {
-        semihost_puts(why);
-        semihost_puts("\n");
-        return 2;
-    }
+    if (target_vectors_parsed(&v) != 0) return 2;
     for (i = 0; i < v.n; i++) {
         int32_t q[3];
         if (slipest_vectors_check_q(&v, slipest_bundle_model_q(), i, q) != 0) {

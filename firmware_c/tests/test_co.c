@@ -27,6 +27,11 @@ static int n;
 static uint32_t now;
 static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
 static size_t img_len;
+/* block() and segmented() download into the CiA 302-3 program data 0x1F50 sub 1, after a clear (0x1F51 = 3) unless
+ * no_clear is set (the "not cleared" refusal) */
+#define IMG_INDEX 0x1F50u
+#define IMG_SUB 1u
+static int no_clear;
 
 static void send(uint32_t id, uint8_t dlc, const uint8_t *d)
 {
@@ -58,10 +63,45 @@ static uint32_t rd(uint16_t index, uint8_t sub, uint32_t *code)
     return le32(&out[0].data[4]);
 }
 
+static int emcy_in_out(uint16_t code)
+{
+    int i;
+    for (i = 0; i < n; i++) {
+        if (out[i].id == 0x080u + ID && (uint16_t)(out[i].data[0] | out[i].data[1] << 8) == code) return 1;
+    }
+    return 0;
+}
+
 static uint32_t wr(uint16_t index, uint8_t sub, uint32_t v, unsigned bytes)
 {
     sdo8((uint8_t)(0x23u | ((4u - bytes) << 2)), index, sub, v);
     return aborted();
+}
+
+/* 0x1F51 = 3 (clear): the next 0x1F50 download may begin; an open or validated one is dropped */
+static uint32_t clear(void) { return wr(0x1F51u, 1u, SLIPEST_CO_PROG_CLEAR, 1u); }
+
+/* a download of 0x1F50 begins: clear first (unless no_clear), then the initiate request b0 with `size` */
+static void open_image(uint8_t b0, uint32_t size)
+{
+    if (!no_clear) CHECK(clear() == 0u);
+    sdo8(b0, IMG_INDEX, IMG_SUB, size);
+}
+
+/* set by activate(): the start's answer held the EMCY 0x0000 (the activation cleared the error register) */
+static int start_emcy_reset;
+
+/* permanent activation of the validated download as a CiA 302-3 master does it: start (0x1F51 = 1, on trial, the
+ * node restarts: boot-up, PRE-OPERATIONAL), then confirm (0x80). Returns the first abort code, 0 when both passed. */
+static uint32_t activate(void)
+{
+    uint32_t code = wr(0x1F51u, 1u, SLIPEST_CO_PROG_START, 1u);
+    start_emcy_reset = emcy_in_out(SLIPEST_CO_EMCY_RESET);
+    if (code == 0u) {
+        CHECK(out[n - 1].id == 0x700u + ID && out[n - 1].data[0] == 0u); /* the boot-up after the answer */
+        code = wr(0x1F51u, 1u, SLIPEST_CO_PROG_CONFIRM, 1u);
+    }
+    return code;
 }
 
 /* block download of data (len bytes, announced size `size`); skip_seq > 0 drops that segment once;
@@ -72,7 +112,7 @@ static uint32_t block(const uint8_t *data, size_t len, uint32_t size, unsigned s
     unsigned seq = 0, total = 0;
     uint16_t crc;
     int skipped = 0;
-    sdo8(0xC6u, 0x2000u, 0u, size);
+    open_image(0xC6u, size);
     if (aborted() != 0u) return aborted();
     CHECK(out[0].data[0] == 0xA4u && out[0].data[4] == SLIPEST_CO_BLKSIZE);
     while (off < len) {
@@ -116,12 +156,12 @@ static uint32_t block(const uint8_t *data, size_t len, uint32_t size, unsigned s
     return 0u;
 }
 
-/* segmented download of data into 0x2000; toggle_error flips the toggle of the 3rd segment */
+/* segmented download of data into 0x1F50 sub 1; toggle_error flips the toggle of the 3rd segment */
 static uint32_t segmented(const uint8_t *data, size_t len, int toggle_error)
 {
     size_t off = 0;
     unsigned t = 0, k = 0;
-    sdo8(0x21u, 0x2000u, 0u, (uint32_t)len);
+    open_image(0x21u, (uint32_t)len);
     if (aborted() != 0u) return aborted();
     while (off < len) {
         uint8_t d[8] = {0};
@@ -167,14 +207,6 @@ static void put_version(uint8_t *im, uint32_t v)
 }
 
 
-static int emcy_in_out(uint16_t code)
-{
-    int i;
-    for (i = 0; i < n; i++) {
-        if (out[i].id == 0x080u + ID && (uint16_t)(out[i].data[0] | out[i].data[1] << 8) == code) return 1;
-    }
-    return 0;
-}
 
 /* One window of RPDOs (100 samples x 3 frames): the number of estimate TPDO1s that came out. */
 static int one_window(void)
@@ -215,7 +247,7 @@ static void no_builtin_model(const slipest_nvm_t *nvm)
         slipest_co_set_builtin_sha256(&co, slipest_bundle_sha256()); /* no built-in model runs: still none */
         CHECK(read_sha256(sha) == 0u && memcmp(sha, zero, 32) == 0); /* no model: 32 zero bytes, as version 0 */
     }
-    CHECK(wr(0x2002u, 2u, 1u, 1u) == SLIPEST_CO_ABORT_STATE); /* nothing to roll back to */
+    CHECK(wr(0x2002u, 0u, 1u, 1u) == SLIPEST_CO_ABORT_STATE); /* nothing to roll back to */
     CHECK(slipest_co_tick(&co, 1000u, out, 2u) == 1 && out[0].data[0] == 0x7Fu); /* heartbeat */
     send(0u, 2u, (const uint8_t[]){0x01u, ID});
     CHECK(slipest_co_nmt_state(&co) == SLIPEST_CO_NMT_OPERATIONAL);
@@ -232,7 +264,7 @@ static void no_builtin_model(const slipest_nvm_t *nvm)
     CHECK(slipest_co_counter(&co, SLIPEST_CO_CNT_RPDO_NO_MODEL) == 0u);
     /* a model uploaded and activated: the error register clears, estimates start at a window boundary */
     CHECK(block(img, img_len, (uint32_t)img_len, 0u, 0) == 0u);
-    CHECK(wr(0x2002u, 1u, 1u, 1u) == 0u && emcy_in_out(SLIPEST_CO_EMCY_RESET));
+    CHECK(activate() == 0u && start_emcy_reset);
     CHECK(rd(0x1001u, 0u, &code) == 0u && rd(0x2001u, 1u, &code) == 3u && (rd(0x2001u, 4u, &code) & 0xFFu) == 0u);
     send(0u, 2u, (const uint8_t[]){0x01u, ID});
     CHECK(one_window() == 1);
@@ -317,11 +349,11 @@ static void test_params(const slipest_nvm_t *nvm)
     CHECK(slipest_store_open(&store, nvm, NULL) == SLIPEST_E_STATE);
     CHECK(slipest_co_init(&co, ID, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 1u) == 1);
     CHECK(rd(0x1017u, 0u, &code) == SLIPEST_CO_HEARTBEAT_DEFAULT_MS);
-    /* refused: while an upload is open (the store's one sector buffer holds it), and when the NVM fails */
-    sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
-    CHECK(aborted() == 0u);
+    /* refused: while an upload is open (the store's one sector buffer holds it), and when the NVM fails. The upload
+     * is opened in the store directly: one opened by an SDO download would end at the next SDO request, the save */
+    CHECK(slipest_store_begin(&store, (uint32_t)img_len, 0u) == SLIPEST_OK);
     CHECK(wr(0x1010u, 1u, SLIPEST_CO_SIGNATURE_SAVE, 4u) == SLIPEST_CO_ABORT_STATE);
-    CHECK(wr(0x2002u, 3u, 1u, 1u) == 0u); /* abort the upload */
+    CHECK(clear() == 0u); /* drop the upload */
     ram.fail_all = 1;
     CHECK(wr(0x1010u, 1u, SLIPEST_CO_SIGNATURE_SAVE, 4u) == SLIPEST_CO_ABORT_HARDWARE && emcy_in_out(SLIPEST_CO_EMCY_HARDWARE));
     ram.fail_all = 0;
@@ -342,7 +374,7 @@ static void test_params(const slipest_nvm_t *nvm)
     {
         uint32_t len = 0u;
         CHECK(slipest_co_init(&co, ID, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 1u) == 1);
-        CHECK(block(img, img_len, (uint32_t)img_len, 0u, 0) == 0u && wr(0x2002u, 1u, 1u, 1u) == 0u);
+        CHECK(block(img, img_len, (uint32_t)img_len, 0u, 0) == 0u && activate() == 0u);
         CHECK(slipest_store_params(&store, &len) != NULL && len == SLIPEST_STORE_PARAMS_MAX);
         CHECK(wr(0x1017u, 0u, 70u, 2u) == 0u && wr(0x1010u, 1u, SLIPEST_CO_SIGNATURE_SAVE, 4u) == 0u);
         CHECK(slipest_store_open(&store, nvm, NULL) == SLIPEST_OK && slipest_store_active_version(&store) == 3u);
@@ -361,6 +393,68 @@ static void test_params(const slipest_nvm_t *nvm)
 
 /* slipest_node_telemetry() gives slipest_node_handle()'s estimate frames, bit for bit, and one
  * all-zero STATUS_MODEL frame where slipest_node_handle() gives the three status frames */
+/* CiA 302-3 program download on a fresh store: the clear rule and its flash status, program control only in
+ * PRE-OPERATIONAL, start on trial with the boot-up after the answer, a reset node before the confirm reverts (EMCY
+ * 0xFF01, 0x2005 sub 16), a confirmed model stays, 0x1F50 reads the active image back (segmented). */
+static void test_program_download(const slipest_nvm_t *nvm)
+{
+    uint32_t code, got = 0u, t = 0u, mismatch = 0u, k;
+    const uint32_t builtin = slipest_model_hash32(slipest_bundle_model_q());
+    memset(mem, 0xFF, sizeof mem);
+    CHECK(slipest_store_open(&store, nvm, NULL) == SLIPEST_E_STATE);
+    CHECK(slipest_co_init(&co, ID, 9u, &store, slipest_bundle_model_q(), NULL, 0u, out, 3u) == 1);
+    CHECK(rd(0x1F51u, 1u, &code) == SLIPEST_CO_PROG_STATE_STARTED && code == 0u);
+    CHECK(rd(0x1F56u, 1u, &code) == builtin && rd(0x1F57u, 1u, &code) == 0u && code == 0u);
+    no_clear = 1;
+    CHECK(block(img, img_len, (uint32_t)img_len, 0u, 0) == SLIPEST_CO_ABORT_STATE); /* not cleared */
+    CHECK(rd(0x1F57u, 1u, &code) == (SLIPEST_CO_FLASH_NOT_CLEARED << SLIPEST_CO_FLASH_CODE_SHIFT));
+    no_clear = 0;
+    CHECK(wr(0x1F51u, 1u, 7u, 1u) == SLIPEST_CO_ABORT_VALUE);
+    send(0u, 2u, (const uint8_t[]){0x01u, ID}); /* OPERATIONAL: program control refused */
+    CHECK(wr(0x1F51u, 1u, SLIPEST_CO_PROG_CLEAR, 1u) == SLIPEST_CO_ABORT_STATE);
+    send(0u, 2u, (const uint8_t[]){0x80u, ID});
+    CHECK(wr(0x1F51u, 1u, SLIPEST_CO_PROG_STOP, 1u) == 0u && rd(0x1F51u, 1u, &code) == SLIPEST_CO_PROG_STATE_STOPPED);
+    for (k = 0; k < 2u; k++) { /* k 0: reset node before the confirm; k 1: confirmed */
+        CHECK(wr(0x1F51u, 1u, SLIPEST_CO_PROG_CLEAR, 1u) == 0u);
+        CHECK(block(img, img_len, (uint32_t)img_len, 0u, 0) == 0u && rd(0x1F57u, 1u, &code) == 0u);
+        sdo8(0x2Fu, 0x1F51u, 1u, SLIPEST_CO_PROG_START);
+        /* the answer, the EMCY 0x0000 when the activation cleared the error register (k 1: the revert's bit 7),
+         * then the boot-up */
+        CHECK(out[0].data[0] == 0x60u && n == (int)(2u + k) && out[n - 1].id == 0x700u + ID && out[n - 1].data[0] == 0u);
+        CHECK(k == 0u || emcy_in_out(SLIPEST_CO_EMCY_RESET));
+        CHECK(slipest_co_nmt_state(&co) == SLIPEST_CO_NMT_PRE_OPERATIONAL);
+        CHECK(rd(0x1F56u, 1u, &code) == slipest_store_active_hash32(&store) && code == 0u);
+        CHECK(slipest_store_trial_state(&store) == SLIPEST_TRIAL_RUNNING);
+        CHECK(block(img, img_len, (uint32_t)img_len, 0u, 0) == SLIPEST_CO_ABORT_STATE); /* on trial: no download */
+        if (k == 1u) {
+            CHECK(wr(0x1F51u, 1u, SLIPEST_CO_PROG_CONFIRM, 1u) == 0u);
+            CHECK(slipest_store_trial_state(&store) == SLIPEST_TRIAL_NONE);
+        }
+        send(0u, 2u, (const uint8_t[]){0x81u, ID});
+        if (k == 0u) {
+            CHECK(n == 2 && emcy_in_out(SLIPEST_CO_EMCY_TRIAL_REVERTED));
+            CHECK(rd(0x1F56u, 1u, &code) == builtin && rd(0x2005u, 16u, &code) == 1u);
+            CHECK(rd(0x2001u, 1u, &code) == slipest_bundle_model_q()->version); /* the built-in model again */
+        } else {
+            /* kept (the image is the built-in model's parameters as version 3: the same hash32, another version) */
+            CHECK(n == 1 && rd(0x1F56u, 1u, &code) == slipest_store_active_hash32(&store));
+            CHECK(rd(0x2001u, 1u, &code) == 3u && (rd(0x2001u, 4u, &code) & 0xFFu) <= 1u);
+        }
+    }
+    CHECK(wr(0x1F51u, 1u, SLIPEST_CO_PROG_CONFIRM, 1u) == 0u); /* nothing on trial: nothing to do */
+    sdo8(0x40u, 0x1F50u, 1u, 0u); /* read back: segmented, size indicated */
+    CHECK(out[0].data[0] == 0x41u && le32(&out[0].data[4]) == img_len);
+    while (got < img_len && aborted() == 0u) {
+        uint32_t len;
+        sdo8((uint8_t)(0x60u | (t << 4)), 0u, 0u, 0u);
+        len = 7u - ((out[0].data[0] >> 1) & 7u);
+        if (got + len > img_len || memcmp(&out[0].data[1], img + got, len) != 0) mismatch++;
+        got += len;
+        t ^= 1u;
+    }
+    CHECK(got == img_len && mismatch == 0u && (out[0].data[0] & 1u) != 0u);
+}
+
 static void test_telemetry_matches_handle(const slipest_model_q_t *mq)
 {
     static const uint32_t ids[3] = {SLIPEST_DBC_TELEM_WHEEL_FRAME_ID, SLIPEST_DBC_TELEM_IMU_FRAME_ID,
@@ -484,11 +578,15 @@ int main(void)
     CHECK(code == SLIPEST_CO_ABORT_NO_OBJECT);
     (void)rd(0x1018u, 7u, &code);
     CHECK(code == SLIPEST_CO_ABORT_NO_SUB);
-    (void)rd(0x2000u, 0u, &code);
+    (void)rd(0x2000u, 0u, &code); /* fleetlab's own model image before OD 4.0: 0x1F50 sub 1 now */
+    CHECK(code == SLIPEST_CO_ABORT_NO_OBJECT);
+    (void)rd(0x2002u, 0u, &code);
     CHECK(code == SLIPEST_CO_ABORT_WRITE_ONLY);
-    (void)rd(0x2002u, 1u, &code);
-    CHECK(code == SLIPEST_CO_ABORT_WRITE_ONLY);
-    sdo8(0xA0u, 0x2000u, 0u, 0u); /* block upload: not supported */
+    sdo8(0xA0u, 0x2002u, 0u, 0u); /* block upload of the write-only rollback command: the DOMAIN only */
+    CHECK(aborted() == SLIPEST_CO_ABORT_UNSUPPORTED);
+    sdo8(0xA0u, 0x1000u, 0u, 0u); /* block upload: the 0x1F50 image only (small values go expedited) */
+    CHECK(aborted() == SLIPEST_CO_ABORT_UNSUPPORTED);
+    sdo8(0xA3u, 0x0000u, 0u, 0u); /* block upload start without an initiate */
     CHECK(aborted() == SLIPEST_CO_ABORT_COMMAND);
     sdo8(0x60u, 0x1000u, 0u, 0u); /* upload segment without a transfer */
     CHECK(aborted() == SLIPEST_CO_ABORT_COMMAND);
@@ -502,11 +600,11 @@ int main(void)
     CHECK(wr(0x1018u, 1u, 1u, 4u) == SLIPEST_CO_ABORT_READ_ONLY);
     CHECK(wr(0x2003u, 1u, 1u, 4u) == SLIPEST_CO_ABORT_READ_ONLY);
     CHECK(wr(0x2100u, 2u, 0x1234u, 2u) == 0u && rd(0x2100u, 2u, &code) == 0x1234u);
-    CHECK(wr(0x2002u, 1u, 2u, 1u) == SLIPEST_CO_ABORT_VALUE);
-    CHECK(wr(0x2002u, 1u, 1u, 1u) == SLIPEST_CO_ABORT_STATE); /* nothing to activate */
-    CHECK(wr(0x2002u, 2u, 1u, 1u) == SLIPEST_CO_ABORT_STATE); /* nothing to roll back to */
-    CHECK(wr(0x2002u, 3u, 1u, 1u) == SLIPEST_CO_ABORT_STATE); /* no upload open */
-    CHECK(wr(0x2000u, 0u, 1u, 4u) == SLIPEST_CO_ABORT_TOO_LOW); /* an image is never expedited */
+    CHECK(wr(0x2002u, 0u, 2u, 1u) == SLIPEST_CO_ABORT_VALUE);
+    CHECK(wr(0x2002u, 0u, 1u, 1u) == SLIPEST_CO_ABORT_STATE); /* nothing to roll back to */
+    /* OD 3.0's activate (sub 1) and abort (sub 3): a master written for it gets "no sub-index", no other command */
+    CHECK(wr(0x2002u, 1u, 1u, 1u) == SLIPEST_CO_ABORT_NO_SUB && wr(0x2002u, 3u, 1u, 1u) == SLIPEST_CO_ABORT_NO_SUB);
+    CHECK(wr(0x1F50u, 1u, 1u, 4u) == SLIPEST_CO_ABORT_TOO_LOW); /* an image is never expedited */
     sdo8(0x20u, 0x1017u, 0u, 0u); /* segmented, size not indicated */
     CHECK(aborted() == SLIPEST_CO_ABORT_LENGTH);
     sdo8(0x21u, 0x1017u, 0u, 2u); /* segmented download of a small value */
@@ -521,7 +619,7 @@ int main(void)
     /* model image: sizes, block download with a lost segment (repeated), CRC, activation */
     CHECK(block(img, img_len, SLIPEST_STORE_IMAGE_MAX + 1u, 0u, 0) == SLIPEST_CO_ABORT_TOO_HIGH);
     CHECK(block(img, img_len, 10u, 0u, 0) == SLIPEST_CO_ABORT_TOO_LOW);
-    sdo8(0xC4u, 0x2000u, 0u, 0u); /* size not indicated */
+    sdo8(0xC4u, 0x1F50u, 1u, 0u); /* size not indicated */
     CHECK(aborted() == SLIPEST_CO_ABORT_LENGTH);
     sdo8(0xC6u, 0x1017u, 0u, 2u); /* block download of a small value */
     CHECK(aborted() == SLIPEST_CO_ABORT_UNSUPPORTED);
@@ -531,7 +629,7 @@ int main(void)
     CHECK(slipest_co_counter(&co, SLIPEST_CO_CNT_BLOCK_SEQUENCE_ERRORS) == 1u);
     CHECK((rd(0x2006u, 1u, &code) & 0xFFu) == 2u); /* READY */
     CHECK(rd(0x2006u, 3u, &code) == img_len);
-    CHECK(wr(0x2002u, 1u, 1u, 1u) == 0u);
+    CHECK(activate() == 0u);
     CHECK(rd(0x2001u, 1u, &code) == 3u && (rd(0x2001u, 4u, &code) & 0xFFu) <= 1u);
     sdo8(0x40u, 0x2001u, 3u, 0u); /* sha256: segmented upload, 32 bytes */
     CHECK(out[0].data[0] == 0x41u && le32(&out[0].data[4]) == 32u);
@@ -566,11 +664,11 @@ int main(void)
     CHECK((rd(0x2006u, 2u, &code) & 0xFFu) == (uint8_t)(int8_t)SLIPEST_E_CRC);
     image_edit_reseal(bad, img_len - SLIPEST_IMAGE_TRAILER_SIZE);
     CHECK(segmented(bad, img_len, 1) == SLIPEST_CO_ABORT_TOGGLE);
-    sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
-    sdo8(0x80u, 0x2000u, 0u, 0x08000000u); /* the client aborts */
+    open_image(0x21u, (uint32_t)img_len);
+    sdo8(0x80u, 0x1F50u, 1u, 0x08000000u); /* the client aborts */
     CHECK(n == 0 && slipest_co_counter(&co, SLIPEST_CO_CNT_SDO_ABORTS_RECEIVED) == 1u);
     now = 5000u;
-    sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
+    open_image(0x21u, (uint32_t)img_len);
     CHECK(slipest_co_tick(&co, now + SLIPEST_CO_SDO_TIMEOUT_MS, out, 2u) >= 1);
     CHECK(out[0].data[0] == 0x80u || out[1].data[0] == 0x80u);
     /* NVM failure while opening an upload */
@@ -580,15 +678,16 @@ int main(void)
     ram.fail_all = 0;
     /* a good version 4: block download, activate (error register cleared, EMCY reset), rollback, abort */
     CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == 0u);
-    CHECK(wr(0x2002u, 1u, 1u, 1u) == 0u && emcy_in_out(SLIPEST_CO_EMCY_RESET));
+    CHECK(activate() == 0u && start_emcy_reset);
     CHECK(rd(0x1001u, 0u, &code) == 0u && rd(0x2001u, 1u, &code) == 4u);
-    CHECK(wr(0x2002u, 2u, 1u, 1u) == 0u && rd(0x2001u, 1u, &code) == 3u);
+    CHECK(wr(0x2002u, 0u, 1u, 1u) == 0u && rd(0x2001u, 1u, &code) == 3u);
     CHECK(block(img, img_len, (uint32_t)img_len, 0u, 0) == SLIPEST_CO_ABORT_STORE); /* 3 is active: stale */
     put_version(bad, 5u);
     image_edit_reseal(bad, img_len - SLIPEST_IMAGE_TRAILER_SIZE);
     CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == 0u);
-    CHECK(wr(0x2002u, 3u, 1u, 1u) == 0u); /* abandon the validated upload */
-    CHECK((rd(0x2006u, 1u, &code) & 0xFFu) == 0u && wr(0x2002u, 1u, 1u, 1u) == SLIPEST_CO_ABORT_STATE);
+    CHECK((rd(0x2006u, 1u, &code) & 0xFFu) == 2u); /* READY */
+    CHECK(clear() == 0u); /* abandon the validated upload */
+    CHECK((rd(0x2006u, 1u, &code) & 0xFFu) == 0u && slipest_store_upload_state(&store) == SLIPEST_UPLOAD_IDLE);
 
     /* protocol errors */
     sdo8(0xC1u, 0u, 0u, 0u); /* end of a block download that never started */
@@ -596,7 +695,7 @@ int main(void)
     sdo8(0x21u, 0x1017u, 0u, 2u);
     send(0x600u + ID, 8u, (const uint8_t[]){0x01u, 1, 2, 3, 4, 5, 6, 7}); /* 7 bytes for a 2-byte value */
     CHECK(aborted() == SLIPEST_CO_ABORT_TOO_HIGH);
-    sdo8(0xC6u, 0x2000u, 0u, 100u);
+    open_image(0xC6u, 100u);
     {
         unsigned k;
         uint8_t d[8] = {0};
@@ -612,7 +711,7 @@ int main(void)
         /* a whole image, then an end request with the wrong count of unused bytes, then a bad command */
         size_t off = 0;
         unsigned seq = 0;
-        sdo8(0xC6u, 0x2000u, 0u, (uint32_t)img_len);
+        open_image(0xC6u, (uint32_t)img_len);
         while (off < img_len) {
             uint8_t d[8] = {0};
             size_t k = img_len - off < 7u ? img_len - off : 7u;
@@ -624,13 +723,13 @@ int main(void)
         }
         sdo8(0xC3u, 0u, 0u, 0u);
         CHECK(aborted() == SLIPEST_CO_ABORT_COMMAND);
-        CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == 0u && wr(0x2002u, 3u, 1u, 1u) == 0u);
+        CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == 0u && clear() == 0u);
     }
     {
         /* the NVM fails in the middle of an upload */
         size_t off = 0;
         unsigned t = 0;
-        sdo8(0x21u, 0x2000u, 0u, (uint32_t)img_len);
+        open_image(0x21u, (uint32_t)img_len);
         ram.fail_all = 1;
         while (off < img_len && aborted() == 0u) {
             uint8_t d[8] = {0};
@@ -706,13 +805,14 @@ int main(void)
     CHECK(slipest_co_store_size() == sizeof(slipest_store_t) && slipest_co_max_out() == SLIPEST_CO_MAX_OUT);
     test_params(&nvm);
     no_builtin_model(&nvm);
+    test_program_download(&nvm);
     /* a node without a store (no model upload): the slots read empty and the store counters 0, not an abort */
     CHECK(slipest_co_init(&co, ID, 9u, NULL, slipest_bundle_model_q(), NULL, 0u, out, 1u) == 1);
     CHECK((rd(0x2004u, 1u, &code) & 0xFFu) == (uint32_t)SLIPEST_SLOT_EMPTY && code == 0u);
     CHECK(rd(0x2004u, 6u, &code) == 0u && code == 0u);
     CHECK(rd(0x2005u, 3u, &code) == 0u && code == 0u);
     CHECK(rd(0x2006u, 1u, &code) == 0u && code == 0u);
-    CHECK(wr(0x2002u, 2u, 1u, 1u) == SLIPEST_CO_ABORT_STATE);
+    CHECK(wr(0x2002u, 0u, 1u, 1u) == SLIPEST_CO_ABORT_STATE);
     test_telemetry_matches_handle(slipest_bundle_model_q());
     CHECK_DONE();
 }

@@ -78,6 +78,20 @@ static void model_q_checks(void)
     b = m; b.n_out = 2; CHECK(slipest_model_q_check(&b) == SLIPEST_E_ARCH);
     b = m; b.gelu_n = 10; CHECK(slipest_model_q_check(&b) == SLIPEST_E_ARCH);
     b = m; b.rsqrt_seed_n = 10; CHECK(slipest_model_q_check(&b) == SLIPEST_E_ARCH);
+#if !SLIPEST_LAYER_TABLE
+    {
+        /* a layer-table model in a build without the table kernel: the check and the kernel both refuse its
+         * architecture, before they look at the table (so a dummy one does) */
+        static const slipest_layer_q_t dummy[1];
+        int16_t x[NI] = {0};
+        int32_t logits[NO] = {0};
+        b = m;
+        b.layers = dummy;
+        b.n_layers = 1u;
+        CHECK(slipest_model_q_check(&b) == SLIPEST_E_ARCH);
+        CHECK(slipest_infer_q(&b, x, logits, NULL) == SLIPEST_E_ARCH);
+    }
+#endif
     /* shifts */
     b = m; b.h_bits = 0; CHECK(slipest_model_q_check(&b) == SLIPEST_E_RANGE);
     b = m; b.h_bits = 22; CHECK(slipest_model_q_check(&b) == SLIPEST_E_RANGE); /* k1 rounding overflows */

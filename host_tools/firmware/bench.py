@@ -26,15 +26,13 @@ Where the guest has no counter QEMU drives (user-mode PowerPC, bare-metal SPARC)
 under QEMU's one-instruction-per-block exec trace and the instructions between marks are counted; a
 target with no counter at all (link-only) reports null with the reason, never an estimate.
 
-This module is the command: options, builds, and the printed output. measure.py reads the images,
-maps and host timings; figures.py assembles the figures from them.
+This module runs the builds and formats the output; measure.py reads the images, maps and host timings;
+figures.py assembles the figures from them; the options are `fleetlab.cli.bench_c`'s.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 from pathlib import Path
 
 from fleetlab.system_tools import need
@@ -44,77 +42,63 @@ from . import targets as target_registry
 from .build import cmake_build
 from .figures import bench_figures, target_figures
 from .measure import host_timings, target_costs
+from fleetlab.errors import InputError
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--bundle", type=Path, default=None, help="export bundle (default: the example bundle)")
-    parser.add_argument("--build-dir", type=Path, default=None,
-                        help="where the host and target builds go, reused when present (default: bench/ under "
-                             "the build root: build/ in a clone, else the user's cache folder)")
-    parser.add_argument("--iterations", type=int, default=2000,
-                        help="onnxruntime/torch inferences per timing round (3 rounds, interleaved with the C bench)")
-    parser.add_argument("--target", default=None,
-                        help="CPU target (a file under firmware_c/cmake/, see --list-targets) or 'all' "
-                             "(default: the reference target, whose figures are the <key>_* ones, m4_* on the M4)")
-    parser.add_argument("--list-targets", action="store_true", help="list the CPU targets and exit")
-    parser.add_argument("--compare", type=Path, metavar="BUNDLE",
-                        help="a second bundle of another architecture (e.g. an SN-D export): its instructions per "
-                        "inference, flash and stack on the same targets, and host C against onnxruntime, beside "
-                        "the main bundle's (keys compare_*, a second table)")
-    parser.add_argument("--trap-unaligned", action="store_true",
-                        help="build the targets for firmware that traps unaligned access (-DSLIPEST_TRAP_UNALIGNED=ON: "
-                        "no unaligned loads, the portable hidden loop; ARMv7-M targets only): what that costs")
-    parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+def list_targets() -> dict[str, dict]:
+    """Every CPU target found (`targets.discover()`), as `--list-targets --json` prints them."""
+    return {name: t.as_dict() for name, t in target_registry.discover().items()}
 
 
-def _list_targets(as_json: bool) -> int:
-    found = target_registry.discover()
-    if as_json:
-        print(json.dumps({name: t.as_dict() for name, t in found.items()}))
-        return 0
-    for name, t in found.items():
+def targets_text() -> str:
+    """Every CPU target found, one line each, as `--list-targets` prints them."""
+    lines = []
+    for name, t in target_registry.discover().items():
         flags = ", ".join([t.endian + "-endian", "FPU" if t.fpu else "no FPU"] + (["integer-only"] if t.integer_only else []))
         tree = repo_root()
-        print(f"{name:14s} {t.description} [{flags}] -- {t.emulator}  ({t.file.relative_to(tree) if t.file.is_relative_to(tree) else t.file})")
-    return 0
+        lines.append(f"{name:14s} {t.description} [{flags}] -- {t.emulator}  "
+                     f"({t.file.relative_to(tree) if t.file.is_relative_to(tree) else t.file})")
+    return "\n".join(lines)
 
 
-def run(args: argparse.Namespace) -> int:
+def bench(bundle: Path | None = None, build_dir: Path | None = None, iterations: int = 2000, target: str | None = None,
+          compare: Path | None = None, trap_unaligned: bool = False, progress: bool = True) -> dict:
+    """Build `bundle` (default: the example bundle) for the host and for `target` (a name, 'all', or None: the
+    reference target, always measured too) in `build_dir` (default: bench/ under the build root) and measure
+    it; with `compare`, a second bundle's figures beside it (key "compare")."""
     from tqdm.auto import tqdm
 
-    if args.list_targets:
-        return _list_targets(args.json)
     found = target_registry.discover()
     ref = target_registry.reference()
-    names = [n for n, t in found.items() if t.runs] if args.target == "all" else [target_registry.get(args.target or ref.name).name]
+    names = [n for n, t in found.items() if t.runs] if target == "all" else [target_registry.get(target or ref.name).name]
     if not found[names[-1]].runs:
-        raise ValueError(f"target {names[-1]} is link-only (no emulator): nothing to measure")
+        raise InputError(f"target {names[-1]} is link-only (no emulator): nothing to measure")
     if ref.name not in names:
         names.insert(0, ref.name)  # the reference figures (and the issue's figures) are always measured
-    bundle = Path(args.bundle or default_bundle())
+    bundle = Path(bundle or default_bundle())
     if not (bundle / "vectors.bin").is_file():
         raise FileNotFoundError(f"{bundle}: no vectors.bin (not an export bundle?)")
-    if args.trap_unaligned and (no_trap := [n for n in names if not found[n].unaligned_trap]):
-        raise ValueError(f"--trap-unaligned: {', '.join(no_trap)} cannot trap unaligned access "
+    if trap_unaligned and (no_trap := [n for n in names if not found[n].unaligned_trap]):
+        raise InputError(f"--trap-unaligned: {', '.join(no_trap)} cannot trap unaligned access "
                          f"(targets that can: {', '.join(n for n, t in found.items() if t.unaligned_trap)})")
     # always named, so a reused build folder never keeps the other choice from its cache
-    options = {"SLIPEST_TRAP_UNALIGNED": "ON" if args.trap_unaligned else "OFF"}
-    args.build_dir = Path(args.build_dir or build_root() / "bench")
+    options = {"SLIPEST_TRAP_UNALIGNED": "ON" if trap_unaligned else "OFF"}
+    build_dir = Path(build_dir or build_root() / "bench")
     need("cmake", "fleetlab bench c")
     for name in names:
         found[name].need_tools(f"fleetlab bench c --target {name}")
-    compare = Path(args.compare) if args.compare is not None else None
+    compare = Path(compare) if compare is not None else None
     if compare is not None and not (compare / "vectors.bin").is_file():
         raise FileNotFoundError(f"{compare}: no vectors.bin (not an export bundle?)")
     steps = tqdm(total=(2 + 2 * len(names)) * (2 if compare else 1), desc="bench c", leave=False,
-                 disable=args.json or not sys.stderr.isatty())
+                 disable=not progress)
     try:
-        builds, t, ref_cost, rows = _measure(bundle, args.build_dir, names, found, ref, args.iterations, steps, options)
+        builds, t, ref_cost, rows = _measure(bundle, build_dir, names, found, ref, iterations, steps, options)
         result = bench_figures(ref, builds[ref.name], ref_cost, t, rows, bundle)
         result["arch"] = _arch_of(bundle)
-        result["trap_unaligned"] = args.trap_unaligned
+        result["trap_unaligned"] = trap_unaligned
         if compare is not None:
-            _, c_t, _, c_rows = _measure(compare, args.build_dir / "compare", names, found, None, args.iterations,
+            _, c_t, _, c_rows = _measure(compare, build_dir / "compare", names, found, None, iterations,
                                          steps, options)
             result["compare"] = {"bundle": str(compare), "arch": _arch_of(compare), "host_ns_per_inference_q": c_t["q"],
                                  "host_ns_per_inference_f32": c_t["f32"],
@@ -122,11 +106,7 @@ def run(args: argparse.Namespace) -> int:
                                  "speedup_vs_onnxruntime": c_t["onnxruntime"] / c_t["q"], "cpu_targets": c_rows}
     finally:
         steps.close()  # cleared before anything else is printed: an error line is never written over by the bar
-    if args.json:
-        print(json.dumps(result))
-    else:
-        print(format_result(result, ref.key))
-    return 0
+    return result
 
 
 def _arch_of(bundle: Path) -> str:

@@ -16,6 +16,7 @@ from pathlib import Path
 from fleetlab.system_tools import need
 from fleetlab.paths import repo_root
 from .targets import Target, get
+from fleetlab.errors import InputError
 
 
 def _target(target: Target | str | None) -> Target | None:
@@ -104,7 +105,7 @@ def qemu_command(build_dir: Path, image: Path, *, icount: bool = False, trace: P
             raise OSError(f"target {rec['name']}: no instruction counting mode (user-mode QEMU)")
         extra = [str(trace) if a == "@TRACE@" else a for a in rec["icount"]]
         if "@TRACE@" in rec["icount"] and trace is None:
-            raise ValueError(f"target {rec['name']} counts by exec trace: pass trace=<log file>")
+            raise InputError(f"target {rec['name']} counts by exec trace: pass trace=<log file>")
         cmd = cmd[:1] + extra + cmd[1:]
     return cmd
 

@@ -23,12 +23,14 @@ from .measure import (STORE_OBJECTS, bundle_images, by_source, library_footprint
 from .targets import Target
 
 SERIAL_LINK_OBJECTS = ("slipest_slcan", "slipest_cobs", "slipest_crc")
-# the fixed-point kernel plus the model as data: the bundle's const structs and its hash
-KERNEL_AND_MODEL_OBJECTS = ("slipest_infer_q", "slipest_bundle_q", "slipest_model_hash")
+# the fixed-point kernels (the SN-S one and, in a layer-table build, the table one) plus the model as data: the
+# bundle's const structs and its hash
+KERNEL_AND_MODEL_OBJECTS = ("slipest_infer_q", "slipest_infer_table_q", "slipest_bundle_q", "slipest_model_hash")
 # the CANopen node with two model slots (firmware_c/target/co_node_target.c), by part
 CANOPEN_PARTS = {
     "canopen": ("slipest_co", "slipest_co_sdo", "slipest_co_od_access", "slipest_co_model", "slipest_co_od"),
-    "store": ("slipest_store", "slipest_sha256", "slipest_image", "slipest_model"),
+    "store": ("slipest_store", "slipest_sha256", "slipest_image_stream", "slipest_image_v1", "slipest_image_buffer",
+              "slipest_model"),
 }
 CANOPEN_GOALS = {"ram_bytes": 4096, "flash_bytes": 12288}  # issue 20: the whole CANopen node on the reference CPU
 # the reference CPU's goals (issue figures), by the suffix of their key

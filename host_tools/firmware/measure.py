@@ -26,13 +26,14 @@ import numpy as np
 from . import targets as target_registry
 from .build import run, run_image, run_record
 from .targets import Target
+from fleetlab.errors import InputError
 
 MARK = "] slipest_count_mark"
 _MAP_ENTRY = re.compile(r"^ (\.[\w.]+|COMMON)\s*\n?\s+0x([0-9a-f]+)\s+0x([0-9a-f]+)\s+(\S+)", re.M)
-# the model store's objects (docs/model_slots.md): store, SHA-256, image reader, model check
-# the format-2 part of the image validator is linked only in a build with the layer-table reader
-STORE_OBJECTS = ("slipest_store.c.obj", "slipest_sha256.c.obj", "slipest_image.c.obj", "slipest_image_table.c.obj",
-                 "slipest_model.c.obj")
+# the model store's objects (docs/model_slots.md): store, SHA-256, image reader (its stream, the format-1 visitor, the
+# whole-buffer readers), model check; the format-2 visitor is linked only in a build with the layer-table reader
+STORE_OBJECTS = ("slipest_store.c.obj", "slipest_sha256.c.obj", "slipest_image_stream.c.obj", "slipest_image_v1.c.obj",
+                 "slipest_image_buffer.c.obj", "slipest_image_table.c.obj", "slipest_model.c.obj")
 
 
 def parse_kv(text: str) -> dict[str, int]:
@@ -53,7 +54,7 @@ def instructions_between_marks(trace: Path) -> list[int]:
             in_mark = here
             n += 1
     if len(entries) % 2:
-        raise ValueError(f"{trace}: odd number of count marks ({len(entries)})")
+        raise InputError(f"{trace}: odd number of count marks ({len(entries)})")
     return [entries[k + 1] - entries[k] for k in range(0, len(entries), 2)]
 
 
@@ -68,7 +69,7 @@ def _counted_kv(t: Target, build_dir: Path, image: str) -> dict[str, int]:
         phases = instructions_between_marks(log)
     keys = [k for k in kv if k.endswith("_ticks") and k != "calib_ticks"]
     if len(keys) != len(phases):
-        raise ValueError(f"{image}: {len(keys)} counted phases printed, {len(phases)} marked in the trace")
+        raise InputError(f"{image}: {len(keys)} counted phases printed, {len(phases)} marked in the trace")
     kv.update(zip(keys, phases))
     return kv
 
@@ -93,7 +94,7 @@ def costs_from_counts(name: str, qonly: dict, full: dict | None) -> dict[str, fl
         # counter (bench_target.c calls_that_fit): the loop overhead is taken per call
         calls = ref[f"{phase}_calls"]
         if calls < 1:
-            raise ValueError(f"{name}: one {phase} inference takes more than half the cycle counter's range; "
+            raise InputError(f"{name}: one {phase} inference takes more than half the cycle counter's range; "
                              "its cost cannot be measured on this target")
         return (ref[f"{phase}_ticks"] - ref["empty_ticks"] * calls / n) * per_tick / calls
 
@@ -114,7 +115,7 @@ def library_footprint(map_file: Path, archive: str) -> dict[str, dict[str, int]]
     text = Path(map_file).read_text()
     start = text.find("Linker script and memory map")
     if start < 0:
-        raise ValueError(f"{map_file}: no memory map section")
+        raise InputError(f"{map_file}: no memory map section")
     per_obj: dict[str, dict[str, int]] = {}
     for name, _addr, size, origin in _MAP_ENTRY.findall(text[start:]):
         m = re.match(re.escape(archive) + r"\((.+)\)$", Path(origin).name)
@@ -157,7 +158,7 @@ def model_slots_footprint(build_dir: Path) -> dict[str, int]:
     out = subprocess.run([nm, "-S", str(image)], capture_output=True, text=True, check=True).stdout
     m = re.search(r"^[0-9a-f]+ ([0-9a-f]+) [bB] store$", out, flags=re.M)
     if m is None:
-        raise ValueError(f"{image}: no 'store' symbol (slipest_store_t) in the symbol table")
+        raise InputError(f"{image}: no 'store' symbol (slipest_store_t) in the symbol table")
     return {"flash": sum(o["flash"] for k, o in objs.items() if k in STORE_OBJECTS), "ram": int(m.group(1), 16),
             "objects": {k: v["flash"] for k, v in objs.items() if k in STORE_OBJECTS}}
 

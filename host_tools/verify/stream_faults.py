@@ -20,6 +20,7 @@ import numpy as np
 
 from ..wire.items import WireItem
 from ..wire.dbc import CONTROL_RESET, CONTROL_STATUS, Frame, by_id, control_frame, feature_frames, telemetry_frames
+from fleetlab.errors import InputError
 
 KINDS = (
     "bad_crc",
@@ -64,10 +65,10 @@ def parse_kinds(spec: str | None, link: str, features_source: bool = False) -> l
     kinds = [k.strip() for k in spec.split(",") if k.strip()]
     for k in kinds:
         if k not in KINDS:
-            raise ValueError(f"--inject: unknown fault kind {k!r} (choose from {', '.join(KINDS)} or 'all')")
+            raise InputError(f"--inject: unknown fault kind {k!r} (choose from {', '.join(KINDS)} or 'all')")
         if k not in allowed:
             where = "the features source" if features_source else f"--link {link}"
-            raise ValueError(f"--inject: fault {k!r} cannot be carried by {where}")
+            raise InputError(f"--inject: fault {k!r} cannot be carried by {where}")
     return kinds
 
 
@@ -108,7 +109,7 @@ def _window_faults(n_windows: int, kinds: list[str], rate: float, rng: np.random
     if not kinds or rate <= 0:
         return {}
     if not 0 <= rate <= 1:
-        raise ValueError(f"--inject-rate must be in [0, 1], got {rate}")
+        raise InputError(f"--inject-rate must be in [0, 1], got {rate}")
     out = {}
     prev_restart = True  # window 0 opens a segment
     for w in range(n_windows - 1):  # the last window stays clean

@@ -1,4 +1,5 @@
-"""Upload faults: model uploads over CANopen (SDO block download to the DOMAIN 0x2000) with one fault each.
+"""Upload faults: model uploads over CANopen (SDO block download to the CiA 302-3 program data, DOMAIN 0x1F50
+sub 1) with one fault each.
 
 Image faults change the bytes the master sends (through the one image description,
 export/image_layout.py, so they work on unsigned and signed images alike); wire faults change the
@@ -17,6 +18,7 @@ import can
 from fleetlab.canopen_od.objects import ABORT, EMCY
 from fleetlab.export import image_layout
 from fleetlab.export.model_image import sign_image
+from fleetlab.errors import InputError
 
 UPLOAD_IMAGE_FAULTS = ("corrupt_image", "wrong_arch", "truncated", "stale_version")
 UPLOAD_WIRE_FAULTS = ("drop_segment", "duplicate_segment", "reorder_segments", "corrupt_segment", "wrong_block_crc",
@@ -75,7 +77,7 @@ class SdoFaultBus(can.BusABC):
 
     def __init__(self, inner: can.BusABC, node_id: int, kind: str, at: int = 40) -> None:
         if kind not in UPLOAD_WIRE_FAULTS:
-            raise ValueError(f"not a wire fault: {kind!r}")
+            raise InputError(f"not a wire fault: {kind!r}")
         self.inner, self.kind, self.at = inner, kind, at
         self.cob = 0x600 + node_id
         self.segments = 0

@@ -4,6 +4,7 @@ complement bit after five equal bits); CRC delimiter, ACK slot and delimiter, EO
 3-bit intermission are not. Used to state an upload's bus time at a given bit rate."""
 
 from __future__ import annotations
+from fleetlab.errors import InputError
 
 
 def _crc15(bits: list[int]) -> int:
@@ -19,7 +20,7 @@ def _crc15(bits: list[int]) -> int:
 def frame_bits(can_id: int, data: bytes) -> int:
     """Bits on the bus for one standard data frame, including stuff bits and the intermission."""
     if not 0 <= can_id <= 0x7FF or len(data) > 8:
-        raise ValueError("a classic CAN data frame: 11-bit identifier, 0..8 data bytes")
+        raise InputError("a classic CAN data frame: 11-bit identifier, 0..8 data bytes")
     bits = [0]  # SOF
     bits += [(can_id >> (10 - i)) & 1 for i in range(11)]
     bits += [0, 0, 0]  # RTR (data frame), IDE (standard), r0

@@ -25,6 +25,7 @@ import numpy as np
 
 from fleetlab.dbc import DBC_PATH, check_layout
 from fleetlab.dbc import load as _load
+from fleetlab.errors import InputError
 
 DBC_ENV = "FLEETLAB_DBC"  # environment variable naming another DBC (other CAN IDs, same layout)
 
@@ -44,9 +45,9 @@ class Frame:
 
     def __post_init__(self) -> None:
         if not 0 <= self.can_id <= 0x7FF:
-            raise ValueError(f"CAN ID 0x{self.can_id:X} is not an 11-bit identifier")
+            raise InputError(f"CAN ID 0x{self.can_id:X} is not an 11-bit identifier")
         if len(self.data) > 8:
-            raise ValueError(f"frame 0x{self.can_id:03X}: {len(self.data)} data bytes (classic CAN allows 8)")
+            raise InputError(f"frame 0x{self.can_id:03X}: {len(self.data)} data bytes (classic CAN allows 8)")
 
 
 @dataclass(frozen=True)
@@ -63,11 +64,11 @@ class MessageCodec:
         try:
             return Frame(self.frame_id, self.fmt.pack(*values))
         except struct.error as e:
-            raise ValueError(f"{self.name}: cannot encode {dict(zip(self.signals, values))}: {e}") from None
+            raise InputError(f"{self.name}: cannot encode {dict(zip(self.signals, values))}: {e}") from None
 
     def decode(self, data: bytes) -> tuple[int, ...]:
         if len(data) != self.length:
-            raise ValueError(f"{self.name} (0x{self.frame_id:03X}): {len(data)} data bytes, DBC says {self.length}")
+            raise InputError(f"{self.name} (0x{self.frame_id:03X}): {len(data)} data bytes, DBC says {self.length}")
         return self.fmt.unpack(data)
 
     def decode_dict(self, data: bytes) -> dict[str, int]:
@@ -81,9 +82,9 @@ def _codec_of(msg: cantools.database.can.Message, source: str) -> MessageCodec:
     fmt, pos, names = "<", 0, []
     for sig in sorted(msg.signals, key=lambda s: s.start):
         if sig.byte_order != "little_endian" or sig.start % 8 or (sig.length, sig.is_signed) not in _STRUCT_CODES:
-            raise ValueError(f"{source}: {msg.name}.{sig.name} is not a byte-aligned little-endian integer")
+            raise InputError(f"{source}: {msg.name}.{sig.name} is not a byte-aligned little-endian integer")
         if sig.start < pos:
-            raise ValueError(f"{source}: {msg.name}.{sig.name} overlaps another signal")
+            raise InputError(f"{source}: {msg.name}.{sig.name} overlaps another signal")
         fmt += "x" * ((sig.start - pos) // 8) + _STRUCT_CODES[(sig.length, sig.is_signed)]
         pos = sig.start + sig.length
         names.append(sig.name)
@@ -123,7 +124,12 @@ def _checked(path: Path) -> Path:
     if not path.is_file():
         raise OSError(f"{path}: no such DBC file (--dbc / ${DBC_ENV})")
     if path != DBC_PATH.resolve():
-        check_layout(_load(path), path.name)
+        try:
+            check_layout(_load(path), path.name)
+        except ValueError as e:
+            # dbc/ imports nothing of fleetlab (CMake runs it bare), so its refusals are plain ValueErrors: a
+            # rover's DBC that cannot be read or breaks the layout is the user's input
+            raise InputError(str(e)) from None
     return path
 
 
@@ -183,7 +189,7 @@ def feature_frames(window_counter: int, feat_q: np.ndarray | tuple[int, ...]) ->
     """FEATURES_0..3 of one int16 feature vector (FEATURE_NAMES order, raw LSB units)."""
     f = [int(v) for v in feat_q]
     if len(f) != 12:
-        raise ValueError(f"a feature vector has 12 values, got {len(f)}")
+        raise InputError(f"a feature vector has 12 values, got {len(f)}")
     wc = window_counter & 0xFFFF
     cs = codecs()
     return tuple(cs[name].encode(wc, *f[3 * i : 3 * i + 3]) for i, name in enumerate(FEATURE_FRAME_NAMES))  # type: ignore[return-value]

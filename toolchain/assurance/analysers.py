@@ -20,7 +20,7 @@ STRICT_WARNINGS = ["-Wall", "-Wextra", "-pedantic", "-Wconversion", "-Wsign-conv
 # its definition EVA stops at the first read of the model) and the precision options of each
 EVA_TARGETS = {
     # precision 5 unrolls the 30 layer-1 rows, so each partial sum is bounded with its own row's weights
-    "eva_infer_q": (["slipest_infer_q.c", "slipest_bundle_q.c"], ["-eva-precision", "5"]),
+    "eva_infer_q": (["slipest_infer_q.c", "slipest_infer_table_q.c", "slipest_bundle_q.c"], ["-eva-precision", "5"]),
     # the driver's stream loop is unrolled (eva_driver.c): no widening of the window sums
     "eva_features": (["slipest_features.c"], ["-eva-precision", "1", "-eva-split-return", "auto"]),
 }

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .sources import ToolFailed, fw, generate_dbc, gist, include_dirs, library_sources, need, rel, run
+from ..errors import InputError
 
 _FINDING = re.compile(r"^(?P<file>[^:\n]+):(?P<line>\d+):misra-c2012-(?P<rule>[\d.]+)$", re.M)
 # a counts-table row: | 15.5 | firmware_c/src/slipest_node.c | 12 | MD-15.5 |
@@ -87,7 +88,7 @@ def read_deviations(path: Path | None = None) -> tuple[Counter, set]:
     recorded: Counter = Counter()
     for m in _ROW.finditer(text):
         if m["permit"] != f"MD-{m['rule']}":
-            raise ValueError(f"{path}: row for rule {m['rule']} names permit {m['permit']}")
+            raise InputError(f"{path}: row for rule {m['rule']} names permit {m['permit']}")
         recorded[(m["rule"], m["file"])] += int(m["count"])
     permits = {m["rule"] for m in _PERMIT.finditer(text)}
     return recorded, permits

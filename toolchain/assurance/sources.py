@@ -12,13 +12,16 @@ from typing import TypeVar
 
 from fleetlab.host_tools.firmware.build import Result, execute
 
-from ..cores import usable_cores
+from ..compute import usable_cores
 from ..errors import FleetlabError
 from ..paths import default_bundle, repo_root
 from .. import system_tools
 
 # sources that use float on purpose (the f32 reference path); the fixed-point library omits them
 FLOAT_SOURCES = ("slipest_features_f32.c", "slipest_infer_f32.c")
+# sources CMake compiles only with the layer table (SLIPEST_LAYER_TABLE): the format-2 image visitor and the
+# layer-table kernel
+LAYER_TABLE_SOURCES = ("slipest_image_table.c", "slipest_infer_table_q.c")
 T = TypeVar("T")
 
 

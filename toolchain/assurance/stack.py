@@ -17,11 +17,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fleetlab.host_tools.firmware import targets as target_registry
-from .sources import fw, generate_dbc, include_dirs, library_sources, need, public_headers, run
+from .sources import LAYER_TABLE_SOURCES, fw, generate_dbc, include_dirs, library_sources, need, public_headers, run
 
 KERNEL_OPT = "-O3"   # firmware_c/cmake/target.cmake: inference kernels
 FRAME_OPT = "-Os"    # ... and per-frame code
-KERNELS = ("slipest_infer_q.c", "slipest_infer_f32.c", "slipest_features_f32.c")
+KERNELS = ("slipest_infer_q.c", "slipest_infer_table_q.c", "slipest_infer_f32.c", "slipest_features_f32.c")
 
 _NODE = re.compile(r'node: \{ title: "(?P<title>[^"]+)" label: "(?P<label>[^"]*)"')
 _EDGE = re.compile(r'edge: \{ sourcename: "(?P<src>[^"]+)" targetname: "(?P<dst>[^"]+)"')
@@ -104,15 +104,19 @@ class StackGraph:
 BENCH_WRAPPERS = {"stack_q": "one_q", "stack_node_window": "node_last_frame"}
 
 
-def compile_graph(bundle: Path | None = None, q_only: bool = True, with_bench: bool = False) -> StackGraph:
+def compile_graph(bundle: Path | None = None, q_only: bool = True, with_bench: bool = False,
+                  layer_table: bool = True) -> StackGraph:
+    """GCC's call graph of the library as CMake builds it; layer_table=False: SLIPEST_LAYER_TABLE=0, without the
+    sources CMake then leaves out (LAYER_TABLE_SOURCES)."""
     gcc = need("arm-none-eabi-gcc")
     graph = StackGraph()
     with tempfile.TemporaryDirectory() as tmp:
         gen = generate_dbc(Path(tmp) / "generated", bundle)
         incs = [f"-I{d}" for d in include_dirs(bundle, gen.parent)]
-        defs = ["-DSLIPEST_Q_ONLY"] if q_only else []
+        defs = (["-DSLIPEST_Q_ONLY"] if q_only else []) + ([] if layer_table else ["-DSLIPEST_LAYER_TABLE=0"])
         bench = fw() / "target" / "bench_target.c"
-        for i, src in enumerate([*library_sources(include_float=not q_only), gen] + ([bench] if with_bench else [])):
+        lib = [f for f in library_sources(include_float=not q_only) if layer_table or f.name not in LAYER_TABLE_SOURCES]
+        for i, src in enumerate([*lib, gen] + ([bench] if with_bench else [])):
             opt = KERNEL_OPT if src.name in KERNELS else FRAME_OPT
             extra = []
             if src == bench:  # as target.cmake builds the cost image

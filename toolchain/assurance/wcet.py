@@ -18,6 +18,7 @@ from pathlib import Path
 from fleetlab.host_tools.firmware import targets as target_registry
 from fleetlab.host_tools.firmware.measure import parse_kv
 from fleetlab.host_tools.firmware.build import cmake_build, run_image
+from ..errors import InputError
 
 IMAGE = "slipest_wcet_target_q.elf"
 # (function, key in the image's output, overhead key, what the cases are)
@@ -45,7 +46,7 @@ def parse(text: str) -> list[WorstCase]:
     kv = parse_kv(text)
     missing = [k for k in ("calib_instructions", "calib_ticks", "reps") if k not in kv]
     if missing:
-        raise ValueError(f"{IMAGE}: output lacks {missing}:\n{text[-2000:]}")
+        raise InputError(f"{IMAGE}: output lacks {missing}:\n{text[-2000:]}")
     per_tick = kv["calib_instructions"] / kv["calib_ticks"]
     rows = []
     for fn, key, overhead, what in ROWS:
@@ -58,7 +59,7 @@ def measure(build: Path, bundle: Path | None = None, target: str | None = None) 
     """Build the worst-case image for `target` (a SysTick target) and run it; (target description, rows)."""
     t = target_registry.get(target) if target else target_registry.reference()
     if t.counter != "systick":
-        raise ValueError(f"{t.name}: the worst-case image needs a SysTick counter (counter is {t.counter!r})")
+        raise InputError(f"{t.name}: the worst-case image needs a SysTick counter (counter is {t.counter!r})")
     cmake_build(build, bundle, target=t, targets=("slipest_wcet_target_q",))
     return t.description, parse(run_image(build, IMAGE, icount=True, timeout=900))
 

@@ -16,7 +16,11 @@ import os
 import select
 import sys
 
-from ..errors import FleetlabError
+from ..errors import FleetlabError, InputError, first_line
+
+# exit statuses: bad input 1 and a missing tool or part of the installation 2 (the errors module's types);
+# anything else raised is a bug in fleetlab, EX_SOFTWARE of sysexits.h, so that a script can tell them apart
+INPUT_EXIT, SETUP_EXIT, INTERNAL_EXIT, INTERRUPTED_EXIT, READER_GONE_EXIT = 1, 2, 70, 130, 141
 
 # name -> (module, one-line help): the one table of subcommands
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -70,6 +74,8 @@ def build_parser(selected: str | None = None) -> argparse.ArgumentParser:
         epilog="Run 'fleetlab COMMAND --help' for the options of one command.",
     )
     parser.add_argument("--version", action="version", version=f"fleetlab {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="let any error end with its traceback (for a bug report) instead of one line")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module, help_text) in _available().items():
         p = sub.add_parser(name, help=help_text, description=help_text[0].upper() + help_text[1:] + ".")
@@ -90,37 +96,60 @@ def _reader_gone() -> bool:
         return False
 
 
+def _command(argv: list[str]) -> str | None:
+    """The subcommand named in `argv`: the first word after the global options (`fleetlab --debug fuse ...`)."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     try:
-        args = build_parser(argv[0] if argv else None).parse_args(argv)
+        args = build_parser(_command(argv)).parse_args(argv)
     except FleetlabError as e:  # a subcommand's options could not be set up (e.g. its files are missing)
+        if "--debug" in argv:
+            raise
         print(f"fleetlab: error: {e}", file=sys.stderr)
-        return 2
+        return SETUP_EXIT
     if not getattr(args, "_module", None):
         build_parser().print_help()
-        return 2
+        return SETUP_EXIT
     try:
         code = int(importlib.import_module(args._module).run(args) or 0)
         sys.stdout.flush()  # so that a reader gone away (`| head`) is met here, not in the interpreter's exit
         return code
+    except BrokenPipeError:
+        if not _reader_gone():
+            return _failed(args, INPUT_EXIT)  # a pipe other than stdout (an emulator that died): said in one line
+        # `fleetlab data info DIR | head`: the reader has what it wanted. Nothing is wrong, so no message;
+        # the rest of the output goes nowhere, so that the exit's own flush cannot fail again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return READER_GONE_EXIT  # 128 + SIGPIPE: what a shell tool stopped by the same closed pipe returns
     except KeyboardInterrupt:
+        if args.debug:
+            raise
         print("interrupted", file=sys.stderr)
-        return 130
-    except FleetlabError as e:
-        # what the user can fix (a missing tool, a missing part of the installation): one line, exit 2
-        print(f"fleetlab {args.command}: error: {e}", file=sys.stderr)
-        return 2
-    except (ValueError, OSError) as e:
-        if isinstance(e, BrokenPipeError) and _reader_gone():
-            # `fleetlab data info DIR | head`: the reader has what it wanted. Nothing is wrong, so no message;
-            # the rest of the output goes nowhere, so that the exit's own flush cannot fail again.
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-            return 141  # 128 + SIGPIPE: what a shell tool stopped by the same closed pipe returns
-        # Bad input (a pipe other than stdout breaking too): one clear line naming what is wrong, no
-        # traceback. Bugs still show theirs.
-        print(f"fleetlab {args.command}: error: {e}", file=sys.stderr)
-        return 1
+        return INTERRUPTED_EXIT
+    except (InputError, OSError):
+        # bad input: an option, a file's contents, a path that is not there (OSError names it)
+        return _failed(args, INPUT_EXIT)
+    except FleetlabError:
+        # what the user can fix outside the input (a missing tool, a missing part of the installation)
+        return _failed(args, SETUP_EXIT)
+    except Exception:  # noqa: BLE001 - every other exception is a bug: one line here, the traceback with --debug
+        return _failed(args, INTERNAL_EXIT)
+
+
+def _failed(args: argparse.Namespace, code: int) -> int:
+    """The exception being handled as one line on stderr, and `code`; with --debug, the exception itself."""
+    if args.debug:
+        raise  # noqa: PLE0704 - called from an except block: re-raises the exception being handled
+    error = sys.exc_info()[1]
+    if code == INTERNAL_EXIT:
+        print(f"fleetlab {args.command}: internal error ({type(error).__name__}: {first_line(error)}); "
+              f"rerun with `fleetlab --debug {args.command} ...` for the traceback and report it", file=sys.stderr)
+    else:
+        print(f"fleetlab {args.command}: error: {error}", file=sys.stderr)
+    return code
 
 
 if __name__ == "__main__":

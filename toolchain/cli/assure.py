@@ -15,6 +15,7 @@ from fleetlab.host_tools.firmware import targets as target_registry
 from ..assurance import analysers, coverage, misra, stack, wcet
 from ..assurance.report import COVERAGE_ROW, CTEST_ROW, assure, checked_bundle
 from ..paths import build_root, default_bundle
+from ..errors import InputError
 
 __all__ = ["add_arguments", "run"]
 
@@ -127,8 +128,8 @@ def run(args: argparse.Namespace) -> int:
         args.bundle = checked_bundle(args.bundle or default_bundle())
         given = [f"--{k.replace('_', '-')}" for k in REPORT_ONLY if getattr(args, k) not in (None, False)]
         if given:
-            raise ValueError(f"{', '.join(given)}: options of the full report, not of 'assure {args.check}'")
+            raise InputError(f"{', '.join(given)}: options of the full report, not of 'assure {args.check}'")
         return CHECKS[args.check][0](args)
     if args.out is None:
-        raise ValueError("--out DIR is required for the report (or name one check: " + ", ".join(CHECKS) + ")")
+        raise InputError("--out DIR is required for the report (or name one check: " + ", ".join(CHECKS) + ")")
     return assure(args.bundle, args.out, fuzz_stats=args.fuzz_stats, eva=not args.no_eva, target=not args.no_target)

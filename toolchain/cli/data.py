@@ -18,41 +18,49 @@ from ..data.info import plot_histograms, summarise
 from ..data.log_import import UNASSIGNED, drop_summary, import_source, range_warnings, write_import
 from ..data.rover_profile import load_profile
 from . import dataset_input
+from ..errors import InputError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     add_info_arguments(sub)
-    p = sub.add_parser(
-        "compare",
-        help="compare two dataset folders role by role (realism report)",
-        description="Side by side, per role: class mix, within-traverse persistence (lag-1 slip "
-        "autocorrelation, mean same-class run length), per-feature mean and std with the acceleration "
-        "convention detected, and SN-S learnability on the target (leave-one-traverse-out, Earth expert "
-        "zero-shot, Earth + FullFinetune at |D_Cal| = 150 under both protocols).",
-    )
-    p.add_argument("dir_a", type=Path, help="first dataset folder")
-    p.add_argument("dir_b", type=Path, help="second dataset folder")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
-    p.add_argument("--plot", type=Path, metavar="FILE", help="write per-role class mix and feature means to this PNG")
-    p.add_argument("--runs", type=int, default=5, help="D_Cal draws per protocol for Earth + FullFinetune (default 5)")
-    p.add_argument("--seed", type=int, default=0, help="model seed (default 0)")
-    p.add_argument("--no-learnability", action="store_true", help="statistics only, no model training (fast)")
+    add_compare_arguments(sub)
     add_import_arguments(sub)
 
 
+def _report_action(sub, name: str, help: str, description: str, folders: dict[str, str], plot: str):
+    """An action that reads dataset folders and prints a report: as tables, or as one JSON object (--json),
+    and draws it into a PNG on request (--plot)."""
+    p = sub.add_parser(name, help=help, description=description)
+    for dest, what in folders.items():
+        p.add_argument(dest, type=Path, help=what)
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
+    p.add_argument("--plot", type=Path, metavar="FILE", help=plot)
+    return p
+
+
 def add_info_arguments(sub) -> None:
-    p = sub.add_parser(
-        "info",
-        help="summarise a dataset folder",
-        description="Rows and class counts per role and per file, and per-feature summary statistics, of a "
+    _report_action(
+        sub, "info", "summarise a dataset folder",
+        "Rows and class counts per role and per file, and per-feature summary statistics, of a "
         "dataset folder (one made by 'fleetlab simulate' or 'fleetlab data import', a folder of the original "
         "Fleet-To-Lab CSV files, or a roles .toml file). Windows without labels count in the rows and the "
         "feature statistics; the class mix is shown where labels exist.",
-    )
-    p.add_argument("path", type=Path, help="dataset folder")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
-    p.add_argument("--plot", type=Path, metavar="FILE", help="write per-class feature histograms to this PNG")
+        {"path": "dataset folder"}, "write per-class feature histograms to this PNG")
+
+
+def add_compare_arguments(sub) -> None:
+    p = _report_action(
+        sub, "compare", "compare two dataset folders role by role (realism report)",
+        "Side by side, per role: class mix, within-traverse persistence (lag-1 slip "
+        "autocorrelation, mean same-class run length), per-feature mean and std with the acceleration "
+        "convention detected, and SN-S learnability on the target (leave-one-traverse-out, Earth expert "
+        "zero-shot, Earth + FullFinetune at |D_Cal| = 150 under both protocols).",
+        {"dir_a": "first dataset folder", "dir_b": "second dataset folder"},
+        "write per-role class mix and feature means to this PNG")
+    p.add_argument("--runs", type=int, default=5, help="D_Cal draws per protocol for Earth + FullFinetune (default 5)")
+    p.add_argument("--seed", type=int, default=0, help="model seed (default 0)")
+    p.add_argument("--no-learnability", action="store_true", help="statistics only, no model training (fast)")
 
 
 def add_import_arguments(sub) -> None:
@@ -83,13 +91,13 @@ def run_import(args: argparse.Namespace) -> int:
     import time
 
     if args.role != UNASSIGNED and not ROLE_PATTERN.match(args.role):
-        raise ValueError(f"--role {args.role!r}: expected earth, target or fleet_<rover>")
+        raise InputError(f"--role {args.role!r}: expected earth, target or fleet_<rover>")
     profile = load_profile(args.rover)
     t0 = time.perf_counter()
     results = [r for src in args.sources for r in import_source(src, profile, progress=not args.no_progress)]
     elapsed = time.perf_counter() - t0
     if not any(r.segments for r in results):
-        raise ValueError("no window survived the import: " + "; ".join(
+        raise InputError("no window survived the import: " + "; ".join(
             f"{r.name}: {drop_summary(r.drops)}" for r in results))
     write_import(args.out, results, profile, args.role)
     kept = sum(r.windows_kept for r in results)
@@ -201,8 +209,8 @@ def run_compare(args: argparse.Namespace) -> int:
         try:
             rep["learnability"] = {side: learnability(ds, seed=args.seed, runs=args.runs).as_dict()
                                    for side, ds in (("a", ds_a), ("b", ds_b))}
-        except ValueError as e:
-            raise ValueError(f"{e}; add --no-learnability for the statistics alone") from None
+        except InputError as e:  # a dataset the learnability check cannot use (too few traverses or roles)
+            raise InputError(f"{e}; add --no-learnability for the statistics alone") from None
     return _output(rep, args, print_report, lambda path: plot_report(rep, path))
 
 

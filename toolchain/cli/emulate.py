@@ -21,6 +21,7 @@ from fleetlab.host_tools.sources import FeatureSource, TelemetrySource, resolve
 from fleetlab.host_tools.verify import stream_faults as fault_mod
 from .dbc_option import add_dbc_option, apply_dbc_option
 from ..paths import default_bundle
+from ..errors import InputError
 
 EPILOG = """\
 Output: a summary; with --json FILE the same as JSON: windows, bit_exact, mismatches,
@@ -101,21 +102,21 @@ def run(args: argparse.Namespace) -> int:
     if args.estimates is not None:
         check_path(args.estimates)
         if args.restart_every:
-            raise ValueError("--estimates writes the estimates of a plain replay (one estimator lifetime); "
+            raise InputError("--estimates writes the estimates of a plain replay (one estimator lifetime); "
                              "drop --restart-every")
     if args.soak:
         if args.source != "sim":
-            raise ValueError("--soak streams simulator telemetry; drop --source")
+            raise InputError("--soak streams simulator telemetry; drop --source")
         source: TelemetrySource | FeatureSource = soak_source(args.soak, args.seed, args.scale)
     else:
         source = resolve(args.source, args.seed, args.scale, bundle)
     if args.max_windows < 0:
-        raise ValueError("--max-windows must be >= 0")
+        raise InputError("--max-windows must be >= 0")
     if args.max_windows:
         source = first_windows(source, args.max_windows)
     kinds = fault_mod.parse_kinds(args.inject, args.link, isinstance(source, FeatureSource))
     if args.restart_every < 0:
-        raise ValueError("--restart-every must be >= 0")
+        raise InputError("--restart-every must be >= 0")
     result = emulate(bundle, source, args.link, kinds, args.inject_rate, args.restart_every, args.seed,
                      args.timeout, progress=not args.no_progress, realtime=args.realtime)
     s = result.summary()

@@ -7,11 +7,14 @@ import json
 import sys
 from pathlib import Path
 
-from ..evaluation.mccv import BACKENDS, EvalSettings, run_mccv, write_atomic
+from ..evaluation.executor import BACKENDS, write_atomic
+from ..evaluation.mccv import run_mccv
+from ..evaluation.protocol import EvalSettings
 from ..evaluation.methods import parse_methods, selectable
 from ..fusion.registry import Budget
 from ..models.train import EXPERT_LR
 from . import dataset_input, options
+from ..errors import InputError
 
 DEFAULT_CAL_SIZES = EvalSettings.cal_sizes
 DEFAULT_RUNS = EvalSettings.runs
@@ -74,9 +77,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def settings_from_args(args: argparse.Namespace) -> EvalSettings:
     if args.jobs < 1:
-        raise ValueError(f"--jobs must be at least 1, got {args.jobs}")
+        raise InputError(f"--jobs must be at least 1, got {args.jobs}")
     if args.backend == "dask" and not args.scheduler:
-        raise ValueError("--backend dask needs --scheduler ADDRESS")
+        raise InputError("--backend dask needs --scheduler ADDRESS")
     return EvalSettings(
         protocol=args.protocol, arch=args.arch, cal_sizes=tuple(args.cal_sizes or DEFAULT_CAL_SIZES),
         runs=args.runs, seed=args.seed, epochs=args.epochs,
@@ -93,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
 
     settings = settings_from_args(args)
     if args.resume and args.out and args.out.resolve() != args.resume.resolve():
-        raise ValueError("--resume DIR writes into DIR: give no other --out")
+        raise InputError("--resume DIR writes into DIR: give no other --out")
     args.out = args.resume or args.out
     dataset = dataset_input.load(args.data)
     if args.label_noise_sweep:
@@ -109,7 +112,7 @@ def _sweep(args: argparse.Namespace, settings: EvalSettings, dataset) -> int:
     from ..evaluation import noise_sweep
 
     if args.label_noise:
-        raise ValueError("--label-noise-sweep runs every rate itself: give no --label-noise")
+        raise InputError("--label-noise-sweep runs every rate itself: give no --label-noise")
     kind, rates = noise_sweep.parse_sweep(args.label_noise_sweep)
     sweep = noise_sweep.run_sweep(dataset, settings, kind, rates, n_jobs=args.jobs, backend=args.backend,
                                   scheduler=args.scheduler, progress=not args.no_progress, results_dir=args.out,

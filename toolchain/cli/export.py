@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from . import options
+from ..errors import InputError
 
 DEFAULT_VECTORS = 1200
 
@@ -72,9 +73,9 @@ def run(args: argparse.Namespace) -> int:
         _print_checks(check_bundle(args.check_only))
         return 0
     if args.model is None or args.out is None:
-        raise ValueError("give MODEL and --out BUNDLE (or --check-only BUNDLE)")
+        raise InputError("give MODEL and --out BUNDLE (or --check-only BUNDLE)")
     if args.vectors < 1000 and not args.onnx_only:
-        raise ValueError(f"--vectors {args.vectors}: at least 1000 test vectors are required")
+        raise InputError(f"--vectors {args.vectors}: at least 1000 test vectors are required")
 
     from ..models import load_model
 

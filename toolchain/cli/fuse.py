@@ -13,10 +13,10 @@ from pathlib import Path
 
 import torch
 
+from ..compute import device_label, torch_threads
 from ..data.calibration import calibration_set
 from ..evaluation.fuse_report import Row, scores, write_run
 from ..fusion import registry
-from ..fusion.acomerge import run_threads
 from ..fusion.baselines import model_from_flat
 from ..fusion.finetune import FINETUNE_STEPS, finetune
 from ..fusion.fitness import CalibrationFitness
@@ -24,6 +24,7 @@ from ..fusion.pipeline import fuse, needs_joint, prepare_sources, source_device
 from ..fusion.registry import Budget
 from ..models import flatten
 from . import dataset_input, options
+from ..errors import InputError
 
 DEFAULT_METHOD = "acomerge"
 DEFAULT_CAL_SIZE = 150
@@ -58,13 +59,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     options.at_least_one(args, "cal_size", "epochs", "generations", "ants", "finetune_steps")
     if args.threads < 0:
-        raise ValueError(f"--threads must be 0 (chosen from the free cores) or more, got {args.threads}")
-    previous_threads = torch.get_num_threads()
-    torch.set_num_threads(run_threads(args.threads))
-    try:
+        raise InputError(f"--threads must be 0 (chosen from the free cores) or more, got {args.threads}")
+    with torch_threads(args.threads):
         return _fuse(args)
-    finally:
-        torch.set_num_threads(previous_threads)
 
 
 def _fuse(args: argparse.Namespace) -> int:
@@ -85,7 +82,7 @@ def _fuse(args: argparse.Namespace) -> int:
     budget = Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, copies=args.copies, threads=args.threads,
                     device=device, rng=args.rng)
     if device != "cpu" and progress:
-        print(f"{label}: searching on {options.device_label(device)}", file=sys.stderr)
+        print(f"{label}: searching on {device_label(device)}", file=sys.stderr)
     fused = fuse(args.method, src, cal.x_cal, cal.y_cal, seed=args.seed, buffer_seed=args.seed, budget=budget)
     seconds[args.method] = time.perf_counter() - t0
 

@@ -6,12 +6,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import torch
-
+from ..compute import AUTO_THREADS, MAX_THREADS, resolve_device
 from ..data.splits import PROTOCOLS
-from ..fusion.acomerge import AUTO_THREADS, MAX_THREADS, AcoMergeConfig
+from ..fusion.acomerge import AcoMergeConfig
 from ..models.mlp import ARCHS, MAX_HIDDEN_LAYERS, MAX_UNITS, MIN_UNITS, canonical_arch
 from ..models.train import EXPERT_EPOCHS
+from ..errors import InputError
 
 ACO = AcoMergeConfig()  # the paper's AcoMerge defaults: the one source of every search default below
 
@@ -85,15 +85,7 @@ def device(p: argparse.ArgumentParser) -> None:
 
 def resolved_device(args: argparse.Namespace) -> str:
     """--device as AcoMergeConfig takes it ('cpu', 'cuda', 'cuda:N'); a one-line error without a GPU."""
-    from ..fusion.lockstep import resolve_device
-
     return str(resolve_device(args.device))
-
-
-def device_label(device: str) -> str:
-    from ..fusion.lockstep import device_label as label
-
-    return label(torch.device(device))
 
 
 def jobs(p: argparse.ArgumentParser) -> None:
@@ -112,4 +104,4 @@ def at_least_one(args: argparse.Namespace, *names: str) -> None:
     """Refuse counts below 1 with the option's own spelling."""
     for name in names:
         if getattr(args, name) < 1:
-            raise ValueError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(args, name)}")
+            raise InputError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(args, name)}")

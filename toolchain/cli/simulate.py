@@ -15,6 +15,7 @@ from ..data.simulator.bag import STORAGES
 from ..data.simulator.engine import ACCEL_CONVENTIONS, ACCEL_LINEAR
 from ..data.simulator.rovers import ROVERS
 from ..data.simulator.scenario import DEFAULT_FLEET, LABEL_SOURCES, SCENARIO, write_scenario
+from ..errors import InputError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -58,11 +59,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if not np.isfinite(args.rate) or args.rate <= 0:
-        raise ValueError(f"--rate must be a positive number of Hz, got {args.rate}")
+        raise InputError(f"--rate must be a positive number of Hz, got {args.rate}")
     if not np.isfinite(args.scale) or not 0 < args.scale <= 10:
-        raise ValueError(f"--scale must be in (0, 10], got {args.scale}")
+        raise InputError(f"--scale must be in (0, 10], got {args.scale}")
     if (args.bag or args.csv_logs) and args.accel != ACCEL_LINEAR:
-        raise ValueError("--bag and --csv-logs write the IMU as a raw accelerometer (gravity added from the attitude) itself; "
+        raise InputError("--bag and --csv-logs write the IMU as a raw accelerometer (gravity added from the attitude) itself; "
                          f"keep the default --accel {ACCEL_LINEAR}")
     fleet = tuple(r.strip() for r in args.fleet.split(",") if r.strip())
     t0 = time.perf_counter()

@@ -1,5 +1,7 @@
-"""`fleetlab upload`: send a bundle's model image to a running slipest CANopen node (SDO block
-download into its inactive slot), activate it when asked, read back the active version and hash.
+"""`fleetlab upload`: send a bundle's model image to a running slipest CANopen node by CiA 302-3 program
+download (clear, SDO block download of 0x1F50 into its inactive slot), start it when asked (on trial) and
+confirm it (0x1F51 = 0x80; after --rehearse only when the rehearsal passed; never with --no-confirm), read back
+the active version and hash.
 The library part is `fleetlab.host_tools.upload`."""
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ from fleetlab.host_tools.canopen_session import CobsCanBus, eds_for
 from fleetlab.host_tools.links import open_can_bus
 from fleetlab.export.image_layout import V2, layout_of
 from fleetlab.host_tools.upload import open_tapped, read_image, rehearse, rollback_model, upload_image
+from ..errors import InputError
+
 from . import options
 
 
@@ -22,7 +26,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bundle", type=Path, default=None, help="export bundle whose model.img is sent (required unless "
                                                              "--rollback)")
     p.add_argument("--rollback", action="store_true",
-                   help="send no image: the node re-activates its previous model (0x2002 sub 2); says so in one line "
+                   help="send no image: the node re-activates its previous model (0x2002 = 1); says so in one line "
                         "when it has none")
     p.add_argument("--link", choices=("canopen", "serial"), default="canopen",
                    help="canopen: a CAN bus (python-can --interface/--channel); serial: the same CAN frames in "
@@ -32,7 +36,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bitrate", type=int, default=500000, help="CAN bit rate for slcan/socketcan (default 500000)")
     p.add_argument("--port", default=None, help="serial device for --link serial")
     p.add_argument("--node-id", type=int, default=5, help="CANopen node id of the estimator (default 5)")
-    p.add_argument("--activate", action="store_true", help="activate the image after it passed validation")
+    p.add_argument("--activate", action="store_true",
+                   help="start the image after it passed validation (CiA 302-3 start: on trial, the node boots up) "
+                        "and confirm it (0x1F51 = 0x80)")
+    p.add_argument("--no-confirm", action="store_true",
+                   help="with --activate or --rehearse: leave the new model on trial; the next reset or power cut "
+                        "brings the previous one back (confirm later by writing 0x80 to 0x1F51)")
     p.add_argument("--segmented", action="store_true", help="SDO segmented download instead of block download")
     p.add_argument("--emulate", action="store_true",
                    help="no hardware: start the emulator (slipest_emu --profile canopen) on a pty and upload to it")
@@ -78,11 +87,13 @@ def run(args: argparse.Namespace) -> int:
     from tqdm.auto import tqdm
 
     if not 1 <= args.node_id <= 127:
-        raise ValueError("--node-id must be 1..127")
+        raise InputError("--node-id must be 1..127")
     if args.rollback and (args.bundle is not None or args.activate or args.rehearse):
-        raise ValueError("--rollback sends no image: it takes no --bundle, --activate or --rehearse")
+        raise InputError("--rollback sends no image: it takes no --bundle, --activate or --rehearse")
     if not args.rollback and args.bundle is None:
-        raise ValueError("--bundle is required (or --rollback)")
+        raise InputError("--bundle is required (or --rollback)")
+    if args.no_confirm and not (args.activate or args.rehearse):
+        raise InputError("--no-confirm needs --activate or --rehearse (nothing is started otherwise)")
     image = b"" if args.rollback else read_image(args.bundle)
     with tempfile.TemporaryDirectory() as tmp:
         if args.emulate:
@@ -105,12 +116,12 @@ def run(args: argparse.Namespace) -> int:
             eds.write_text(eds_text())  # the node's EDS, from the same source as its C tables
             if args.link == "canopen":
                 if args.channel is None and args.interface != "virtual":
-                    raise ValueError("--link canopen needs --channel (or --emulate)")
+                    raise InputError("--link canopen needs --channel (or --emulate)")
                 kw = {"bitrate": args.bitrate} if args.interface in ("slcan", "socketcan") else {}
                 bus = open_can_bus(args.interface, args.channel, **kw)
             else:
                 if args.port is None:
-                    raise ValueError("--link serial needs --port (or --emulate)")
+                    raise InputError("--link serial needs --port (or --emulate)")
                 bus = CobsCanBus(args.port)
             session, tap = open_tapped("bus", eds, args.node_id, bus=bus)
         with session:
@@ -122,14 +133,14 @@ def run(args: argparse.Namespace) -> int:
             try:
                 if args.rehearse > 0:
                     if args.boot_bundle is None:
-                        raise ValueError("--rehearse needs --boot-bundle (the model the node runs before the update)")
+                        raise InputError("--rehearse needs --boot-bundle (the model the node runs before the update)")
                     result = rehearse(session, tap, image, args.bundle, args.boot_bundle, args.rehearse,
                                       seed=args.seed, scale=args.scale, block=not args.segmented,
-                                      progress=bar.update)
+                                      progress=bar.update, confirm=not args.no_confirm)
                 else:
                     result = None
                     report = upload_image(session, tap, image, args.activate, block=not args.segmented,
-                                          progress=bar.update)
+                                          progress=bar.update, confirm=not args.no_confirm)
             finally:
                 bar.close()
     if result is not None:
@@ -147,6 +158,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"activated    version {result['before']['version']} -> {result['after']['version']} "
                   f"(hash {result['after']['hash32']}); next {result['windows_after_activation']} windows bit-exact "
                   f"with the new model: {result['new_model_bit_exact']}")
+            print("confirmed    yes" if result["confirmed"] else
+                  "confirmed    no: on trial, the next reset brings the previous model back")
         ok = result["boot_model_bit_exact"] and result["new_model_bit_exact"] and \
             result["windows_answered_during_upload_phase"] == result["windows_streamed_during_upload_phase"]
         return 0 if ok else 1
@@ -160,6 +173,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"transfer     {report.sdo_frames} SDO frames, {report.bus_bits} bits on the bus: "
           f"{report.bus_time_s_at_500k * 1000:.1f} ms at 500 kbit/s ({report.wall_time_s * 1000:.0f} ms here)")
     print(f"before       model version {before['version']} hash {before['hash32']:08x}")
-    state = "active" if report.activated else "uploaded, not activated (run again with --activate)"
+    state = ("active, confirmed" if report.confirmed else "active on trial (not confirmed: a reset reverts it)") \
+        if report.activated else "uploaded, not activated (run again with --activate)"
     print(f"now          model version {report.active_version} hash {report.active_hash32} ({state})")
     return 0

@@ -20,6 +20,7 @@ import numpy as np
 
 from .attitude import UNTRUSTED_SHARE, estimate_attitude
 from .contracts import DEFAULT_RATE_HZ, STRIDE_S, WINDOW_S
+from ..errors import InputError
 
 NS = 1_000_000_000
 
@@ -94,7 +95,7 @@ def summarise(errors: list[TraverseErrors]) -> list[dict]:
 def measure(seed: int, scale: float) -> dict:
     """The figures of `fleetlab bench attitude`: one row per gravity and terrain, and the time taken."""
     if not 0 < scale <= 10:
-        raise ValueError(f"--scale must be in (0, 10], got {scale}")
+        raise InputError(f"--scale must be in (0, 10], got {scale}")
     t0, c0 = time.perf_counter(), time.process_time()
     rows = summarise(scenario_errors(seed, scale))
     return {"seed": seed, "scale": scale, "rows": rows, "wall_s": time.perf_counter() - t0,

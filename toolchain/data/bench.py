@@ -1,4 +1,5 @@
-"""`fleetlab bench data`: featurisation throughput and simulation speed on one core.
+"""Featurisation throughput and simulation speed on one core (`fleetlab bench data`, options in
+`fleetlab.cli.bench_data`).
 
 * featurise: raw samples turned into window features per second by
   `features.featurise` (best of several repeats on a fixed random trace),
@@ -9,27 +10,17 @@
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
+from ..compute import torch_threads
 from .contracts import DEFAULT_RATE_HZ, N_CHANNELS
 from .features import WindowSpec, featurise
 
 FEATURISE_TARGET = 5_000_000  # raw samples per second the brief asks for
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
-    parser.add_argument("--samples", type=int, default=2_000_000, help="raw samples per featurise call (default 2,000,000)")
-    parser.add_argument("--repeats", type=int, default=5, help="featurise repeats; the best is reported (default 5)")
-    parser.add_argument("--sim-scale", type=float, default=1.0,
-                        help="scenario scale for the batched simulation timing (default 1.0, the full scenario)")
-    parser.add_argument("--seed", type=int, default=1, help="seed of the random trace and the scenario (default 1)")
 
 
 def bench_featurise(n_samples: int, repeats: int, seed: int) -> dict:
@@ -74,30 +65,20 @@ def bench_simulate(scale: float, seed: int) -> dict:
     }
 
 
-def run(args: argparse.Namespace) -> int:
-    if args.samples < 100 or args.repeats < 1:
-        raise ValueError("--samples must be >= 100 and --repeats >= 1")
-    if not 0 < args.sim_scale <= 10:
-        raise ValueError(f"--sim-scale must be in (0, 10], got {args.sim_scale}")
-    import torch
+def measure(samples: int, repeats: int, sim_scale: float, seed: int) -> dict:
+    """Both figures, on one thread (torch's and the BLAS pools alike): a core's throughput, whatever the machine."""
+    with torch_threads(1), threadpool_limits(1):
+        return {"threads": 1, "featurise": bench_featurise(samples, repeats, seed),
+                "simulate": bench_simulate(sim_scale, seed)}
 
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        with threadpool_limits(1):
-            result = {"threads": 1, "featurise": bench_featurise(args.samples, args.repeats, args.seed),
-                      "simulate": bench_simulate(args.sim_scale, args.seed)}
-    finally:
-        torch.set_num_threads(threads)
-    if args.json:
-        print(json.dumps(result))
-        return 0
+
+def text(result: dict) -> str:
+    """The figures as the two lines `fleetlab bench data` prints."""
     f, s = result["featurise"], result["simulate"]
-    print(f"featurise: {f['samples_per_cpu_s'] / 1e6:.1f} M raw samples per CPU second on one core "
-          f"({'meets' if f['meets_target'] else 'BELOW'} the {FEATURISE_TARGET / 1e6:.0f} M/s target; "
-          f"{f['samples_per_s'] / 1e6:.1f} M per wall second)")
-    print(f"simulate:  {s['single_traverse_sim_s_per_wall_s']:.0f} simulated s per wall s for one traverse; "
-          f"{s['batched_sim_s_per_wall_s']:.0f} ({s['batched_sim_s_per_cpu_s']:.0f} per CPU s) for the "
-          f"{s['scenario_traverses']} batched traverses of the scenario at scale {s['scenario_scale']:g} "
-          f"({s['scenario_wall_s']:.1f} s wall, {s['scenario_cpu_s']:.1f} s CPU)")
-    return 0
+    return (f"featurise: {f['samples_per_cpu_s'] / 1e6:.1f} M raw samples per CPU second on one core "
+            f"({'meets' if f['meets_target'] else 'BELOW'} the {FEATURISE_TARGET / 1e6:.0f} M/s target; "
+            f"{f['samples_per_s'] / 1e6:.1f} M per wall second)\n"
+            f"simulate:  {s['single_traverse_sim_s_per_wall_s']:.0f} simulated s per wall s for one traverse; "
+            f"{s['batched_sim_s_per_wall_s']:.0f} ({s['batched_sim_s_per_cpu_s']:.0f} per CPU s) for the "
+            f"{s['scenario_traverses']} batched traverses of the scenario at scale {s['scenario_scale']:g} "
+            f"({s['scenario_wall_s']:.1f} s wall, {s['scenario_cpu_s']:.1f} s CPU)")

@@ -10,6 +10,7 @@ import numpy as np
 from .csvio import read_windows_csv
 from .dataset import TARGET, Dataset
 from .splits import make_split
+from ..errors import InputError
 
 
 @dataclass
@@ -33,7 +34,7 @@ def calibration_set(dataset: Dataset, protocol: str, cal_size: int, seed: int,
         return CalibrationSet(x[split.cal], y[split.cal], x[split.test], y[split.test], info)
     table = read_windows_csv(calibration_csv)
     if len(table) == 0:
-        raise ValueError(f"{calibration_csv}: calibration file has no usable rows")
+        raise InputError(f"{calibration_csv}: calibration file has no usable rows")
     x_cal, y_cal = table.features.astype(np.float32), table.label
     # Target rows that also appear in the calibration file are not test rows: drop and count them.
     cal_rows = {row.tobytes() for row in x_cal}
@@ -41,5 +42,5 @@ def calibration_set(dataset: Dataset, protocol: str, cal_size: int, seed: int,
     info = {"source": str(calibration_csv), "size": int(len(y_cal)), "test_size": int((~in_cal).sum()),
             "test_rows_dropped_as_calibration": int(in_cal.sum()), "rejected_nonfinite": table.rejected_nonfinite}
     if (~in_cal).sum() == 0:
-        raise ValueError(f"{calibration_csv}: every target row is in the calibration file; nothing left to test on")
+        raise InputError(f"{calibration_csv}: every target row is in the calibration file; nothing left to test on")
     return CalibrationSet(x_cal, y_cal, x[~in_cal], y[~in_cal], info)

@@ -11,9 +11,10 @@ import numpy as np
 
 from .contracts import CSV_COLUMNS, N_CLASSES, N_FEATURES
 from .features import LabelledWindows
+from ..errors import InputError
 
 
-class CsvFormatError(ValueError):
+class CsvFormatError(InputError):
     """A CSV file that does not follow the Fleet-To-Lab format; names file and line."""
 
     def __init__(self, path: Path | str, line: int | None, message: str):
@@ -58,7 +59,7 @@ class WindowTable:
     @classmethod
     def concat(cls, tables: list["WindowTable"]) -> "WindowTable":
         if not tables:
-            raise ValueError("no tables to concatenate")
+            raise InputError("no tables to concatenate")
         cat = lambda name: np.concatenate([getattr(t, name) for t in tables])  # noqa: E731
         return cls(
             features=cat("features"),

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .csvio import UNLABELLED_SUFFIX, CsvFormatError, WindowTable, read_unlabelled_csv, read_windows_csv
+from ..errors import InputError
 
 MANIFEST_NAME = "dataset.json"
 MANIFEST_FORMAT = "fleetlab-dataset/1"
@@ -109,7 +110,7 @@ class Dataset:
         if not self.fleet_roles:
             missing.append("fleet_<rover>")
         if missing:
-            raise ValueError(f"{self.root}: dataset has no {', '.join(missing)} files (found roles: {self.roles})")
+            raise InputError(f"{self.root}: dataset has no {', '.join(missing)} files (found roles: {self.roles})")
 
 
 ROLES_KEYS = ("path", "role")
@@ -130,21 +131,21 @@ def load_roles_file(path: Path) -> Dataset:
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as e:
-        raise ValueError(f"{path}: not valid TOML ({e})") from None
+        raise InputError(f"{path}: not valid TOML ({e})") from None
     extra = [k for k in data if k != "folder"]
     if extra or not isinstance(data.get("folder"), list) or not data["folder"]:
-        raise ValueError(f"{path}: a roles file holds only [[folder]] tables (path, optional role)"
+        raise InputError(f"{path}: a roles file holds only [[folder]] tables (path, optional role)"
                          + (f"; unknown key {extra[0]!r}" if extra else ""))
     files: list[DataFile] = []
     unlabelled: list[UnlabelledFile] = []
     for k, entry in enumerate(data["folder"], start=1):
         bad = [key for key in entry if key not in ROLES_KEYS]
         if bad or not isinstance(entry.get("path"), str):
-            raise ValueError(f"{path}: folder {k}: " + (f"unknown key {bad[0]!r} (keys: path, role)" if bad
+            raise InputError(f"{path}: folder {k}: " + (f"unknown key {bad[0]!r} (keys: path, role)" if bad
                                                          else "needs path = \"FOLDER\""))
         role = entry.get("role")
         if role is not None and not (isinstance(role, str) and ROLE_PATTERN.match(role)):
-            raise ValueError(f"{path}: folder {k}: role {role!r} is not {EARTH}, {TARGET} or {FLEET_PREFIX}<rover>")
+            raise InputError(f"{path}: folder {k}: role {role!r} is not {EARTH}, {TARGET} or {FLEET_PREFIX}<rover>")
         folder = load_dataset(path.parent / entry["path"], roles_file=False, role=role)
         files += [DataFile(f.path, role or f.role, f.table) for f in folder.files]
         unlabelled += [UnlabelledFile(f.path, role or f.role, f.features) for f in folder.unlabelled]
@@ -166,9 +167,9 @@ def load_dataset(root: Path | str, roles_file: bool = True, role: str | None = N
         try:
             meta = json.loads(manifest.read_text())
         except json.JSONDecodeError as e:
-            raise ValueError(f"{manifest}: not valid JSON ({e})") from None
+            raise InputError(f"{manifest}: not valid JSON ({e})") from None
         if meta.get("format") != MANIFEST_FORMAT:
-            raise ValueError(f"{manifest}: unknown format {meta.get('format')!r}, expected {MANIFEST_FORMAT!r}")
+            raise InputError(f"{manifest}: unknown format {meta.get('format')!r}, expected {MANIFEST_FORMAT!r}")
         entries = [(root / name, info["role"]) for name, info in meta["files"].items()]
         loose = [(root / name, info.get("role", role or "unassigned"))
                  for name, info in meta.get("unlabelled_files", {}).items()]
@@ -186,7 +187,7 @@ def load_dataset(root: Path | str, roles_file: bool = True, role: str | None = N
             loose = [(p, role) for p in sorted(root.glob("*" + UNLABELLED_SUFFIX))]
             source = "role given by a roles file"
         if not entries and not loose:
-            raise ValueError(
+            raise InputError(
                 f"{root}: no {MANIFEST_NAME} and no files named like the Fleet-To-Lab originals "
                 "(training_data_<leo_rover|cadre|husky>_<lunalab|default_moon>_..._partN.csv); a roles file that "
                 "gives the folder a role takes every window CSV in it"

@@ -23,6 +23,7 @@ from .contracts import (
     WINDOW_S,
 )
 from .labels import slip_class, slip_ratio
+from ..errors import InputError
 
 
 @dataclass(frozen=True)
@@ -35,7 +36,7 @@ class WindowSpec:
         spw = int(round(WINDOW_S * rate_hz))
         stride = int(round(STRIDE_S * rate_hz))
         if spw < MIN_SAMPLES_PER_WINDOW:
-            raise ValueError(
+            raise InputError(
                 f"rate {rate_hz} Hz gives {spw} samples per {WINDOW_S} s window; "
                 f"at least {MIN_SAMPLES_PER_WINDOW} are needed"
             )
@@ -67,10 +68,10 @@ def finite_matrix(x: np.ndarray, width: int, what: str) -> np.ndarray:
     """x as float64 (n, width); a clear error for another shape or any NaN/Inf (names the first row)."""
     x = np.asarray(x, dtype=np.float64)
     if x.ndim != 2 or x.shape[1] != width:
-        raise ValueError(f"{what} must have shape (n, {width}), got {x.shape}")
+        raise InputError(f"{what} must have shape (n, {width}), got {x.shape}")
     if not np.isfinite(x).all():
         row = int(np.argwhere(~np.isfinite(x))[0, 0])
-        raise ValueError(f"{what} contain NaN/Inf (first at row {row})")
+        raise InputError(f"{what} contain NaN/Inf (first at row {row})")
     return x
 
 

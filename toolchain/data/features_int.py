@@ -38,6 +38,7 @@ import numpy as np
 
 from .contracts import FEATURE_SOURCES, MIN_SAMPLES_PER_WINDOW, N_CHANNELS, N_FEATURES, RAW_CHANNELS, RAW_LSB
 from .features import finite_matrix
+from ..errors import InputError
 
 INT16_MIN, INT16_MAX = -32768, 32767
 SAMPLES_PER_WINDOW = 100
@@ -161,14 +162,14 @@ def featurise_int(samples: np.ndarray, counters: np.ndarray | None = None) -> In
     """
     x = np.asarray(samples)
     if x.ndim != 2 or x.shape[1] != N_CHANNELS:
-        raise ValueError(f"samples must have shape (n, {N_CHANNELS}), got {x.shape}")
+        raise InputError(f"samples must have shape (n, {N_CHANNELS}), got {x.shape}")
     if not np.issubdtype(x.dtype, np.integer) or (x.size and (x.min() < INT16_MIN or x.max() > INT16_MAX)):
-        raise ValueError("samples must be integers in int16 range (raw CAN units); use quantize_samples")
+        raise InputError("samples must be integers in int16 range (raw CAN units); use quantize_samples")
     if counters is None:
         counters = np.arange(len(x), dtype=np.int64)
     counters = np.asarray(counters)
     if counters.shape != (len(x),):
-        raise ValueError(f"counters must have shape ({len(x)},), got {counters.shape}")
+        raise InputError(f"counters must have shape ({len(x)},), got {counters.shape}")
     accepted, slots = _unwrap(counters)
     x = x[accepted].astype(np.int64)
     slots = slots[accepted]

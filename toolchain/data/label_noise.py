@@ -28,6 +28,7 @@ import numpy as np
 
 from .contracts import N_CLASSES
 from .labels import slip_class, slip_ratio
+from ..errors import InputError
 
 KINDS = ("symmetric", "adjacent", "vo")
 
@@ -83,14 +84,14 @@ class LabelNoise:
         kind, sep, value = text.partition(":")
         kind = kind.strip().lower()
         if kind not in KINDS or not sep:
-            raise ValueError(f"label noise {text!r}: write KIND:RATE with KIND one of {', '.join(KINDS)} "
+            raise InputError(f"label noise {text!r}: write KIND:RATE with KIND one of {', '.join(KINDS)} "
                              f"(e.g. adjacent:0.2, vo:1)")
         try:
             rate = float(value)
         except ValueError:
-            raise ValueError(f"label noise {text!r}: {value!r} is not a number") from None
+            raise InputError(f"label noise {text!r}: {value!r} is not a number") from None
         if not np.isfinite(rate) or rate < 0 or (kind != "vo" and rate > 1):
-            raise ValueError(f"label noise {text!r}: the rate must be in [0, 1] (vo: a scale >= 0)")
+            raise InputError(f"label noise {text!r}: the rate must be in [0, 1] (vo: a scale >= 0)")
         return cls(kind, rate)
 
     def __str__(self) -> str:
@@ -112,7 +113,7 @@ class LabelNoise:
             to = np.where(y == 0, 1, np.where(y == N_CLASSES - 1, N_CLASSES - 2, np.where(up, y + 1, y - 1)))
             return np.where(flip, to, y)
         if d_actual is None or d_commanded is None:
-            raise ValueError("label noise vo needs each window's travelled and commanded distance "
+            raise InputError("label noise vo needs each window's travelled and commanded distance "
                              "(total_dist_actual, total_dist_cmd)")
         n = y.size
         groups = np.zeros(n, dtype=np.int64) if groups is None else groups

@@ -40,6 +40,7 @@ from .reference_ranges import import_range_warnings
 from .rover_profile import RoverProfile
 from .timeseries_csv import read_csv_drives
 from .timebase import NS, Stream, clean, grid, messages_per_window, resample, segments
+from ..errors import InputError
 
 RAW_SUFFIX = ".raw.npz"
 GRAVITY_LEFT_M_S2 = 0.5  # |mean acc_z| above this after the import: gravity left in (or taken out twice)
@@ -200,7 +201,7 @@ def _import_streams(source: Path, stem: str, raw: dict[str, Stream], drops: Coun
     for name, s in streams.items():
         if len(s) < 2:
             where = profile.streams[name].topic or profile.streams[name].csv.file
-            raise ValueError(f"{source}: the {name} stream ({where}) has {len(s)} usable message(s) "
+            raise InputError(f"{source}: the {name} stream ({where}) has {len(s)} usable message(s) "
                              f"(dropped: {drop_summary(drops)}); nothing to import" + "".join(f" [{n}]" for n in notes))
     dynamic = _attitude(streams, profile)
     step_ns = int(np.ceil(NS / rate_hz))
@@ -252,7 +253,7 @@ def import_log(source: Path | str, profile: RoverProfile, rate_hz: float = DEFAU
     """`import_source` of a log that holds one drive (a bag, or a CSV folder of one drive)."""
     results = import_source(source, profile, rate_hz, progress)
     if len(results) != 1:
-        raise ValueError(f"{source}: holds {len(results)} drives ({', '.join(r.drive or '?' for r in results)}); "
+        raise InputError(f"{source}: holds {len(results)} drives ({', '.join(r.drive or '?' for r in results)}); "
                          "import_source imports each")
     return results[0]
 
@@ -282,7 +283,7 @@ def write_import(out: Path | str, results: list[ImportResult], profile: RoverPro
     stems = [seg.stem for res in results for seg in res.segments]
     twice = sorted({s for s in stems if stems.count(s) > 1})
     if twice:
-        raise ValueError(f"two logs would both write {twice[0]}.csv; import them into different folders or rename one")
+        raise InputError(f"two logs would both write {twice[0]}.csv; import them into different folders or rename one")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     files, unlabelled, report = {}, {}, []
@@ -325,7 +326,7 @@ def raw_files(folder: Path | str) -> list[Path]:
     try:
         logs = json.loads((folder / REPORT_NAME).read_text())["logs"]
     except (OSError, ValueError, KeyError) as e:
-        raise ValueError(f"{folder}: not a 'fleetlab data import' folder ({REPORT_NAME}: {e})") from None
+        raise InputError(f"{folder}: not a 'fleetlab data import' folder ({REPORT_NAME}: {e})") from None
     return [folder / f"{stem}{RAW_SUFFIX}" for log in logs for stem in log["files"]]
 
 
@@ -333,5 +334,5 @@ def read_raw(path: Path | str) -> tuple[np.ndarray, float]:
     """Raw samples (n, 7) of one imported segment and their rate."""
     with np.load(path) as z:
         if tuple(z["channels"]) != RAW_CHANNELS:
-            raise ValueError(f"{path}: channels {tuple(z['channels'])} are not {RAW_CHANNELS}")
+            raise InputError(f"{path}: channels {tuple(z['channels'])} are not {RAW_CHANNELS}")
         return np.asarray(z["samples"], dtype=np.float64), float(z["rate_hz"])

@@ -27,11 +27,12 @@ from tqdm.auto import tqdm
 
 from .rover_profile import POSE_ARRAY, SECTION_TYPES, ProfileError, RoverProfile, StreamSpec
 from .timebase import NS, Stream
+from ..errors import InputError
 
 BAG_SUFFIXES = (".mcap", ".db3")
 
 
-class _NoMessages(ValueError):
+class _NoMessages(InputError):
     """A bag without a single message on the profile's topics."""
 
 
@@ -48,7 +49,7 @@ def source_kind(source: Path) -> str:
     if source.is_file():
         if source.suffix in BAG_SUFFIXES:
             return "bag"
-        raise ValueError(f"{source}: not a bag file (.mcap or .db3) nor a folder")
+        raise InputError(f"{source}: not a bag file (.mcap or .db3) nor a folder")
     if not source.is_dir():
         raise FileNotFoundError(f"{source}: no such file or folder")
     if (source / "metadata.yaml").exists() or any(source.glob("*.mcap")) or any(source.glob("*.db3")):
@@ -166,7 +167,7 @@ class _Collect:
             if not self.log_time and len(t) >= 2:
                 zeros = int(np.count_nonzero(t == 0))
                 if zeros == len(t):
-                    raise ValueError(f"{self.source}: {spec.topic}: {ZERO_STAMPS_HINT} in {profile.path} to cut the "
+                    raise InputError(f"{self.source}: {spec.topic}: {ZERO_STAMPS_HINT} in {profile.path} to cut the "
                                      "windows in the bag's log time (when the recorder received each message)")
                 if zeros:
                     notes.append(f"{self.source}: {spec.topic}: {zeros} of {len(t)} header stamps are zero (dropped as "
@@ -217,7 +218,7 @@ def bag_files(source: Path) -> list[Path]:
             return listed
     files = sorted(source.glob("*.mcap")) or sorted(source.glob("*.db3"))
     if not files:
-        raise ValueError(f"{source}: no .mcap or .db3 file in this folder")
+        raise InputError(f"{source}: no .mcap or .db3 file in this folder")
     return files
 
 
@@ -260,7 +261,7 @@ def _read_salvaged(files: list[Path], source: Path, profile: RoverProfile, progr
     try:
         scans = [scan_mcap(f) for f in files]
     except NotMcap as e:
-        raise ValueError(f"{e} ({why})") from None
+        raise InputError(f"{e} ({why})") from None
     topics: dict[str, str] = {}
     for scan in scans:
         topics.update({c.topic: c.msgtype for c in scan.channels.values()})
@@ -277,7 +278,7 @@ def _read_salvaged(files: list[Path], source: Path, profile: RoverProfile, progr
         raise col.no_messages(f" that could be read whole ({where or why})")
     for ch in {c for c, _, _ in wanted}:
         if ch.encoding != "cdr":
-            raise ValueError(f"{source}: {ch.topic} is encoded {ch.encoding!r}, not as ROS 2 CDR ('cdr')")
+            raise InputError(f"{source}: {ch.topic} is encoded {ch.encoding!r}, not as ROS 2 CDR ('cdr')")
     for ch, log_ns, raw in tqdm(wanted, desc=f"salvaging {source.name}", unit="msg", unit_scale=True,
                                 disable=not progress):
         try:
@@ -330,7 +331,7 @@ def read_bag(source: Path, profile: RoverProfile, progress: bool = True,
         col = _read_rosbags(whole, source, profile, progress)
     except _Unreadable as e:
         if not all(f.suffix == ".mcap" for f in files):
-            raise ValueError(f"{source}: cannot read as a rosbag2 (truncated, corrupt or not a bag?): {e}"
+            raise InputError(f"{source}: cannot read as a rosbag2 (truncated, corrupt or not a bag?): {e}"
                              + ("; a sqlite3 bag is not salvaged, only MCAP" if any(f.suffix == ".db3" for f in files)
                                 else "")) from None
         col = _read_salvaged(files, source, profile, progress, f"rosbags: {e}", notes)
@@ -353,8 +354,8 @@ def read_log(source: Path, profile: RoverProfile, progress: bool = True,
     by `timeseries_csv.read_csv_drives` (it may hold several drives)."""
     kind = source_kind(source)
     if kind != profile.kind:
-        raise ValueError(f"{source} is a {'rosbag2' if kind == 'bag' else 'time-series CSV folder'} but "
+        raise InputError(f"{source} is a {'rosbag2' if kind == 'bag' else 'time-series CSV folder'} but "
                          f"{profile.path} describes {'topics' if profile.kind == 'bag' else 'CSV files'}")
     if kind != "bag":  # a CSV folder may hold several drives: `timeseries_csv.read_csv_drives`
-        raise ValueError(f"{source}: a time-series CSV folder is read drive by drive (timeseries_csv)")
+        raise InputError(f"{source}: a time-series CSV folder is read drive by drive (timeseries_csv)")
     return read_bag(source, profile, progress, notes)

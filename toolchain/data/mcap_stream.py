@@ -23,6 +23,7 @@ import struct
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
+from ..errors import InputError
 
 MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_DATA_END = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x0F
@@ -31,7 +32,7 @@ _MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publis
 _CHUNK_HEAD = struct.Struct("<QQQI")  # message start time, end time, uncompressed size, uncompressed CRC-32
 
 
-class NotMcap(ValueError):
+class NotMcap(InputError):
     """The file does not start like an MCAP file of the ROS 2 profile."""
 
 
@@ -121,11 +122,11 @@ def _records(buf: bytes, scan: Scan, schemas: dict[int, str], cut: bool) -> int:
         if end > len(buf):
             if cut:
                 break
-            raise ValueError(f"a record inside a chunk runs past the chunk's end (opcode {op:#04x})")
+            raise InputError(f"a record inside a chunk runs past the chunk's end (opcode {op:#04x})")
         _record(scan, schemas, op, buf[pos + _RECORD_HEAD.size : end])
         pos = end
     if pos != len(buf) and not cut:
-        raise ValueError("a chunk ends inside a record header")
+        raise InputError("a chunk ends inside a record header")
     return pos
 
 
@@ -141,7 +142,7 @@ def _decompress(compression: str, data: bytes, whole: bool) -> bytes:
         import lz4.frame
 
         return lz4.frame.decompress(data) if whole else lz4.frame.LZ4FrameDecompressor().decompress(data)
-    raise ValueError(f"chunk compression {compression!r} is not supported (none, zstd or lz4)")
+    raise InputError(f"chunk compression {compression!r} is not supported (none, zstd or lz4)")
 
 
 def _chunk(scan: Scan, schemas: dict[int, str], content: bytes, whole: bool) -> int:
@@ -156,9 +157,9 @@ def _chunk(scan: Scan, schemas: dict[int, str], content: bytes, whole: bool) -> 
     records = _decompress(compression, data, whole)
     if whole:
         if len(records) != size:
-            raise ValueError(f"chunk decompresses to {len(records)} bytes, its header says {size}")
+            raise InputError(f"chunk decompresses to {len(records)} bytes, its header says {size}")
         if crc and zlib.crc32(records) != crc:
-            raise ValueError("chunk CRC-32 does not match its records")
+            raise InputError("chunk CRC-32 does not match its records")
     parsed = _records(records, scan, schemas, cut=not whole)
     return c.pos + parsed if compression == "" else 0
 

@@ -33,6 +33,7 @@ import difflib
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from ..errors import InputError
 
 TIME_UNITS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
 VELOCITY_UNITS = {"rad/s": 1.0, "rpm": 2.0 * 3.141592653589793 / 60.0, "deg/s": 3.141592653589793 / 180.0,
@@ -71,7 +72,7 @@ _KEYS: dict[str, tuple[str, ...]] = {
 _REQUIRED_SECTIONS = ("rover", "wheels", "imu", "attitude")
 
 
-class ProfileError(ValueError):
+class ProfileError(InputError):
     """A rover profile mistake: one line naming the file and the key."""
 
     def __init__(self, path: Path | str, key: str, message: str):
@@ -274,7 +275,7 @@ def load_profile(path: Path | str) -> RoverProfile:
     except FileNotFoundError:
         raise FileNotFoundError(f"{path}: no such rover profile (docs/your_rover.md describes one)") from None
     except tomllib.TOMLDecodeError as e:
-        raise ValueError(f"{path}: not valid TOML ({e})") from None
+        raise InputError(f"{path}: not valid TOML ({e})") from None
     _check_keys(path, data)
     rover = _Reader(path, "rover", data["rover"])
     wheels = _Reader(path, "wheels", data["wheels"])

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from sklearn.model_selection import train_test_split
+from ..errors import InputError
 
 PROTOCOLS = ("paper", "traverse")
 
@@ -28,7 +29,7 @@ class Split:
 def _stratified_pick(y: np.ndarray, rows: np.ndarray, size: int, seed: int) -> np.ndarray:
     """`size` rows of `rows`, stratified by class where every class has at least 2 rows."""
     if size > len(rows):
-        raise ValueError(f"calibration size {size} exceeds the {len(rows)} rows available")
+        raise InputError(f"calibration size {size} exceeds the {len(rows)} rows available")
     if size == len(rows):
         return np.sort(rows)
     counts = np.bincount(y[rows])
@@ -51,7 +52,7 @@ def traverse_split(y: np.ndarray, groups: np.ndarray, cal_size: int, seed: int) 
     sizes = np.array([np.sum(groups == g) for g in traverses])
     n_cal = int(np.searchsorted(np.cumsum(sizes), cal_size) + 1)
     if n_cal >= len(traverses):
-        raise ValueError(
+        raise InputError(
             f"traverse split needs {cal_size} calibration rows and at least one other traverse for testing; "
             f"the {len(traverses)} traverses hold {sizes.sum()} rows"
         )
@@ -65,4 +66,4 @@ def make_split(protocol: str, y: np.ndarray, groups: np.ndarray, cal_size: int, 
         return paper_split(y, cal_size, seed)
     if protocol == "traverse":
         return traverse_split(y, groups, cal_size, seed)
-    raise ValueError(f"unknown split protocol {protocol!r}; choose one of {', '.join(PROTOCOLS)}")
+    raise InputError(f"unknown split protocol {protocol!r}; choose one of {', '.join(PROTOCOLS)}")

@@ -36,6 +36,7 @@ from tqdm.auto import tqdm
 from .log_sources import wheel_channels
 from .rover_profile import TIME_UNITS, ProfileError, RoverProfile, StreamSpec
 from .timebase import Stream
+from ..errors import InputError
 
 
 @dataclass
@@ -184,7 +185,7 @@ def _pair_by_time(files: list[list[_File]], drops: Counter, notes: list[str]) ->
             same = sorted((f for f in fs if f.group == g), key=lambda f: f.span)
             for a, b in zip(same, same[1:]):
                 if _overlap(a.span, b.span):
-                    raise ValueError(f"{a.path.parent}: {a.rel} and {b.rel} overlap in time, so they are not parts of "
+                    raise InputError(f"{a.path.parent}: {a.rel} and {b.rel} overlap in time, so they are not parts of "
                                      "one log, and nothing pairs them with the other sensors' files: name the files of "
                                      "one drive with a common suffix (imu_01.csv with wheels_01.csv)")
         out.append(fs)
@@ -233,7 +234,7 @@ def read_csv_drives(source: Path, profile: RoverProfile, progress: bool = True,
     if paired is None:
         paired = _pair_by_time(files, drops, notes)
     if not paired:
-        raise ValueError(f"{source}: no drive has a file of every sensor overlapping in time ({'; '.join(notes)})")
+        raise InputError(f"{source}: no drive has a file of every sensor overlapping in time ({'; '.join(notes)})")
     drives = []
     for k, (name, fs) in enumerate(paired):
         d: Counter = Counter(drops) if k == 0 else Counter()  # files left out: counted with the first drive

@@ -1,4 +1,4 @@
-"""The Dask backend of `mccv.execute`: joblib `delayed` tasks on an existing cluster, and nothing lost with a
+"""The Dask backend of `executor.execute`: joblib `delayed` tasks on an existing cluster, and nothing lost with a
 worker, in any phase (the source models' training, the MCCV jobs).
 
 The arguments the tasks share (everything but plain numbers and strings: the dataset, the sources, the target
@@ -28,7 +28,7 @@ import time
 from concurrent.futures import CancelledError
 from typing import Callable
 
-from ..errors import FleetlabError, first_line
+from ..errors import FleetlabError, InputError, first_line
 
 TASK_RESUBMITS = 3  # a task whose inputs or result were lost with a worker is submitted again this often
 NO_WORKERS_TIMEOUT_S = 300.0  # how long a cluster left without workers is waited for (see no_workers_timeout)
@@ -71,7 +71,7 @@ def run_on_dask(tasks: list, scheduler: str, ordered: bool, finished: Callable) 
     with Client(scheduler, timeout="30s") as client:
         nthreads = client.nthreads()
         if not nthreads:
-            raise ValueError(f"the Dask scheduler at {scheduler} has no workers; start some with "
+            raise InputError(f"the Dask scheduler at {scheduler} has no workers; start some with "
                              f"'dask worker {scheduler} --nthreads 1'")
         if any(n > 1 for n in nthreads.values()):
             # torch seeds dropout through its per-process global RNG: two jobs in threads of one

@@ -11,13 +11,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
+from ..compute import torch_threads
 from ..data.dataset import EARTH, TARGET
 from ..data.simulator.engine import Trace
 from ..models import build
 from ..models.train import predict, train_classifier
 from .metrics import balanced_accuracy
+from ..errors import InputError
 
 
 @dataclass(frozen=True)
@@ -49,17 +50,13 @@ def earth_to_moon_gap(traces: list[tuple[str, str, Trace]], seed: int = 0, heldo
     earth = [t for role, _, t in traces if role == EARTH]
     target = [t for role, _, t in traces if role == TARGET]
     if len(earth) < 2 or not target:
-        raise ValueError("need at least two Earth traverses and one target traverse")
+        raise InputError("need at least two Earth traverses and one target traverse")
     n_test = max(1, round(heldout_fraction * len(earth)))
     x_tr, y_tr = _stack(earth[:-n_test])
     x_te, y_te = _stack(earth[-n_test:])
     x_moon, y_moon = _stack(target)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # a 543-parameter net trains fastest on one thread
-    try:
+    with torch_threads(1):  # a 543-parameter net trains fastest on one thread
         model = train_classifier(build("sn-s", seed=seed), x_tr, y_tr, epochs=None, steps=steps, seed=seed)
-    finally:
-        torch.set_num_threads(threads)
     return DomainGap(
         earth_heldout_bacc=balanced_accuracy(y_te, predict(model, x_te)),
         target_moon_bacc=balanced_accuracy(y_moon, predict(model, x_moon)),

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping
 
 from ..fusion import registry
+from ..errors import InputError
 
 BUFFER_ABLATION, FLEET_ABLATION = registry.ABLATION_GROUPS
 # Groups that are shown but never ranked best/second.
@@ -69,5 +70,5 @@ def parse_methods(text: str | None) -> list[str]:
     names = [t.strip() for t in text.split(",") if t.strip()]
     unknown = [n for n in names if n not in methods]
     if unknown or not names:
-        raise ValueError(f"--methods: unknown method(s) {', '.join(unknown) or '(none given)'}; choose from {', '.join(methods)}")
+        raise InputError(f"--methods: unknown method(s) {', '.join(unknown) or '(none given)'}; choose from {', '.join(methods)}")
     return [m for m in methods if m in names]

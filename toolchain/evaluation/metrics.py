@@ -14,6 +14,7 @@ import numpy as np
 from sklearn.metrics import confusion_matrix
 
 from ..data.contracts import N_CLASSES
+from ..errors import InputError
 
 LABELS = list(range(N_CLASSES))
 SCALAR_METRICS = ("balanced_accuracy", "macro_f1")
@@ -34,10 +35,10 @@ def classification_metrics(y_true: np.ndarray, y_pred: np.ndarray) -> dict:
     """
     y_true, y_pred = np.asarray(y_true), np.asarray(y_pred)
     if y_true.shape != y_pred.shape or y_true.size == 0:
-        raise ValueError(f"need equally long, non-empty label arrays, got {y_true.shape} and {y_pred.shape}")
+        raise InputError(f"need equally long, non-empty label arrays, got {y_true.shape} and {y_pred.shape}")
     for name, labels in (("true", y_true), ("predicted", y_pred)):
         if not np.isin(labels, LABELS).all():
-            raise ValueError(f"{name} labels must be classes {LABELS}, found {sorted(set(labels.tolist()) - set(LABELS))}")
+            raise InputError(f"{name} labels must be classes {LABELS}, found {sorted(set(labels.tolist()) - set(LABELS))}")
     cm = confusion_matrix(y_true, y_pred, labels=LABELS)
     tp, true_sum, pred_sum = np.diag(cm), cm.sum(axis=1), cm.sum(axis=0)
     present = true_sum > 0

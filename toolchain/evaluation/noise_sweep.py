@@ -15,8 +15,10 @@ import numpy as np
 
 from ..data.dataset import Dataset
 from ..data.label_noise import KINDS
-from .mccv import EvalSettings, prepare_sources, run_mccv
+from .mccv import prepare_sources, run_mccv
+from .protocol import EvalSettings
 from .methods import LABELS
+from ..errors import InputError
 
 METRIC = "balanced_accuracy"
 
@@ -26,13 +28,13 @@ def parse_sweep(text: str) -> tuple[str, list[float]]:
     kind, sep, values = text.partition(":")
     kind = kind.strip().lower()
     if kind not in KINDS or not sep:
-        raise ValueError(f"--label-noise-sweep {text!r}: write KIND:R1,R2,... with KIND one of {', '.join(KINDS)}")
+        raise InputError(f"--label-noise-sweep {text!r}: write KIND:R1,R2,... with KIND one of {', '.join(KINDS)}")
     try:
         rates = [float(v) for v in values.split(",") if v.strip()]
     except ValueError:
-        raise ValueError(f"--label-noise-sweep {text!r}: the rates must be numbers") from None
+        raise InputError(f"--label-noise-sweep {text!r}: the rates must be numbers") from None
     if not rates or len(set(rates)) != len(rates):
-        raise ValueError(f"--label-noise-sweep {text!r}: give distinct rates, e.g. {kind}:0,0.1,0.2")
+        raise InputError(f"--label-noise-sweep {text!r}: give distinct rates, e.g. {kind}:0,0.1,0.2")
     return kind, rates
 
 

@@ -18,13 +18,14 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..compute import torch_threads
 from ..data.dataset import EARTH, TARGET, Dataset
 from ..data.splits import make_split
 from ..fusion.baselines import earth_finetune
 from ..models import build
 from ..models.train import EXPERT_EPOCHS, predict, train_classifier
-from .mccv import single_threaded_torch
 from .metrics import balanced_accuracy
+from ..errors import InputError
 
 CAL_SIZE = 150
 
@@ -52,10 +53,10 @@ def loto(dataset: Dataset, seed: int = 0, epochs: int = EXPERT_EPOCHS) -> list[f
     x, y = dataset.xy(TARGET)
     groups = dataset.groups(TARGET)
     if len(np.unique(groups)) < 2:
-        raise ValueError(f"{dataset.root}: leave-one-traverse-out needs at least two target traverses")
+        raise InputError(f"{dataset.root}: leave-one-traverse-out needs at least two target traverses")
     init = build("sn-s", seed=seed)
     scores = []
-    with single_threaded_torch():
+    with torch_threads(1):
         for g in np.unique(groups):
             train, test = groups != g, groups == g
             model = train_classifier(copy.deepcopy(init), x[train], y[train], epochs=epochs, seed=seed)
@@ -71,7 +72,7 @@ def earth_expert(dataset: Dataset, seed: int = 0, epochs: int = EXPERT_EPOCHS):
 
 def earth_zero_shot(dataset: Dataset, seed: int = 0, epochs: int = EXPERT_EPOCHS) -> float:
     """Balanced accuracy of the Earth expert on every target row, without calibration."""
-    with single_threaded_torch():
+    with torch_threads(1):
         return _bacc(earth_expert(dataset, seed, epochs), *dataset.xy(TARGET))
 
 
@@ -91,10 +92,10 @@ def learnability(dataset: Dataset, seed: int = 0, runs: int = 5, epochs: int = E
     """The learnability figures of one dataset (it needs `earth` and `target` roles)."""
     missing = [r for r in (EARTH, TARGET) if r not in dataset.roles]
     if missing:
-        raise ValueError(f"{dataset.root}: learnability needs the roles {', '.join(missing)}")
+        raise InputError(f"{dataset.root}: learnability needs the roles {', '.join(missing)}")
     if runs < 1:
-        raise ValueError(f"runs must be at least 1, got {runs}")
-    with single_threaded_torch():  # a 543-parameter net trains fastest on one thread
+        raise InputError(f"runs must be at least 1, got {runs}")
+    with torch_threads(1):  # a 543-parameter net trains fastest on one thread
         per_traverse = loto(dataset, seed, epochs)
         earth = earth_expert(dataset, seed, epochs)
         x, y = dataset.xy(TARGET)

@@ -24,6 +24,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy import stats
+from ..errors import InputError
 
 FORMS = ("nadeau-bengio", "reference")
 
@@ -43,12 +44,12 @@ class TTestResult:
 
 def correction_factor(n: int, n_train: float, n_test: float, form: str = "nadeau-bengio") -> float:
     if n_train <= 0 or n_test <= 0:
-        raise ValueError(f"train and test sizes must be positive, got {n_train} and {n_test}")
+        raise InputError(f"train and test sizes must be positive, got {n_train} and {n_test}")
     if form == "nadeau-bengio":
         return 1.0 / n + n_test / n_train
     if form == "reference":
         return 1.0 / n + n_train / n_test
-    raise ValueError(f"unknown t-test form {form!r}; choose one of {', '.join(FORMS)}")
+    raise InputError(f"unknown t-test form {form!r}; choose one of {', '.join(FORMS)}")
 
 
 def corrected_resampled_ttest(
@@ -57,10 +58,10 @@ def corrected_resampled_ttest(
     """Test whether method A and method B differ, from their paired per-run scores."""
     a, b = np.asarray(scores_a, dtype=float), np.asarray(scores_b, dtype=float)
     if a.shape != b.shape or a.ndim != 1:
-        raise ValueError(f"paired scores must be two 1-D arrays of equal length, got {a.shape} and {b.shape}")
+        raise InputError(f"paired scores must be two 1-D arrays of equal length, got {a.shape} and {b.shape}")
     n = a.size
     if n < 2:
-        raise ValueError(f"the t-test needs at least 2 paired runs, got {n}")
+        raise InputError(f"the t-test needs at least 2 paired runs, got {n}")
     d = a - b
     mean, var = float(d.mean()), float(d.var(ddof=1))
     corr = correction_factor(n, n_train, n_test, form)

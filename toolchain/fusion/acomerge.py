@@ -80,8 +80,6 @@ import contextlib
 import dataclasses
 import gc
 import math
-import os
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -89,11 +87,12 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from ..cores import usable_cores
+from ..compute import torch_threads
 from ..models import n_params
 from ..models.train import LOSSES
 from .buffer import BUFFER_KINDS, make_buffer
 from .fitness import CalibrationFitness
+from ..errors import InputError
 
 PHASES = ("mmas", "iwoa")
 HEURISTICS = ("constant", "best_distance")
@@ -129,7 +128,7 @@ class AcoMergeConfig:
     loss: str = "ce"  # the fitness: weighted CE, or 'gce' (noise-robust; CPU search only, see methods.py)
     chunk: int = 150  # ants per forward chunk of a deeper net (bounds its activations' memory; SN-S bounds its own)
     # torch intra-op threads during the run (0: chosen at its start from the cores free then, see
-    # default_threads); the result is deterministic for a seed and a thread count
+    # compute.default_threads); the result is deterministic for a seed and a thread count
     threads: int = 1
     # 'cpu' runs `search` (the reference); a GPU ('cuda', 'cuda:N') runs the lockstep engine
     # (lockstep.py), whose results differ from the CPU's in float rounding and random stream
@@ -141,29 +140,29 @@ class AcoMergeConfig:
     def validate(self) -> None:
         bad = [p for p in self.phases if p not in PHASES]
         if bad or not self.phases:
-            raise ValueError(f"phases must be a non-empty subset of {PHASES}, got {self.phases}")
+            raise InputError(f"phases must be a non-empty subset of {PHASES}, got {self.phases}")
         if self.n_ants < 1 or self.generations < 1:
-            raise ValueError("n_ants and generations must be at least 1")
+            raise InputError("n_ants and generations must be at least 1")
         if not (0.0 <= self.q0_start <= 1.0 and 0.0 <= self.q0_end <= 1.0):
-            raise ValueError("q0_start and q0_end must lie in [0, 1]")
+            raise InputError("q0_start and q0_end must lie in [0, 1]")
         if not 0.0 <= self.evaporation < 1.0:
-            raise ValueError("evaporation must lie in [0, 1)")
+            raise InputError("evaporation must lie in [0, 1)")
         if not 0.0 < self.p_best < 1.0:
-            raise ValueError("p_best must lie in (0, 1)")
+            raise InputError("p_best must lie in (0, 1)")
         if self.heuristic not in HEURISTICS:
-            raise ValueError(f"heuristic must be one of {HEURISTICS}")
+            raise InputError(f"heuristic must be one of {HEURISTICS}")
         if self.buffer_kind not in BUFFER_KINDS:
-            raise ValueError(f"buffer_kind must be one of {BUFFER_KINDS}")
+            raise InputError(f"buffer_kind must be one of {BUFFER_KINDS}")
         if self.iwoa_every < 1 or self.gb_every < 0 or self.deposit <= 0 or self.tau_init <= 0:
-            raise ValueError("iwoa_every ≥ 1, gb_every ≥ 0, deposit > 0 and tau_init > 0 are required")
+            raise InputError("iwoa_every ≥ 1, gb_every ≥ 0, deposit > 0 and tau_init > 0 are required")
         if self.loss not in LOSSES or (self.loss != "ce" and self.device != "cpu"):
-            raise ValueError(f"loss must be one of {LOSSES}, and 'ce' on a GPU (the lockstep engine's fitness)")
+            raise InputError(f"loss must be one of {LOSSES}, and 'ce' on a GPU (the lockstep engine's fitness)")
         if self.chunk < 1 or self.threads < 0:
-            raise ValueError("chunk must be at least 1 and threads at least 0 (0: chosen from the free cores)")
+            raise InputError("chunk must be at least 1 and threads at least 0 (0: chosen from the free cores)")
         if self.device != "cpu" and not self.device.startswith("cuda"):
-            raise ValueError(f"device must be 'cpu' or 'cuda[:N]', got {self.device!r}")
+            raise InputError(f"device must be 'cpu' or 'cuda[:N]', got {self.device!r}")
         if self.rng not in ("device", "host"):
-            raise ValueError(f"rng must be 'device' or 'host', got {self.rng!r}")
+            raise InputError(f"rng must be 'device' or 'host', got {self.rng!r}")
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -316,62 +315,17 @@ def whale_update(
     return new
 
 
-MAX_THREADS = 4  # beyond this a generation's small GEMMs gain nothing from more threads
-AUTO_THREADS = 0  # `threads` value meaning: chosen at the start of each run from the cores free then
-
-
-def _cpu_times() -> tuple[float, float] | None:
-    """(idle, total) jiffies of all CPUs from /proc/stat, or None where there is none."""
-    try:
-        with open("/proc/stat") as f:
-            fields = [float(v) for v in f.readline().split()[1:]]
-    except (OSError, ValueError):
-        return None
-    return fields[3] + (fields[4] if len(fields) > 4 else 0.0), sum(fields[:8])
-
-
-def busy_cores(window_s: float = 0.05) -> float:
-    """How many CPUs other processes kept busy over the last `window_s` (this one sleeps meanwhile)."""
-    before = _cpu_times()
-    time.sleep(window_s)
-    after = _cpu_times()
-    if before is None or after is None or after[1] <= before[1]:
-        return 0.0
-    busy_fraction = 1.0 - (after[0] - before[0]) / (after[1] - before[1])
-    return busy_fraction * (os.cpu_count() or 1)
-
-
-def default_threads() -> int:
-    """Threads for one AcoMerge run: the cores this process may use that no other process keeps
-    busy right now, at most MAX_THREADS, at least 1.
-
-    Why: a generation's intra-op threads meet at a barrier several times per generation. With a
-    core taken by another process, one of two threads waits for its time slice at every barrier,
-    and a 2-thread SN-S run took 11.3 s instead of 1.1 s on one thread (2 cores, load 6,
-    `fleetlab bench fusion --load`). So a run takes only the cores that are free when it starts.
-    """
-    cores = usable_cores()
-    free = min(cores, (os.cpu_count() or 1) - busy_cores())
-    return max(1, min(MAX_THREADS, cores, int(free + 0.25)))
-
-
-def run_threads(threads: int) -> int:
-    """`threads` as given, or chosen now (`default_threads`) for AUTO_THREADS."""
-    return default_threads() if threads == AUTO_THREADS else threads
-
-
 @contextlib.contextmanager
 def search_threads(threads: int):
-    """Torch intra-op threads for a run, and the garbage collector paused: a generation makes
-    a few hundred short-lived tensors and no reference cycles, and the collections they would
-    trigger walk every object of torch & co. (~8 % of a run)."""
-    saved, gc_on = torch.get_num_threads(), gc.isenabled()
-    torch.set_num_threads(run_threads(threads))
+    """Torch intra-op threads for a run (`compute.torch_threads`), and the garbage collector paused: a
+    generation makes a few hundred short-lived tensors and no reference cycles, and the collections they
+    would trigger walk every object of torch & co. (~8 % of a run)."""
+    gc_on = gc.isenabled()
     gc.disable()
     try:
-        yield
+        with torch_threads(threads):
+            yield
     finally:
-        torch.set_num_threads(saved)
         if gc_on:
             gc.enable()
 
@@ -485,18 +439,18 @@ def checked_inputs(
     experts = torch.as_tensor(experts_flat).detach().to(torch.float32)
     n_t = n_params(arch)
     if experts.dim() != 2 or experts.shape[1] != n_t:
-        raise ValueError(f"experts must be (K, {n_t}) flat {arch} vectors, got shape {tuple(experts.shape)}")
+        raise InputError(f"experts must be (K, {n_t}) flat {arch} vectors, got shape {tuple(experts.shape)}")
     if not torch.isfinite(experts).all():
-        raise ValueError("expert parameters contain NaN or infinity")
+        raise InputError("expert parameters contain NaN or infinity")
     k = experts.shape[0]
     for i in range(k):
         for j in range(i):
             if torch.equal(experts[i], experts[j]):
-                raise ValueError(f"experts {j} and {i} are identical: fusion needs different models")
+                raise InputError(f"experts {j} and {i} are identical: fusion needs different models")
     cand = make_buffer(experts, cfg.copies, cfg.sigma, seed, cfg.buffer_kind) if buffer is None else buffer
     cand = torch.as_tensor(cand).detach().to(torch.float32).clone()
     if cand.dim() != 2 or cand.shape[1] != n_t or not torch.isfinite(cand).all():
-        raise ValueError(f"buffer must be a finite (M, {n_t}) tensor, got shape {tuple(cand.shape)}")
+        raise InputError(f"buffer must be a finite (M, {n_t}) tensor, got shape {tuple(cand.shape)}")
     return cfg, experts, cand
 
 

@@ -1,4 +1,5 @@
-"""`fleetlab bench fusion`: how fast AcoMerge evaluates a generation, and a full run.
+"""How fast AcoMerge evaluates a generation, and a full run (`fleetlab bench fusion`, options in
+`fleetlab.cli.bench_fusion`).
 
 Figures (one JSON object with --json):
 - batched_ms_per_generation: one generation's ants (AcoMergeConfig.n_ants different models, none shared)
@@ -54,7 +55,6 @@ from different seeds, briefly trained on it, so the fitness landscape is not fla
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import math
@@ -64,31 +64,23 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 import torch
 from torch.utils.data import DataLoader, TensorDataset
 
-from ..cores import usable_cores
+from ..compute import AUTO_THREADS, MAX_THREADS, default_threads, device_label, resolve_device, torch_threads, usable_cores
 from ..data.contracts import N_CLASSES
 from ..models import build, flatten, load_flat
 from ..models.train import class_weights
-from .acomerge import (
-    AUTO_THREADS,
-    MAX_THREADS,
-    AcoMergeConfig,
-    acomerge,
-    construct_departures,
-    default_threads,
-    evaluate_ants,
-    search_threads,
-)
+from .acomerge import AcoMergeConfig, acomerge, construct_departures, evaluate_ants, search_threads
 from .buffer import make_buffer
 from .finetune import finetune
 from .fitness import CalibrationFitness, fitness_seconds
-from .lockstep import StackedFitness, device_label, graphed, resolve_device, search_lockstep
+from .lockstep import StackedFitness, graphed, search_lockstep
+from ..errors import FleetlabError
 
 TARGET_SPEEDUP = 50.0
 TARGET_FULL_RUN_S = 2.0
@@ -106,40 +98,26 @@ _LOC = np.array([3.0, 0.07, 67.0, 14.0, 0.0, 0.7, 0.02, 0.4, 0.0, 1.4, -0.13, -0
 _SCALE = np.array([0.4, 0.08, 11.0, 10.0, 0.05, 0.45, 0.05, 0.25, 0.07, 1.2, 0.22, 0.22], dtype=np.float32)
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.epilog = (
-        "Prints batched_ms_per_generation (one generation's ants evaluated as AcoMerge does), "
-        "sequential_ms_per_generation (the same ants one at a time through an nn.Module, the reference code's way), "
-        "their speedup, full_generation_ms (construction + evaluation + update in a real run) and full_run_s. "
-        f"Targets: speedup >= {TARGET_SPEEDUP:g}, full run <= {TARGET_FULL_RUN_S:g} s."
-    )
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
-    p.add_argument("--data", type=Path, help="dataset folder: draw D_Cal from its target rows (default: synthetic)")
-    aco = AcoMergeConfig()
-    p.add_argument("--ants", type=int, default=aco.n_ants, help=f"ants per generation (default: {aco.n_ants})")
-    p.add_argument("--generations", type=int, default=aco.generations,
-                   help=f"generations of the full run (default: {aco.generations})")
-    p.add_argument("--cal-size", type=int, default=200, help="|D_Cal| (default: 200)")
-    p.add_argument("--repeats", type=int, default=40,
-                   help="repeats of the batched timing, best kept; the sequential baselines run a tenth as often, "
-                        "at least once (default: 40)")
-    p.add_argument("--full-runs", type=int, default=5, help="complete runs timed, best kept (default: 5)")
-    p.add_argument("--threads", type=int, default=AUTO_THREADS,
-                   help=f"threads of the batched evaluation (default: {AUTO_THREADS} = chosen as a run chooses them: "
-                        f"the cores free when it starts, up to {MAX_THREADS})")
-    p.add_argument("--load", type=int, default=1, metavar="N",
-                   help="busy processes (one spinning core each) started beside a second set of full runs, to "
-                        "measure the run time on a busy machine; 0 skips it (default: 1)")
-    p.add_argument("--table-runs", type=int, default=0, metavar="R",
-                   help=f"also time the paper table (`fleetlab evaluate`, R runs x 2 calibration sizes, every method; "
-                        f"needs --data; the goal is for R = {GOAL_TABLE_RUNS}); 0 skips it (default: 0)")
-    p.add_argument("--table-jobs", type=int, default=GOAL_TABLE_JOBS, metavar="J",
-                   help=f"--jobs of that evaluation (default: {GOAL_TABLE_JOBS})")
-    p.add_argument("--device", default="cpu", metavar="cpu|cuda|auto",
-                   help="cpu (default): the reference path; cuda: the GPU path (lockstep engine)")
-    p.add_argument("--batch-runs", type=int, default=30, metavar="R",
-                   help="with --device cuda: runs stepped together in the batched measurement (default: 30)")
-    p.add_argument("--seed", type=int, default=0, help="seed (default: 0)")
+_ACO = AcoMergeConfig()
+
+
+@dataclass(frozen=True)
+class FusionBench:
+    """What to measure; the fields are `fleetlab bench fusion`'s options, and their defaults too."""
+    arch: str = "sn-s"
+    data: Path | None = None  # dataset folder: D_Cal drawn from its target rows (None: synthetic)
+    ants: int = _ACO.n_ants
+    generations: int = _ACO.generations  # of the full run
+    cal_size: int = 200
+    repeats: int = 40  # of the batched timing, best kept; the sequential baselines run a tenth as often
+    full_runs: int = 5  # complete runs timed, best kept
+    threads: int = AUTO_THREADS  # of the batched evaluation
+    load: int = 1  # busy processes beside a second set of full runs; 0 skips it
+    table_runs: int = 0  # runs of the paper table timed (needs data); 0 skips it
+    table_jobs: int = GOAL_TABLE_JOBS
+    device: str = "cpu"  # cpu: the reference path; cuda: the GPU path (lockstep engine)
+    batch_runs: int = 30  # with a GPU: runs stepped together in the batched measurement
+    seed: int = 0
 
 
 def synthetic_calibration(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -151,17 +129,17 @@ def synthetic_calibration(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return x.astype(np.float32), y.astype(np.int64)
 
 
-def _calibration(args) -> tuple[np.ndarray, np.ndarray, str]:
-    if args.data is None:
-        x, y = synthetic_calibration(args.cal_size, args.seed)
+def _calibration(bench: FusionBench) -> tuple[np.ndarray, np.ndarray, str]:
+    if bench.data is None:
+        x, y = synthetic_calibration(bench.cal_size, bench.seed)
         return x, y, "synthetic"
     from ..data.dataset import TARGET, load_dataset
     from ..data.splits import make_split
 
-    ds = load_dataset(args.data)
+    ds = load_dataset(bench.data)
     x, y = ds.xy(TARGET)
-    cal = make_split("paper", y, ds.groups(TARGET), args.cal_size, args.seed).cal
-    return x[cal], y[cal], f"{args.data} (target rows, paper split)"
+    cal = make_split("paper", y, ds.groups(TARGET), bench.cal_size, bench.seed).cal
+    return x[cal], y[cal], f"{bench.data} (target rows, paper split)"
 
 
 def reference_style_fitness(model, flat: torch.Tensor, loader: DataLoader, y: np.ndarray) -> float:
@@ -193,24 +171,24 @@ def _timed(fn, repeats: int, warmup=None) -> tuple[float, float]:
     return 1e3 * min(wall), 1e3 * min(cpu)
 
 
-def measure(args) -> dict:
-    x, y, source = _calibration(args)
-    experts = torch.stack([flatten(finetune(build(args.arch, seed=args.seed + k), x, y, steps=30, seed=k)) for k in range(3)])
-    buffer = make_buffer(experts, 15, 0.05, args.seed)
-    gen = torch.Generator().manual_seed(args.seed)
+def measure(bench: FusionBench) -> dict:
+    x, y, source = _calibration(bench)
+    experts = torch.stack([flatten(finetune(build(bench.arch, seed=bench.seed + k), x, y, steps=30, seed=k)) for k in range(3)])
+    buffer = make_buffer(experts, 15, 0.05, bench.seed)
+    gen = torch.Generator().manual_seed(bench.seed)
     tau = torch.rand(buffer.shape[1], buffer.shape[0], generator=gen) + 0.5
-    departures = construct_departures(tau, None, 0.5, args.ants, gen)  # early-run pheromone: every ant explores
+    departures = construct_departures(tau, None, 0.5, bench.ants, gen)  # early-run pheromone: every ant explores
     ants = buffer.gather(0, departures.dense().long())
-    threads = args.threads or default_threads()
-    config = AcoMergeConfig(n_ants=args.ants, generations=args.generations, threads=threads)
+    threads = bench.threads or default_threads()
+    config = AcoMergeConfig(n_ants=bench.ants, generations=bench.generations, threads=threads)
 
-    fitness = CalibrationFitness(args.arch, x, y, chunk=config.chunk)
+    fitness = CalibrationFitness(bench.arch, x, y, chunk=config.chunk)
     with search_threads(threads):
-        eval_ms, eval_cpu = _timed(lambda: evaluate_ants(departures, buffer, fitness), args.repeats)
+        eval_ms, eval_cpu = _timed(lambda: evaluate_ants(departures, buffer, fitness), bench.repeats)
         batched_j = evaluate_ants(departures, buffer, fitness)
 
     torch.set_num_threads(1)  # the reference's forward passes are far too small for intra-op threads
-    model = build(args.arch)
+    model = build(bench.arch)
     xt = torch.from_numpy(x)
     loader = DataLoader(TensorDataset(xt), batch_size=REFERENCE_BATCH, shuffle=False)
     seq_j: list[float] = []
@@ -224,7 +202,7 @@ def measure(args) -> dict:
             reference_style_fitness(model, a, loader, y)
 
     # the slow baselines: fewer repeats, warm-up on a few ants only
-    seq_ms, seq_cpu = _timed(sequential, max(1, args.repeats // 10), warmup)
+    seq_ms, seq_cpu = _timed(sequential, max(1, bench.repeats // 10), warmup)
     yt, wt = torch.from_numpy(y), class_weights(y)
 
     def sequential_fullbatch():
@@ -232,13 +210,13 @@ def measure(args) -> dict:
             for a in ants:
                 torch.nn.functional.cross_entropy(load_flat(model, a)(xt), yt, weight=wt)
 
-    full_ms, full_cpu = _timed(sequential_fullbatch, max(1, args.repeats // 10), warmup)
+    full_ms, full_cpu = _timed(sequential_fullbatch, max(1, bench.repeats // 10), warmup)
 
-    run_ms, run_cpu = _timed(lambda: acomerge(experts, args.arch, x, y, config, seed=args.seed), args.full_runs,
-                             warmup=lambda: acomerge(experts, args.arch, x, y, replace(config, generations=2), seed=args.seed))
-    gen_ms, gen_cpu = run_ms / args.generations, run_cpu / args.generations
+    run_ms, run_cpu = _timed(lambda: acomerge(experts, bench.arch, x, y, config, seed=bench.seed), bench.full_runs,
+                             warmup=lambda: acomerge(experts, bench.arch, x, y, replace(config, generations=2), seed=bench.seed))
+    gen_ms, gen_cpu = run_ms / bench.generations, run_cpu / bench.generations
     return {
-        "arch": args.arch, "ants": args.ants, "generations": args.generations, "cal_size": int(len(y)),
+        "arch": bench.arch, "ants": bench.ants, "generations": bench.generations, "cal_size": int(len(y)),
         "calibration": source, "threads": threads,
         "batched_ms_per_generation": round(eval_ms, 3),
         "sequential_ms_per_generation": round(seq_ms, 3),
@@ -254,28 +232,28 @@ def measure(args) -> dict:
         "load_average_1min": round(os.getloadavg()[0], 2),
         "max_abs_fitness_diff": float(np.max(np.abs(np.array(seq_j) - batched_j.numpy()))),
         "targets": {"speedup": TARGET_SPEEDUP, "full_run_s": TARGET_FULL_RUN_S},
-        **({"busy": busy_machine(experts, x, y, args)} if args.load else {}),
-        **({"table": table_time(args)} if args.table_runs else {}),
+        **({"busy": busy_machine(experts, x, y, bench)} if bench.load else {}),
+        **({"table": table_time(bench)} if bench.table_runs else {}),
     }
 
 
-def table_time(args) -> dict:
+def table_time(bench: FusionBench) -> dict:
     """The paper table as a user runs it: `fleetlab evaluate` in a child process (its start-up, data
     loading, expert training, every method's jobs and the summary included), wall time against the
     goal, and the CPU seconds per stage and method that evaluate reports."""
     with tempfile.TemporaryDirectory(prefix="fleetlab-table-") as tmp:
         out = Path(tmp) / "table.json"
-        cmd = [sys.executable, "-m", "fleetlab.cli", "evaluate", "--data", str(args.data), "--arch", args.arch,
-               "--runs", str(args.table_runs), "--jobs", str(args.table_jobs), "--seed", str(args.seed),
+        cmd = [sys.executable, "-m", "fleetlab.cli", "evaluate", "--data", str(bench.data), "--arch", bench.arch,
+               "--runs", str(bench.table_runs), "--jobs", str(bench.table_jobs), "--seed", str(bench.seed),
                "--no-progress", "--json", str(out)]
         t0, c0 = time.perf_counter(), _children_cpu_s()
         done = subprocess.run(cmd, capture_output=True, text=True)
         wall_s, process_cpu_s = time.perf_counter() - t0, _children_cpu_s() - c0
         if done.returncode != 0:
             last = (done.stderr.strip().splitlines() or ["no output"])[-1]
-            raise RuntimeError(f"the table's evaluation failed (exit {done.returncode}): {last}")
+            raise FleetlabError(f"the paper table's `fleetlab evaluate` failed (exit {done.returncode}): {last}")
         timing = json.loads(out.read_text())["timing"]
-    return {**table_figures(timing, wall_s, process_cpu_s, args.arch, args.table_runs, args.table_jobs),
+    return {**table_figures(timing, wall_s, process_cpu_s, bench.arch, bench.table_runs, bench.table_jobs),
             "command": " ".join(cmd[2:])}
 
 
@@ -324,7 +302,7 @@ def busy_processes(n: int):
             p.wait()
 
 
-def busy_machine(experts: torch.Tensor, x: np.ndarray, y: np.ndarray, args) -> dict:
+def busy_machine(experts: torch.Tensor, x: np.ndarray, y: np.ndarray, bench: FusionBench) -> dict:
     """Full-run times (best of --full-runs) with the threads a run chooses, idle and with --load busy
     processes, and loaded with every core as threads (the fixed choice that collapses)."""
     cores = usable_cores()
@@ -332,39 +310,39 @@ def busy_machine(experts: torch.Tensor, x: np.ndarray, y: np.ndarray, args) -> d
     def runs(threads: int) -> tuple[float, int, float]:
         """Best wall seconds of the runs, their threads, and the wall seconds of that run's fitness calls."""
         chosen = threads or default_threads()
-        cfg = AcoMergeConfig(n_ants=args.ants, generations=args.generations, threads=chosen)
-        acomerge(experts, args.arch, x, y, replace(cfg, generations=2), seed=args.seed)  # warm-up
+        cfg = AcoMergeConfig(n_ants=bench.ants, generations=bench.generations, threads=chosen)
+        acomerge(experts, bench.arch, x, y, replace(cfg, generations=2), seed=bench.seed)  # warm-up
         best = (math.inf, 0.0)
-        for _ in range(args.full_runs):
+        for _ in range(bench.full_runs):
             w0, f0 = time.perf_counter(), fitness_seconds()[0]
-            acomerge(experts, args.arch, x, y, cfg, seed=args.seed)
+            acomerge(experts, bench.arch, x, y, cfg, seed=bench.seed)
             best = min(best, (time.perf_counter() - w0, fitness_seconds()[0] - f0))
         return best[0], chosen, best[1]
 
-    idle_s, idle_threads, idle_fitness_s = runs(args.threads)
-    with busy_processes(args.load):
-        loaded_s, loaded_threads, _ = runs(args.threads)
+    idle_s, idle_threads, idle_fitness_s = runs(bench.threads)
+    with busy_processes(bench.load):
+        loaded_s, loaded_threads, _ = runs(bench.threads)
         fixed_s, _, _ = runs(min(MAX_THREADS, cores))
-    out = {"load": args.load, "cores": cores, "run_s_idle": round(idle_s, 3), "threads_idle": idle_threads,
+    out = {"load": bench.load, "cores": cores, "run_s_idle": round(idle_s, 3), "threads_idle": idle_threads,
            # the idle run's fitness calls, and the rest of it: what no faster fitness would shorten
            "run_s_idle_in_fitness": round(idle_fitness_s, 3),
            "run_s_idle_outside_fitness": round(idle_s - idle_fitness_s, 3),
            "run_s_loaded": round(loaded_s, 3), "threads_loaded": loaded_threads,
            "run_s_loaded_all_cores": round(fixed_s, 3), "threads_all_cores": min(MAX_THREADS, cores),
            "load_average_1min": round(os.getloadavg()[0], 2)}
-    if args.arch == "sn-s":
+    if bench.arch == "sn-s":
         out["goals"] = {"run_s_idle": GOAL_IDLE_RUN_S, "run_s_loaded": GOAL_LOADED_RUN_S,
                         "met": idle_s <= GOAL_IDLE_RUN_S and loaded_s <= GOAL_LOADED_RUN_S}
     return out
 
 
-def measure_device(args) -> dict:
+def measure_device(bench: FusionBench) -> dict:
     """The accelerator path: one run's generation, its fitness call, a full run, R runs batched."""
-    device = resolve_device(args.device)
-    x, y, source = _calibration(args)
-    experts = torch.stack([flatten(finetune(build(args.arch, seed=args.seed + k), x, y, steps=30, seed=k)) for k in range(3)])
-    buffer = make_buffer(experts, 15, 0.05, args.seed)
-    config = AcoMergeConfig(n_ants=args.ants, generations=args.generations, device=str(device))
+    device = resolve_device(bench.device)
+    x, y, source = _calibration(bench)
+    experts = torch.stack([flatten(finetune(build(bench.arch, seed=bench.seed + k), x, y, steps=30, seed=k)) for k in range(3)])
+    buffer = make_buffer(experts, 15, 0.05, bench.seed)
+    config = AcoMergeConfig(n_ants=bench.ants, generations=bench.generations, device=str(device))
     sync = torch.cuda.synchronize if device.type == "cuda" else (lambda: None)
 
     results = {}
@@ -374,36 +352,36 @@ def measure_device(args) -> dict:
     def timed_runs(n_runs: int, generations: int, cuda_graph: bool = True, compiled: bool = True) -> float:
         """Best wall seconds of a lockstep search of n_runs runs (different seeds)."""
         cfg = replace(config, generations=generations)
-        fitness = StackedFitness(args.arch, [(x, y)] * n_runs, device)
+        fitness = StackedFitness(bench.arch, [(x, y)] * n_runs, device)
         go = lambda: search_lockstep([experts] * n_runs, [buffer] * n_runs, fitness, cfg,  # noqa: E731
-                                     [args.seed + r for r in range(n_runs)], device, cuda_graph=cuda_graph,
+                                     [bench.seed + r for r in range(n_runs)], device, cuda_graph=cuda_graph,
                                      compiled=compiled)
         t0 = time.perf_counter()
         results[n_runs, generations, cuda_graph, compiled] = go()  # also the warm-up: compiled, kernels loaded
         sync()
         first_s[n_runs, generations, cuda_graph, compiled] = time.perf_counter() - t0
         best = math.inf
-        for _ in range(args.full_runs):
+        for _ in range(bench.full_runs):
             t0 = time.perf_counter()
             go()
             sync()
             best = min(best, time.perf_counter() - t0)
         return best
 
-    run_s = timed_runs(1, args.generations)
-    compile_s = first_s[1, args.generations, True, True] - run_s
-    run_s_eager = timed_runs(1, args.generations, cuda_graph=False)
-    run_s_uncompiled = timed_runs(1, args.generations, compiled=False)
-    short = max(1, args.generations // 5)
-    steady_ms = (1e3 * (run_s - timed_runs(1, short)) / (args.generations - short)
-                 if args.generations > short else math.nan)
-    batched_s = timed_runs(args.batch_runs, args.generations, compiled=False)  # as `evaluate` runs them
-    batched_s_compiled = timed_runs(args.batch_runs, args.generations)
-    graphed_run, eager_run = results[1, args.generations, True, True][0], results[1, args.generations, False, True][0]
+    run_s = timed_runs(1, bench.generations)
+    compile_s = first_s[1, bench.generations, True, True] - run_s
+    run_s_eager = timed_runs(1, bench.generations, cuda_graph=False)
+    run_s_uncompiled = timed_runs(1, bench.generations, compiled=False)
+    short = max(1, bench.generations // 5)
+    steady_ms = (1e3 * (run_s - timed_runs(1, short)) / (bench.generations - short)
+                 if bench.generations > short else math.nan)
+    batched_s = timed_runs(bench.batch_runs, bench.generations, compiled=False)  # as `evaluate` runs them
+    batched_s_compiled = timed_runs(bench.batch_runs, bench.generations)
+    graphed_run, eager_run = results[1, bench.generations, True, True][0], results[1, bench.generations, False, True][0]
     same_search = (graphed_run.history == eager_run.history and torch.equal(graphed_run.best_flat, eager_run.best_flat))
-    fitness = StackedFitness(args.arch, [(x, y)], device)
-    gen = torch.Generator(device=device).manual_seed(args.seed)
-    ants = buffer.to(device)[torch.randint(0, buffer.shape[0], (1, args.ants), generator=gen, device=device)]
+    fitness = StackedFitness(bench.arch, [(x, y)], device)
+    gen = torch.Generator(device=device).manual_seed(bench.seed)
+    ants = buffer.to(device)[torch.randint(0, buffer.shape[0], (1, bench.ants), generator=gen, device=device)]
     ants = ants + 0.01 * torch.randn(ants.shape, generator=gen, device=device)
     replayed = graphed(fitness, ants)
     graph_diff = float((replayed(ants) - fitness(ants)).abs().max())
@@ -412,7 +390,7 @@ def measure_device(args) -> dict:
         fn(ants)
         sync()
         best = math.inf
-        for _ in range(args.repeats):
+        for _ in range(bench.repeats):
             t0 = time.perf_counter()
             fn(ants)
             sync()
@@ -420,93 +398,87 @@ def measure_device(args) -> dict:
         return best
 
     fit_best, fit_graph = best_call_s(fitness), best_call_s(replayed)
-    gen_ms = 1e3 * run_s / args.generations
+    gen_ms = 1e3 * run_s / bench.generations
     out = {
-        "arch": args.arch, "ants": args.ants, "generations": args.generations, "cal_size": int(len(y)),
+        "arch": bench.arch, "ants": bench.ants, "generations": bench.generations, "cal_size": int(len(y)),
         "calibration": source, "device": device_label(device),
         "fitness_ms": round(1e3 * fit_best, 4), "fitness_ms_cuda_graph": round(1e3 * fit_graph, 4),
         "cuda_graph_max_abs_diff": graph_diff,
-        "generation_ms": round(gen_ms, 4), "generation_ms_eager": round(1e3 * run_s_eager / args.generations, 4),
-        "generation_ms_uncompiled": round(1e3 * run_s_uncompiled / args.generations, 4),
+        "generation_ms": round(gen_ms, 4), "generation_ms_eager": round(1e3 * run_s_eager / bench.generations, 4),
+        "generation_ms_uncompiled": round(1e3 * run_s_uncompiled / bench.generations, 4),
         "generation_ms_steady": round(steady_ms, 4), "compile_s": round(compile_s, 2),
         "cuda_graph_same_search": same_search,  # the replayed run's history and model equal the eager run's
         "full_run_s": round(run_s, 3), "full_run_s_eager": round(run_s_eager, 3),
-        "batch_runs": args.batch_runs, "batched_generation_ms": round(1e3 * batched_s / args.generations, 4),
-        "per_run_generation_ms": round(1e3 * batched_s / args.generations / args.batch_runs, 4),
+        "batch_runs": bench.batch_runs, "batched_generation_ms": round(1e3 * batched_s / bench.generations, 4),
+        "per_run_generation_ms": round(1e3 * batched_s / bench.generations / bench.batch_runs, 4),
         "batched_full_runs_s": round(batched_s, 3),
-        "batched_generation_ms_compiled": round(1e3 * batched_s_compiled / args.generations, 4),
+        "batched_generation_ms_compiled": round(1e3 * batched_s_compiled / bench.generations, 4),
     }
     goals = {}
-    if args.arch in GOAL_GPU_GENERATION_MS:
-        goals["generation_ms"] = GOAL_GPU_GENERATION_MS[args.arch]
+    if bench.arch in GOAL_GPU_GENERATION_MS:
+        goals["generation_ms"] = GOAL_GPU_GENERATION_MS[bench.arch]
         goals["generation_ms_met"] = gen_ms <= goals["generation_ms"]
-    if args.arch in GOAL_GPU_RUN_S:
-        goals["full_run_s"] = GOAL_GPU_RUN_S[args.arch]
+    if bench.arch in GOAL_GPU_RUN_S:
+        goals["full_run_s"] = GOAL_GPU_RUN_S[bench.arch]
         goals["full_run_s_met"] = run_s <= goals["full_run_s"]
     out["goals"] = goals
     return out
 
 
-def run(args: argparse.Namespace) -> int:
-    for name in ("ants", "generations", "cal_size", "repeats", "full_runs", "batch_runs"):
-        if getattr(args, name) < 1:
-            raise ValueError(f"--{name.replace('_', '-')} must be at least 1")
-    if args.threads < 0 or args.load < 0 or args.table_runs < 0 or args.table_jobs < 1:
-        raise ValueError("--threads, --load and --table-runs must not be negative, --table-jobs at least 1")
-    if args.table_runs and args.data is None:
-        raise ValueError("--table-runs needs --data DIR (the table is evaluated on the real target rover's rows)")
-    device = resolve_device(args.device)  # one line, before any work, where the GPU is missing
-    previous_threads = torch.get_num_threads()
-    try:
-        result = measure(args) if device.type == "cpu" else measure_device(args)
-    finally:
-        torch.set_num_threads(previous_threads)
-    if args.json:
-        print(json.dumps(result))
-        return 0
-    if device.type != "cpu":
-        print(f"AcoMerge on {result['device']}: {result['arch']}, {result['ants']} ants, |D_Cal| = {result['cal_size']}")
+def figures(bench: FusionBench) -> dict:
+    """The figures of `bench`: the CPU reference path, or the accelerator path where `bench.device` names one."""
+    device = resolve_device(bench.device)  # one line, before any work, where the GPU is missing
+    # each measurement sets the threads it measures with: the caller's count is put back after
+    with torch_threads(torch.get_num_threads()):
+        return measure(bench) if device.type == "cpu" else measure_device(bench)
+
+
+def text(result: dict) -> str:
+    """The figures as `fleetlab bench fusion` prints them without --json."""
+    lines = []
+    if "fitness_ms" in result:  # the accelerator path's figures
+        lines.append(f"AcoMerge on {result['device']}: {result['arch']}, {result['ants']} ants, |D_Cal| = {result['cal_size']}")
         for key, unit in (("fitness_ms", "ms"), ("fitness_ms_cuda_graph", "ms"), ("generation_ms", "ms"),
                           ("generation_ms_eager", "ms"), ("generation_ms_uncompiled", "ms"),
                           ("generation_ms_steady", "ms"), ("compile_s", "s"), ("full_run_s", "s"),
                           ("full_run_s_eager", "s"), ("batched_generation_ms", "ms"),
                           ("batched_generation_ms_compiled", "ms"), ("per_run_generation_ms", "ms"),
                           ("batched_full_runs_s", "s")):
-            print(f"  {key:40s} {result[key]:10.4f} {unit}")
-        print(f"  the graph-replayed run is the eager run's search: {result['cuda_graph_same_search']}")
-        print(f"  goals: {result['goals']}")
-        return 0
-    print(f"AcoMerge benchmark: {result['arch']}, {result['ants']} ants, |D_Cal| = {result['cal_size']} "
-          f"({result['calibration']}), {result['threads']} thread(s)")
+            lines.append(f"  {key:40s} {result[key]:10.4f} {unit}")
+        lines.append(f"  the graph-replayed run is the eager run's search: {result['cuda_graph_same_search']}")
+        lines.append(f"  goals: {result['goals']}")
+        return "\n".join(lines)
+    lines.append(f"AcoMerge benchmark: {result['arch']}, {result['ants']} ants, |D_Cal| = {result['cal_size']} "
+                 f"({result['calibration']}), {result['threads']} thread(s)")
     for key in ("batched_ms_per_generation", "sequential_ms_per_generation", "full_generation_ms",
                 "sequential_fullbatch_ms_per_generation"):
-        print(f"  {key:40s} {result[key]:10.3f} ms")
-    print(f"  {'speedup (same ants, reference-style)':40s} {result['speedup']:10.1f} x   (target >= {TARGET_SPEEDUP:g})")
-    print(f"  {'speedup (full generation vs sequential)':40s} {result['speedup_full_generation']:10.1f} x")
-    print(f"  {'speedup (vs full-batch sequential)':40s} {result['speedup_vs_fullbatch']:10.1f} x")
-    print(f"  {'full run, ' + str(result['generations']) + ' generations':40s} {result['full_run_s']:10.3f} s    "
-          f"(target <= {TARGET_FULL_RUN_S:g})")
-    print(f"  {'max |batched - sequential| fitness':40s} {result['max_abs_fitness_diff']:10.2e}")
-    print(f"  machine load (1 min): {result['load_average_1min']}")
+        lines.append(f"  {key:40s} {result[key]:10.3f} ms")
+    lines.append(f"  {'speedup (same ants, reference-style)':40s} {result['speedup']:10.1f} x   (target >= {TARGET_SPEEDUP:g})")
+    lines.append(f"  {'speedup (full generation vs sequential)':40s} {result['speedup_full_generation']:10.1f} x")
+    lines.append(f"  {'speedup (vs full-batch sequential)':40s} {result['speedup_vs_fullbatch']:10.1f} x")
+    lines.append(f"  {'full run, ' + str(result['generations']) + ' generations':40s} {result['full_run_s']:10.3f} s    "
+                 f"(target <= {TARGET_FULL_RUN_S:g})")
+    lines.append(f"  {'max |batched - sequential| fitness':40s} {result['max_abs_fitness_diff']:10.2e}")
+    lines.append(f"  machine load (1 min): {result['load_average_1min']}")
     if "busy" in result:
         b = result["busy"]
-        print(f"  full run as the machine is             {b['run_s_idle']:10.3f} s    ({b['threads_idle']} thread(s))")
-        print(f"  full run with {b['load']} busy process(es)        {b['run_s_loaded']:10.3f} s    "
-              f"({b['threads_loaded']} thread(s); with {b['threads_all_cores']}: {b['run_s_loaded_all_cores']:.3f} s)")
-        print(f"    of the first, fitness calls {b['run_s_idle_in_fitness']:.3f} s, the rest "
-              f"{b['run_s_idle_outside_fitness']:.3f} s (what no faster fitness shortens)")
+        lines.append(f"  full run as the machine is             {b['run_s_idle']:10.3f} s    ({b['threads_idle']} thread(s))")
+        lines.append(f"  full run with {b['load']} busy process(es)        {b['run_s_loaded']:10.3f} s    "
+                     f"({b['threads_loaded']} thread(s); with {b['threads_all_cores']}: {b['run_s_loaded_all_cores']:.3f} s)")
+        lines.append(f"    of the first, fitness calls {b['run_s_idle_in_fitness']:.3f} s, the rest "
+                     f"{b['run_s_idle_outside_fitness']:.3f} s (what no faster fitness shortens)")
         if "goals" in b:
-            print(f"  goals: <= {GOAL_IDLE_RUN_S} s idle, <= {GOAL_LOADED_RUN_S} s loaded: "
-                  f"{'met' if b['goals']['met'] else 'not met'}")
+            lines.append(f"  goals: <= {GOAL_IDLE_RUN_S} s idle, <= {GOAL_LOADED_RUN_S} s loaded: "
+                         f"{'met' if b['goals']['met'] else 'not met'}")
     if "table" in result:
         t = result["table"]
         goal = f"   (goal <= {GOAL_TABLE_S:g} s: {'met' if t['goal']['met'] else 'not met'})" if "goal" in t else ""
-        print(f"  paper table, {t['runs']} runs, --jobs {t['jobs']}:    {t['wall_s']:10.1f} s{goal}")
-        print(f"    CPU seconds: {t['process_cpu_s']:.1f} for the command's processes, {t['cpu_s']:.1f} of them in "
-              f"the jobs; sources {t['sources_cpu_s']}")
+        lines.append(f"  paper table, {t['runs']} runs, --jobs {t['jobs']}:    {t['wall_s']:10.1f} s{goal}")
+        lines.append(f"    CPU seconds: {t['process_cpu_s']:.1f} for the command's processes, {t['cpu_s']:.1f} of them in "
+                     f"the jobs; sources {t['sources_cpu_s']}")
         for m, c in sorted(t["method_cpu_s"].items(), key=lambda kv: -kv[1]):
-            print(f"    {m:24s} {c:8.1f} s CPU, {t['method_fitness_cpu_s'][m]:6.1f} s of it in fitness calls   "
-                  f"({t['method_mean_cpu_s'][m]:.3f} s per run)")
-        print(f"    with a fitness that cost nothing, at least {t['wall_s_bound_without_fitness']:.1f} s on "
-              f"{t['bound_cores']} core(s) ({t['fitness_cpu_s']:.1f} s CPU in fitness calls)")
-    return 0
+            lines.append(f"    {m:24s} {c:8.1f} s CPU, {t['method_fitness_cpu_s'][m]:6.1f} s of it in fitness calls   "
+                         f"({t['method_mean_cpu_s'][m]:.3f} s per run)")
+        lines.append(f"    with a fitness that cost nothing, at least {t['wall_s_bound_without_fitness']:.1f} s on "
+                     f"{t['bound_cores']} core(s) ({t['fitness_cpu_s']:.1f} s CPU in fitness calls)")
+    return "\n".join(lines)

@@ -18,6 +18,7 @@ Kinds (the paper's buffer ablation, all the same size M):
 from __future__ import annotations
 
 import torch
+from ..errors import InputError
 
 BUFFER_KINDS = ("experts", "centroid_random", "random")
 
@@ -27,11 +28,11 @@ def make_buffer(
 ) -> torch.Tensor:
     """(K, T) experts -> (K·(1+copies), T) float32 buffer, seeded (own torch.Generator)."""
     if experts_flat.dim() != 2 or experts_flat.shape[0] < 1:
-        raise ValueError(f"experts must be a (K, T) tensor, got shape {tuple(experts_flat.shape)}")
+        raise InputError(f"experts must be a (K, T) tensor, got shape {tuple(experts_flat.shape)}")
     if copies < 0 or sigma < 0:
-        raise ValueError(f"copies and sigma must be non-negative (got {copies}, {sigma})")
+        raise InputError(f"copies and sigma must be non-negative (got {copies}, {sigma})")
     if kind not in BUFFER_KINDS:
-        raise ValueError(f"unknown buffer kind {kind!r}; choose one of {', '.join(BUFFER_KINDS)}")
+        raise InputError(f"unknown buffer kind {kind!r}; choose one of {', '.join(BUFFER_KINDS)}")
     experts = experts_flat.detach().to(torch.float32)
     k, t = experts.shape
     n_extra = k * copies

@@ -14,6 +14,7 @@ import copy
 from ..data.dataset import EARTH, Dataset
 from ..models import SlipNet, build
 from ..models.train import EXPERT_EPOCHS, train_classifier
+from ..errors import InputError
 
 
 def expert_roles(dataset: Dataset) -> list[str]:
@@ -32,7 +33,7 @@ def train_experts(
     `device`: where they train (`train_classifier`).
     """
     if epochs < 1:
-        raise ValueError(f"epochs must be at least 1, got {epochs}")
+        raise InputError(f"epochs must be at least 1, got {epochs}")
     init = build(arch, seed=seed)
     experts: dict[str, SlipNet] = {}
     for i, role in enumerate(expert_roles(dataset)):

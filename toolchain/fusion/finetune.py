@@ -13,6 +13,7 @@ import numpy as np
 from ..models import SlipNet
 from ..models.train import EXPERT_BATCH, EXPERT_LR, train_classifier
 from .acomerge import AcoMergeConfig
+from ..errors import InputError
 
 FINETUNE_STEPS = AcoMergeConfig.generations  # same budget as AcoMerge's generations
 
@@ -32,9 +33,9 @@ def finetune(
     The input model is left untouched. Seeded (batch order and dropout masks).
     """
     if steps < 1:
-        raise ValueError(f"fine-tune steps must be at least 1, got {steps}")
+        raise InputError(f"fine-tune steps must be at least 1, got {steps}")
     if len(y) == 0:
-        raise ValueError("cannot fine-tune on an empty calibration set")
+        raise InputError("cannot fine-tune on an empty calibration set")
     tuned = copy.deepcopy(model)
     return train_classifier(tuned, x, y, epochs=None, steps=steps, lr=lr, batch_size=batch_size, seed=seed,
                             fused_adam=True, loss=loss)  # per-run work: the fast Adam (models/train.py, adam)

@@ -26,6 +26,7 @@ from ..data.contracts import N_CLASSES
 from ..models import batched_logits
 from ..models.mlp import LN_EPS, hidden_sizes, param_shapes
 from ..models.train import GCE_Q, LOSSES, class_weights
+from ..errors import InputError
 
 
 class _Clock(threading.local):
@@ -78,13 +79,13 @@ class CalibrationFitness:
         x = np.asarray(x, dtype=np.float32)
         y = np.asarray(y, dtype=np.int64)
         if x.ndim != 2 or x.shape[0] != y.shape[0] or x.shape[0] == 0:
-            raise ValueError(f"calibration set must be (N, 12) features with N labels, got {x.shape} and {y.shape}")
+            raise InputError(f"calibration set must be (N, 12) features with N labels, got {x.shape} and {y.shape}")
         if not np.isfinite(x).all():
-            raise ValueError("calibration features contain NaN or infinity")
+            raise InputError("calibration features contain NaN or infinity")
         if y.min() < 0 or y.max() >= N_CLASSES:
-            raise ValueError(f"calibration labels must be classes 0..{N_CLASSES - 1}, found {y.min()}..{y.max()}")
+            raise InputError(f"calibration labels must be classes 0..{N_CLASSES - 1}, found {y.min()}..{y.max()}")
         if loss not in LOSSES:
-            raise ValueError(f"unknown fitness loss {loss!r}; choose one of {', '.join(LOSSES)}")
+            raise InputError(f"unknown fitness loss {loss!r}; choose one of {', '.join(LOSSES)}")
         self.arch = arch
         self.chunk = chunk
         self.loss = loss  # 'ce', or 'gce' (bounded, for noisy labels: models/train.py, weighted_gce)

@@ -43,40 +43,15 @@ import torch
 import torch.nn.functional as F
 from tqdm.auto import tqdm
 
+from ..compute import device_label, resolve_device
 from ..data.contracts import N_CLASSES
-from ..errors import first_line
+from ..errors import InputError, first_line
 from ..models import batched_logits
 from ..models.train import class_weights
 from .acomerge import AcoMergeConfig, AcoMergeResult, _schedule, acomerge, checked_inputs, mmas_bounds, whale_update
 
-DEVICES = ("cpu", "cuda", "auto")
 RNGS = ("device", "host")  # where the search's random numbers are drawn, see `generators`
 HISTORY = ("best_so_far", "iteration_best", "tau_lowest", "tau_highest")  # per run and generation, on the device
-
-
-def resolve_device(name: str) -> torch.device:
-    """'cpu', 'cuda' (or 'cuda:N') or 'auto' -> a torch.device; a clear error where there is no GPU."""
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if name == "cpu":
-        return torch.device("cpu")
-    if name.startswith("cuda"):
-        if not torch.cuda.is_available():
-            build = "a CPU-only torch build" if torch.version.cuda is None else f"torch built for CUDA {torch.version.cuda}"
-            raise ValueError(f"--device {name}: no CUDA GPU is available here ({build}); use --device cpu or auto")
-        dev = torch.device(name)
-        if dev.index is not None and dev.index >= torch.cuda.device_count():
-            raise ValueError(f"--device {name}: this machine has {torch.cuda.device_count()} CUDA device(s)")
-        return dev
-    raise ValueError(f"unknown device {name!r}; choose one of {', '.join(DEVICES)}")
-
-
-def device_label(device: torch.device) -> str:
-    """A human name for progress bars and reports, e.g. 'cuda:0 (NVIDIA H100 80GB HBM3)'."""
-    if device.type == "cuda":
-        index = device.index if device.index is not None else torch.cuda.current_device()
-        return f"cuda:{index} ({torch.cuda.get_device_name(index)})"
-    return "cpu"
 
 
 def run_acomerge_many(
@@ -114,7 +89,7 @@ class StackedFitness:
     def __init__(self, arch: str, cal: Sequence[tuple[np.ndarray, np.ndarray]], device: torch.device | str = "cpu",
                  chunk: int = 0):
         if not cal:
-            raise ValueError("StackedFitness needs at least one calibration set")
+            raise InputError("StackedFitness needs at least one calibration set")
         self.arch, self.device = arch, torch.device(device)
         self.chunk = chunk  # candidates per forward pass (0: all of them at once)
         n = max(len(y) for _, y in cal)
@@ -124,9 +99,9 @@ class StackedFitness:
         for r, (x, y) in enumerate(cal):
             x, y = np.asarray(x, dtype=np.float32), np.asarray(y, dtype=np.int64)
             if x.ndim != 2 or len(x) != len(y) or len(y) == 0 or not np.isfinite(x).all():
-                raise ValueError(f"calibration set {r}: need finite (N, features) rows with N labels")
+                raise InputError(f"calibration set {r}: need finite (N, features) rows with N labels")
             if y.min() < 0 or y.max() >= N_CLASSES:
-                raise ValueError(f"calibration set {r}: labels must be classes 0..{N_CLASSES - 1}")
+                raise InputError(f"calibration set {r}: labels must be classes 0..{N_CLASSES - 1}")
             w = class_weights(y).numpy()[y]
             xs[r, : len(y)], ys[r, : len(y)], ws[r, : len(y)] = x, y, w / w.sum()
         self.x = torch.from_numpy(xs).to(self.device)  # (R, N, F)
@@ -262,7 +237,7 @@ def generators(seeds: Sequence[int], device: torch.device, rng: str = "device") 
     numbers (uploaded each generation) and differs from it by float rounding only.
     """
     if rng not in RNGS:
-        raise ValueError(f"rng must be one of {RNGS}, got {rng!r}")
+        raise InputError(f"rng must be one of {RNGS}, got {rng!r}")
     where = torch.device("cpu") if rng == "host" else device
     return [torch.Generator(device=where).manual_seed(s + 1_000_003) for s in seeds]
 
@@ -511,11 +486,11 @@ def search_lockstep(
     """
     config.validate()
     if "mmas" not in config.phases:
-        raise ValueError("the lockstep engine runs the MMAS phases; the IWOA-only ablation uses acomerge.search")
+        raise InputError("the lockstep engine runs the MMAS phases; the IWOA-only ablation uses acomerge.search")
     dev = torch.device(device)
     n_runs = len(seeds)
     if not (len(experts) == len(cands) == n_runs) or n_runs == 0:
-        raise ValueError("one expert set, one buffer and one seed per run are required")
+        raise InputError("one expert set, one buffer and one seed per run are required")
     ex = torch.stack([torch.as_tensor(e, dtype=torch.float32) for e in experts]).to(dev)  # (R, K, T)
     cand = torch.stack([torch.as_tensor(c, dtype=torch.float32) for c in cands]).to(dev)  # (R, M, T)
     gens = generators(seeds, dev, config.rng)

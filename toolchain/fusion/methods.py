@@ -18,6 +18,7 @@ from .label_audit import crossval_probabilities, flag_labels
 from .lockstep import run_acomerge_many
 from .registry import Budget, FusedModel, FusionInputs, register
 from .robust import fit_acomerge_robust_many
+from ..errors import InputError
 
 
 def make_run_buffer(aligned: torch.Tensor, kind: str, seed: int, sigma: float = Budget.sigma,
@@ -33,7 +34,7 @@ def fleet_ablation_buffer(method: str, aligned: torch.Tensor, seed: int, sigma: 
     its full size K·(1 + copies) (exactly 48 for three experts)."""
     n_all = aligned.shape[0]
     if n_all < 2:
-        raise ValueError(f"{method} needs the Earth expert and at least one fleet expert, got {n_all} expert(s)")
+        raise InputError(f"{method} needs the Earth expert and at least one fleet expert, got {n_all} expert(s)")
     kept = aligned[:1] if method == "acomerge-earth-only" else aligned[1:]
     kept_copies = max(0, round(n_all * (1 + copies) / kept.shape[0]) - 1)
     return kept, make_buffer(kept, copies=kept_copies, sigma=sigma, seed=seed)

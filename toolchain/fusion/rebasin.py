@@ -18,6 +18,7 @@ from scipy.optimize import linear_sum_assignment
 
 from ..models import SlipNet, flatten
 from ..models.mlp import hidden_sizes, param_shapes
+from ..errors import InputError
 
 MAX_SWEEPS = 100
 
@@ -31,7 +32,7 @@ def _split(arch: str, flat: torch.Tensor) -> list[np.ndarray]:
         out.append(v[offset : offset + n].reshape(shape))
         offset += n
     if offset != v.size:
-        raise ValueError(f"flat vector has {v.size} values, {arch} has {offset} parameters")
+        raise InputError(f"flat vector has {v.size} values, {arch} has {offset} parameters")
     return out
 
 
@@ -42,7 +43,7 @@ def permute_flat(arch: str, flat: torch.Tensor, perms: list[np.ndarray]) -> torc
     """
     hidden = hidden_sizes(arch)
     if len(perms) != len(hidden) or any(len(p) != h for p, h in zip(perms, hidden)):
-        raise ValueError(f"{arch} needs permutations of sizes {hidden}")
+        raise InputError(f"{arch} needs permutations of sizes {hidden}")
     params = _split(arch, flat)
     out = []
     prev = np.arange(params[0].shape[1])  # input features are never permuted
@@ -92,9 +93,9 @@ def align_to_reference(models: list[SlipNet], arch: str, reference: int = 0) -> 
     The reference comes back unchanged; every model computes the same function as before.
     """
     if not models:
-        raise ValueError("no models to align")
+        raise InputError("no models to align")
     if not 0 <= reference < len(models):
-        raise ValueError(f"reference index {reference} out of range for {len(models)} models")
+        raise InputError(f"reference index {reference} out of range for {len(models)} models")
     flats = [flatten(m) for m in models]
     ref = flats[reference]
     return [

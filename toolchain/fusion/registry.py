@@ -18,6 +18,7 @@ import torch
 from ..models import SlipNet, build, load_flat
 from ..models.train import EXPERT_LR
 from .acomerge import AcoMergeConfig
+from ..errors import InputError
 
 _ACO = AcoMergeConfig()
 
@@ -95,9 +96,9 @@ def register(name: str, fit: FitFunction, label: str | None = None, group: str =
              needs_joint: bool = False, fit_many: FitManyFunction | None = None) -> MethodSpec:
     """Add a method under `name` (lower-case, no commas or spaces); names are unique."""
     if not name or name != name.strip().lower() or any(c in name for c in ", "):
-        raise ValueError(f"method name {name!r}: use lower-case letters, digits and dashes")
+        raise InputError(f"method name {name!r}: use lower-case letters, digits and dashes")
     if name in _REGISTRY and _REGISTRY[name].fit is not fit:
-        raise ValueError(f"fusion method {name!r} is registered already")
+        raise InputError(f"fusion method {name!r} is registered already")
     spec = MethodSpec(name, fit, label or name, group, needs_joint, fit_many)
     _REGISTRY[name] = spec
     return spec
@@ -110,7 +111,7 @@ def unregister(name: str) -> None:
 
 def get(name: str) -> MethodSpec:
     if name not in _REGISTRY:
-        raise ValueError(f"unknown fusion method {name!r}; choose from {', '.join(selectable())}")
+        raise InputError(f"unknown fusion method {name!r}; choose from {', '.join(selectable())}")
     return _REGISTRY[name]
 
 
@@ -137,7 +138,7 @@ def fit_many(name: str, inputs: list[FusionInputs]) -> list[FusedModel]:
     """Run method `name` on several draws: batched where it registered `fit_many`, else one by one."""
     spec = get(name)
     if spec.needs_joint and any(i.joint is None for i in inputs):
-        raise ValueError(f"{name} needs the joint model, which was not trained")
+        raise InputError(f"{name} needs the joint model, which was not trained")
     return spec.fit_many(inputs) if spec.fit_many else [spec.fit(i) for i in inputs]
 
 
@@ -145,5 +146,5 @@ def fit(name: str, inputs: FusionInputs) -> FusedModel:
     """Run method `name` on `inputs`."""
     spec = get(name)
     if spec.needs_joint and inputs.joint is None:
-        raise ValueError(f"{name} needs the joint model, which was not trained")
+        raise InputError(f"{name} needs the joint model, which was not trained")
     return spec.fit(inputs)

@@ -13,6 +13,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from ..data.contracts import N_CLASSES, N_FEATURES
+from ..errors import InputError
 
 ARCHS: dict[str, tuple[int, ...]] = {"sn-s": (30,), "sn-d": (128, 64, 32)}
 # Any other architecture is written as its hidden sizes, "64,32". The caps are those of the
@@ -56,9 +57,9 @@ def hidden_sizes(arch: str) -> tuple[int, ...]:
     except ValueError:
         sizes = ()
     if not sizes:
-        raise ValueError(f"unknown architecture {arch!r}: give {' or '.join(ARCHS)}, or hidden sizes such as 64,32")
+        raise InputError(f"unknown architecture {arch!r}: give {' or '.join(ARCHS)}, or hidden sizes such as 64,32")
     if len(sizes) > MAX_HIDDEN_LAYERS or any(not MIN_UNITS <= h <= MAX_UNITS for h in sizes):
-        raise ValueError(f"architecture {arch!r}: 1 to {MAX_HIDDEN_LAYERS} hidden layers of "
+        raise InputError(f"architecture {arch!r}: 1 to {MAX_HIDDEN_LAYERS} hidden layers of "
                          f"{MIN_UNITS} to {MAX_UNITS} units are supported")
     return sizes
 
@@ -110,7 +111,7 @@ def load_flat(model: SlipNet, vec: torch.Tensor) -> SlipNet:
     vec = torch.as_tensor(vec)
     total = sum(p.numel() for p in model.parameters())
     if vec.numel() != total:
-        raise ValueError(f"flat vector has {vec.numel()} values, model has {total} parameters")
+        raise InputError(f"flat vector has {vec.numel()} values, model has {total} parameters")
     offset = 0
     with torch.no_grad():
         for p in model.parameters():

@@ -9,7 +9,7 @@ from typing import Any
 import torch
 
 from ..data.contracts import FEATURE_NAMES
-from ..errors import first_line
+from ..errors import InputError, first_line
 from .mlp import arch_of, build
 
 FORMAT = "fleetlab-model/1"
@@ -40,30 +40,30 @@ def load_model(path: Path | str):
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except OSError as e:
-        raise ValueError(f"{path}: cannot read model file ({e.strerror or type(e).__name__})") from None
+        raise InputError(f"{path}: cannot read model file ({e.strerror or type(e).__name__})") from None
     except pickle.UnpicklingError:
         # torch's own text here advises weights_only=False, i.e. running the file's code: not for a model
-        raise ValueError(f"{path}: cannot read model file (not a torch checkpoint of tensors and plain values: "
+        raise InputError(f"{path}: cannot read model file (not a torch checkpoint of tensors and plain values: "
                          "damaged, or another format)") from None
     except EOFError:
-        raise ValueError(f"{path}: cannot read model file (empty or cut short)") from None
+        raise InputError(f"{path}: cannot read model file (empty or cut short)") from None
     except Exception as e:  # torch raises many types for a damaged file (its zip reader's, ...)
-        raise ValueError(f"{path}: cannot read model file ({type(e).__name__}: {first_line(e)})") from None
+        raise InputError(f"{path}: cannot read model file ({type(e).__name__}: {first_line(e)})") from None
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
-        raise ValueError(f"{path}: not a fleetlab model file (expected format {FORMAT})")
+        raise InputError(f"{path}: not a fleetlab model file (expected format {FORMAT})")
     fields = {"arch": str, "feature_names": (list, tuple), "state_dict": dict, "meta": dict}
     bad = [name for name, kind in fields.items() if not isinstance(payload.get(name), kind)]
     if bad:
-        raise ValueError(f"{path}: damaged fleetlab model file (missing or wrong fields: {', '.join(bad)})")
+        raise InputError(f"{path}: damaged fleetlab model file (missing or wrong fields: {', '.join(bad)})")
     if tuple(payload["feature_names"]) != FEATURE_NAMES:
-        raise ValueError(f"{path}: model expects a different feature order: {payload['feature_names']}")
+        raise InputError(f"{path}: model expects a different feature order: {payload['feature_names']}")
     try:
         model = build(payload["arch"])
     except ValueError as e:  # an architecture name this version does not know (an edit, or a newer fleetlab)
-        raise ValueError(f"{path}: fleetlab model of an architecture this version cannot build ({e})") from None
+        raise InputError(f"{path}: fleetlab model of an architecture this version cannot build ({e})") from None
     problem = _weights_problem(payload["state_dict"], model.state_dict(), payload["arch"])
     if problem:
-        raise ValueError(f"{path}: damaged fleetlab model file ({problem})")
+        raise InputError(f"{path}: damaged fleetlab model file ({problem})")
     model.load_state_dict(payload["state_dict"])
     model.eval()
     meta = dict(payload["meta"], arch=payload["arch"])

@@ -8,6 +8,7 @@ from torch.nn import functional as F
 from tqdm.auto import tqdm
 
 from ..data.contracts import N_CLASSES
+from ..errors import InputError
 
 # Expert training hyper-parameters (paper's reference setup).
 EXPERT_LR = 0.0035
@@ -63,7 +64,7 @@ def weighted_loss(name: str, logits: torch.Tensor, y: torch.Tensor, weights: tor
         return weighted_gce(logits, y, weights)
     if name == "ce":
         return weighted_ce(logits, y, weights)
-    raise ValueError(f"unknown loss {name!r}; choose one of {', '.join(LOSSES)}")
+    raise InputError(f"unknown loss {name!r}; choose one of {', '.join(LOSSES)}")
 
 
 def train_classifier(
@@ -100,7 +101,7 @@ def train_classifier(
     per_epoch = (n + batch_size - 1) // batch_size
     total = steps if steps is not None else epochs * per_epoch
     if loss not in LOSSES or (loss != "ce" and device != "cpu"):
-        raise ValueError(f"loss {loss!r}: one of {', '.join(LOSSES)}, and only 'ce' on a GPU")
+        raise InputError(f"loss {loss!r}: one of {', '.join(LOSSES)}, and only 'ce' on a GPU")
     model.train()
     gpu = None if device == "cpu" else torch.device(device)
     forked = None if gpu is None else [gpu.index if gpu.index is not None else torch.cuda.current_device()]

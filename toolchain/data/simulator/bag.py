@@ -25,6 +25,7 @@ from ..log_import import gravity_body
 from ..rover_profile import IMU, JOINT_STATE, ODOMETRY, POSE_STAMPED
 from .engine import Trace
 from .rovers import GRAVITY_EARTH, ROVERS
+from ...errors import InputError
 
 TOPICS = {
     "wheels": ("/joint_states", JOINT_STATE),
@@ -112,7 +113,7 @@ def write_traverse_bag(path: Path, trace: Trace, rover: str, gravity: float, sto
     from rosbags.typesys import Stores, get_typestore
 
     if storage not in STORAGES:
-        raise ValueError(f"bag storage must be one of {', '.join(STORAGES)}, got {storage!r}")
+        raise InputError(f"bag storage must be one of {', '.join(STORAGES)}, got {storage!r}")
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types
     Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]

@@ -52,6 +52,7 @@ from .driver import Commands, drive_commands
 from .rovers import GRAVITY_EARTH, ROVERS, Rover
 from .terrain import TERRAINS, SoilBlend, TerrainField, TerrainSpec
 from .terramechanics import solve_slip
+from ...errors import InputError
 
 PHYSICS_HZ = 25.0  # rate of the traction solve
 # A driver who sees the rover dig in (slip above STUCK_SLIP for STUCK_S) turns
@@ -111,16 +112,16 @@ class TraverseSpec:
              seed: int) -> "TraverseSpec":
         if isinstance(rover, str):
             if rover not in ROVERS:
-                raise ValueError(f"unknown rover {rover!r} (known: {', '.join(ROVERS)})")
+                raise InputError(f"unknown rover {rover!r} (known: {', '.join(ROVERS)})")
             rover = ROVERS[rover]
         if isinstance(terrain, str):
             if terrain not in TERRAINS:
-                raise ValueError(f"unknown terrain {terrain!r} (known: {', '.join(TERRAINS)})")
+                raise InputError(f"unknown terrain {terrain!r} (known: {', '.join(TERRAINS)})")
             terrain = TERRAINS[terrain]
         if not (0.0 < gravity < 100.0):
-            raise ValueError(f"gravity must be in (0, 100) m/s^2, got {gravity}")
+            raise InputError(f"gravity must be in (0, 100) m/s^2, got {gravity}")
         if not duration_s > 0:
-            raise ValueError(f"duration must be positive, got {duration_s} s")
+            raise InputError(f"duration must be positive, got {duration_s} s")
         return cls(rover, terrain, float(gravity), float(duration_s), int(seed))
 
 
@@ -183,9 +184,9 @@ def simulate_batch(specs: list[TraverseSpec], rate_hz: float = DEFAULT_RATE_HZ, 
     if not specs:
         return []
     if not rate_hz > 0:
-        raise ValueError(f"rate must be positive, got {rate_hz} Hz")
+        raise InputError(f"rate must be positive, got {rate_hz} Hz")
     if accel not in ACCEL_CONVENTIONS:
-        raise ValueError(f"unknown acceleration convention {accel!r}; choose one of {', '.join(ACCEL_CONVENTIONS)}")
+        raise InputError(f"unknown acceleration convention {accel!r}; choose one of {', '.join(ACCEL_CONVENTIONS)}")
     dt = 1.0 / rate_hz
     lengths = [max(1, int(round(s.duration_s * rate_hz))) for s in specs]
     n = max(lengths)

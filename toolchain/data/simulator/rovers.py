@@ -10,6 +10,7 @@ explicitly steered wheels turn almost for free.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from ...errors import InputError
 
 GRAVITY_EARTH = 9.81  # m/s^2
 GRAVITY_MOON = 1.62  # m/s^2
@@ -36,11 +37,11 @@ class Rover:
 
     def __post_init__(self) -> None:
         if self.steering not in ("skid", "explicit"):
-            raise ValueError(f"rover {self.name}: steering must be 'skid' or 'explicit', not {self.steering!r}")
+            raise InputError(f"rover {self.name}: steering must be 'skid' or 'explicit', not {self.steering!r}")
         if min(self.mass_kg, self.wheel_radius_m, self.wheel_width_m, self.wheelbase_m, self.track_m) <= 0:
-            raise ValueError(f"rover {self.name}: mass and dimensions must be positive")
+            raise InputError(f"rover {self.name}: mass and dimensions must be positive")
         if self.n_wheels < 3:
-            raise ValueError(f"rover {self.name}: needs at least 3 wheels, has {self.n_wheels}")
+            raise InputError(f"rover {self.name}: needs at least 3 wheels, has {self.n_wheels}")
 
     @property
     def turn_drag(self) -> float:

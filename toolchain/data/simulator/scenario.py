@@ -32,6 +32,7 @@ from ..label_noise import VO_LABEL_COLUMNS, vo_labels
 from .engine import ACCEL_LINEAR, Trace, TraverseSpec, simulate_batch
 from .rovers import GRAVITY_EARTH, GRAVITY_MOON, ROVERS
 from .terrain import TERRAINS
+from ...errors import InputError
 
 GENERATOR = "fleetlab.data.simulator/1"
 
@@ -72,9 +73,9 @@ def scenario_groups(fleet: tuple[str, ...] | None = None) -> list[tuple[int, Tra
     fleet = DEFAULT_FLEET if fleet is None else tuple(fleet)
     unknown = [r for r in fleet if r not in ROVERS]
     if unknown or not fleet:
-        raise ValueError(f"fleet rovers must be one or more of {', '.join(ROVERS)}; got {', '.join(fleet) or 'none'}")
+        raise InputError(f"fleet rovers must be one or more of {', '.join(ROVERS)}; got {', '.join(fleet) or 'none'}")
     if len(set(fleet)) != len(fleet):
-        raise ValueError(f"each fleet rover may appear once (one role per rover), got {', '.join(fleet)}")
+        raise InputError(f"each fleet rover may appear once (one role per rover), got {', '.join(fleet)}")
     template = next(g for g in SCENARIO if g.role.startswith(FLEET_PREFIX))
     fixed = [(gi, g) for gi, g in enumerate(SCENARIO) if not g.role.startswith(FLEET_PREFIX)]
     free_ids = [gi for gi, g in enumerate(SCENARIO) if g.role.startswith(FLEET_PREFIX)]
@@ -86,7 +87,7 @@ def scenario_groups(fleet: tuple[str, ...] | None = None) -> list[tuple[int, Tra
 def scenario_specs(seed: int, scale: float = 1.0, fleet: tuple[str, ...] | None = None) -> list[tuple[str, str, TraverseSpec]]:
     """(role, file stem, spec) of every traverse; `scale` shrinks the number and length of traverses."""
     if not (0.0 < scale <= 10.0):
-        raise ValueError(f"scale must be in (0, 10], got {scale}")
+        raise InputError(f"scale must be in (0, 10], got {scale}")
     out = []
     for gi, grp in scenario_groups(fleet):
         n = max(2, round(grp.n_traverses * math.sqrt(scale)))
@@ -124,7 +125,7 @@ def write_scenario(out_dir: Path | str, seed: int, scale: float = 1.0, rate_hz: 
     slip and class as a rover's visual odometry would measure them (`label_noise.vo_labels`), next to the true ones.
     """
     if labels not in LABEL_SOURCES:
-        raise ValueError(f"labels {labels!r}: one of {', '.join(LABEL_SOURCES)}")
+        raise InputError(f"labels {labels!r}: one of {', '.join(LABEL_SOURCES)}")
     WindowSpec.for_rate(rate_hz)  # refuse a rate too low for 2 s windows before simulating
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

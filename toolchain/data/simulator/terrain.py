@@ -16,6 +16,7 @@ import numpy as np
 from scipy.stats import norm
 
 from .terramechanics import SOILS, Soil
+from ...errors import InputError
 
 N_HEIGHT_MODES = 24
 N_PATCH_MODES = 10
@@ -38,11 +39,11 @@ class TerrainSpec:
     def __post_init__(self) -> None:
         for key in (self.soil_a, self.soil_b):
             if key not in SOILS:
-                raise ValueError(f"terrain {self.name}: unknown soil {key!r} (known: {', '.join(SOILS)})")
+                raise InputError(f"terrain {self.name}: unknown soil {key!r} (known: {', '.join(SOILS)})")
         if not 0.0 <= self.patch_fraction <= 1.0:
-            raise ValueError(f"terrain {self.name}: patch_fraction must be in [0, 1]")
+            raise InputError(f"terrain {self.name}: patch_fraction must be in [0, 1]")
         if not 0.0 <= self.slope_rms_deg < 45.0:
-            raise ValueError(f"terrain {self.name}: slope_rms_deg must be in [0, 45)")
+            raise InputError(f"terrain {self.name}: slope_rms_deg must be in [0, 45)")
 
     @property
     def soils(self) -> tuple[Soil, Soil]:

@@ -16,6 +16,7 @@ import torch
 
 from ...models.train import adam, class_weights
 from .common import BUDGET_STEPS, as_tensor_xy, merge_base, tensor_slices, weighted_ce_many
+from ...errors import InputError
 
 ADAMERGING_LR = 0.01
 ADAMERGING_INIT = 0.3
@@ -47,7 +48,7 @@ def adamerging(
     base, tau = merge_base(aligned)
     index = tensor_index(arch)
     if index.numel() != base.numel():
-        raise ValueError(f"experts have {base.numel()} parameters, {arch} has {index.numel()}")
+        raise InputError(f"experts have {base.numel()} parameters, {arch} has {index.numel()}")
     xt, yt = as_tensor_xy(x_cal, y_cal)
     w = class_weights(y_cal)
     coef = torch.full((tau.shape[0], int(index.max()) + 1), float(init), requires_grad=True)

@@ -13,17 +13,18 @@ import torch
 from ...models import SlipNet, batched_logits, build, load_flat
 from ...models.mlp import param_shapes
 from ..acomerge import AcoMergeConfig
+from ...errors import InputError
 
 BUDGET_STEPS = AcoMergeConfig.generations  # the paper's shared budget of optimisation steps
 
 
 def as_tensor_xy(x: np.ndarray, y: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
     if len(y) == 0:
-        raise ValueError("the calibration set is empty")
+        raise InputError("the calibration set is empty")
     xt = torch.as_tensor(np.asarray(x, dtype=np.float32))
     yt = torch.as_tensor(np.asarray(y, dtype=np.int64))
     if xt.ndim != 2 or xt.shape[0] != yt.shape[0]:
-        raise ValueError(f"calibration features {tuple(xt.shape)} do not match {tuple(yt.shape)} labels")
+        raise InputError(f"calibration features {tuple(xt.shape)} do not match {tuple(yt.shape)} labels")
     return xt, yt
 
 
@@ -81,5 +82,5 @@ def merge_base(aligned: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """
     aligned = torch.as_tensor(aligned, dtype=torch.float32)
     if aligned.ndim != 2 or aligned.shape[0] < 2:
-        raise ValueError(f"need at least two aligned experts as a (K, T) tensor, got shape {tuple(aligned.shape)}")
+        raise InputError(f"need at least two aligned experts as a (K, T) tensor, got shape {tuple(aligned.shape)}")
     return aligned[0], aligned[1:] - aligned[0]

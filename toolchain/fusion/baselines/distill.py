@@ -19,6 +19,7 @@ from torch.nn import functional as F
 from ...models import SlipNet, batched_logits, build
 from ...models.train import EXPERT_BATCH, adam, class_weights
 from .common import BUDGET_STEPS, as_tensor_xy
+from ...errors import InputError
 
 DISTILL_LR = 0.01
 TEMPERATURE = 2.0
@@ -44,7 +45,7 @@ def distill(
 ) -> SlipNet:
     """A student (init from `seed`) distilled from the teachers' flats (K, T) on D_Cal."""
     if not 0.0 <= alpha <= 1.0 or temperature <= 0:
-        raise ValueError(f"need 0 <= alpha <= 1 and temperature > 0, got alpha={alpha}, T={temperature}")
+        raise InputError(f"need 0 <= alpha <= 1 and temperature > 0, got alpha={alpha}, T={temperature}")
     teachers = torch.stack(list(teachers)) if not torch.is_tensor(teachers) else teachers
     xt, yt = as_tensor_xy(x_cal, y_cal)
     soft = teacher_distribution(arch, teachers.float(), xt, temperature)

@@ -19,6 +19,7 @@ import torch
 
 from .common import BUDGET_STEPS, cal_objective, layer_slices, merge_base
 from .dare_ties import dare_ties_merge
+from ...errors import InputError
 
 WEIGHT_BOUNDS = (0.0, 1.5)
 DENSITY_BOUNDS = (0.05, 1.0)
@@ -39,7 +40,7 @@ def evomerge(
     base, tau = merge_base(aligned)
     n_k, n_l = tau.shape[0], len(layer_slices(arch))
     if layer_slices(arch)[-1].stop != base.numel():
-        raise ValueError(f"experts have {base.numel()} parameters, not an {arch} model")
+        raise InputError(f"experts have {base.numel()} parameters, not an {arch} model")
     u = torch.rand(tau.shape, generator=torch.Generator().manual_seed(seed))
     loss = cal_objective(arch, x_cal, y_cal)
     dim = n_k * n_l

@@ -24,6 +24,7 @@ import torch
 from ..acomerge import AcoMergeConfig
 from ..buffer import make_buffer
 from .common import BUDGET_STEPS, cal_objective
+from ...errors import InputError
 
 # AcoMerge's buffer: each expert plus 15 copies with Gaussian noise of sigma 0.05 (paper).
 BUFFER_COPIES = AcoMergeConfig.copies
@@ -48,7 +49,7 @@ def pso(
     cfg = config or SwarmConfig()
     x = torch.as_tensor(buffer, dtype=torch.float32).clone()
     if x.ndim != 2 or x.shape[0] < 2:
-        raise ValueError(f"a swarm needs a (M>=2, T) buffer, got shape {tuple(x.shape)}")
+        raise InputError(f"a swarm needs a (M>=2, T) buffer, got shape {tuple(x.shape)}")
     m = x.shape[0]
     gen = torch.Generator().manual_seed(seed)
     loss = cal_objective(arch, x_cal, y_cal)

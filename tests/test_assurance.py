@@ -94,13 +94,13 @@ def test_misra_checker_finds_a_stale_record_in_the_library_only(tmp_path, misra_
     from fleetlab.assurance import misra
 
     text = misra.deviations_file().read_text()
-    row = "| 20.7 | firmware_c/src/slipest_infer_q.c | "
+    row = "| 20.7 | firmware_c/src/slipest_infer_table_q.c | "
     start = text.index(row) + len(row)
     count = int(text[start:text.index(" ", start)])
     record = tmp_path / "MISRA_DEVIATIONS.md"
     record.write_text(text.replace(f"{row}{count} ", f"{row}{count + 1} "))
     res = misra.compare(misra_findings[0], record)
-    assert [(r, f, n, rec) for r, f, n, rec in res.stale] == [("20.7", "firmware_c/src/slipest_infer_q.c", count, count + 1)]
+    assert [(r, f, n, rec) for r, f, n, rec in res.stale] == [("20.7", "firmware_c/src/slipest_infer_table_q.c", count, count + 1)]
     assert res.recorded[("2.3", "bundle/slipest_model_q.h")] > res.findings[("2.3", "bundle/slipest_model_q.h")]
 
 

@@ -10,6 +10,10 @@
 /* v as 4 little-endian bytes at p. */
 void image_edit_put_le32(uint8_t *p, uint32_t v);
 
+/* The model image at path read into buf (cap bytes at most): its length, or 0 (said on stderr) when it cannot
+ * be read. The C tests' one way to take the bundle's model.img. */
+size_t image_edit_load(const char *path, uint8_t *buf, size_t cap);
+
 /* The CRC-32 of the body (header + payload: the first body bytes) written where the trailer starts. */
 void image_edit_reseal(uint8_t *img, size_t body);
 

@@ -16,15 +16,12 @@
 #include "ram_nvm.h"
 
 #define ID 5u
+#include "co_harness.h"
 #define SECTOR 256u
 
 static uint8_t mem[SLIPEST_STORE_NVM_SECTORS(SECTOR) * SECTOR];
 static ram_nvm_t ram;
 static slipest_store_t store;
-static slipest_co_t co;
-static slipest_frame_t out[SLIPEST_CO_MAX_OUT];
-static int n;
-static uint32_t now;
 static uint8_t img[SLIPEST_IMAGE_MAX_SIZE];
 static size_t img_len;
 /* block() and segmented() download into the CiA 302-3 program data 0x1F50 sub 1, after a clear (0x1F51 = 3) unless
@@ -32,23 +29,6 @@ static size_t img_len;
 #define IMG_INDEX 0x1F50u
 #define IMG_SUB 1u
 static int no_clear;
-
-static void send(uint32_t id, uint8_t dlc, const uint8_t *d)
-{
-    slipest_frame_t f;
-    f.id = id;
-    f.dlc = dlc;
-    memset(f.data, 0, 8);
-    if (dlc > 0u) memcpy(f.data, d, dlc);
-    n = slipest_co_handle(&co, &f, now, out, SLIPEST_CO_MAX_OUT);
-}
-
-static void sdo8(uint8_t b0, uint16_t index, uint8_t sub, uint32_t v)
-{
-    uint8_t d[8] = {b0, (uint8_t)index, (uint8_t)(index >> 8), sub, (uint8_t)v, (uint8_t)(v >> 8), (uint8_t)(v >> 16),
-                    (uint8_t)(v >> 24)};
-    send(0x600u + ID, 8u, d);
-}
 
 static uint32_t le32(const uint8_t *p) { return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24; }
 
@@ -507,11 +487,9 @@ int main(void)
     ram_nvm_init(&ram, mem, SECTOR, SLIPEST_STORE_NVM_SECTORS(SECTOR), &nvm);
     uint32_t code, v;
     uint8_t bad[SLIPEST_IMAGE_MAX_SIZE];
-    FILE *fp = fopen(SLIPEST_TEST_IMAGE, "rb");
-    CHECK(fp != NULL);
-    if (fp == NULL) CHECK_DONE();
-    img_len = fread(img, 1, sizeof img, fp);
-    fclose(fp);
+    img_len = image_edit_load(SLIPEST_TEST_IMAGE, img, sizeof img);
+    CHECK(img_len > 0u);
+    if (img_len == 0u) CHECK_DONE();
     put_version(img, 3u); /* newer than the built-in model */
     image_edit_reseal(img, img_len - SLIPEST_IMAGE_TRAILER_SIZE);
     memset(mem, 0xFF, sizeof mem);
@@ -709,18 +687,8 @@ int main(void)
     image_edit_reseal(bad, img_len - SLIPEST_IMAGE_TRAILER_SIZE);
     {
         /* a whole image, then an end request with the wrong count of unused bytes, then a bad command */
-        size_t off = 0;
-        unsigned seq = 0;
         open_image(0xC6u, (uint32_t)img_len);
-        while (off < img_len) {
-            uint8_t d[8] = {0};
-            size_t k = img_len - off < 7u ? img_len - off : 7u;
-            seq = seq % SLIPEST_CO_BLKSIZE + 1u;
-            d[0] = (uint8_t)(seq | (off + k >= img_len ? 0x80u : 0u));
-            memcpy(&d[1], bad + off, k);
-            send(0x600u + ID, 8u, d);
-            off += k;
-        }
+        CHECK(block_segments(bad, img_len) == 0);
         sdo8(0xC3u, 0u, 0u, 0u);
         CHECK(aborted() == SLIPEST_CO_ABORT_COMMAND);
         CHECK(block(bad, img_len, (uint32_t)img_len, 0u, 0) == 0u && clear() == 0u);

@@ -16,6 +16,7 @@
 #include "slipest_store.h"
 
 #define ID 5u
+#include "co_harness.h"
 #define SECTOR 256u
 #define SDO_TX (0x580u + ID) /* the node's SDO answers */
 #define SDO_RX (0x600u + ID)
@@ -24,29 +25,8 @@ static uint8_t mem[SLIPEST_STORE_NVM_SECTORS(SECTOR) * SECTOR];
 static ram_nvm_t ram;
 static slipest_nvm_t nvm;
 static slipest_store_t store;
-static slipest_co_t co;
-static slipest_frame_t out[SLIPEST_CO_MAX_OUT];
-static int n;
-static uint32_t now;
 static uint8_t base[SLIPEST_IMAGE_MAX_SIZE];
 static size_t base_len;
-
-static void send(uint32_t id, uint8_t dlc, const uint8_t *d)
-{
-    slipest_frame_t f;
-    f.id = id;
-    f.dlc = dlc;
-    memset(f.data, 0, 8);
-    if (dlc > 0u) memcpy(f.data, d, dlc);
-    n = slipest_co_handle(&co, &f, now, out, SLIPEST_CO_MAX_OUT);
-}
-
-static void sdo8(uint8_t b0, uint16_t index, uint8_t sub, uint32_t v)
-{
-    uint8_t d[8] = {b0, (uint8_t)index, (uint8_t)(index >> 8), sub, (uint8_t)v, (uint8_t)(v >> 8), (uint8_t)(v >> 16),
-                    (uint8_t)(v >> 24)};
-    send(SDO_RX, 8u, d);
-}
 
 static uint32_t le32(const uint8_t *p)
 {
@@ -104,22 +84,11 @@ static size_t make_image(uint8_t *img, uint32_t v)
  * Returns the first abort code, 0 when the end was acknowledged. */
 static uint32_t block_down(uint8_t b0, const uint8_t *data, size_t len, uint16_t crc_xor)
 {
-    size_t off = 0;
-    unsigned seq = 0;
     uint16_t crc = (uint16_t)(co_client_crc16(0u, data, len) ^ crc_xor);
     CHECK(prog(SLIPEST_CO_PROG_CLEAR) == 0u);
     sdo8(b0, 0x1F50u, 1u, (uint32_t)len);
     if (aborted() != 0u) return aborted();
-    while (off < len) {
-        uint8_t d[8] = {0};
-        size_t k = len - off < 7u ? len - off : 7u;
-        seq = seq % SLIPEST_CO_BLKSIZE + 1u;
-        d[0] = (uint8_t)(seq | (off + k >= len ? 0x80u : 0u));
-        memcpy(&d[1], data + off, k);
-        send(SDO_RX, 8u, d);
-        if (aborted() != 0u) return aborted();
-        off += k;
-    }
+    if (block_segments(data, len) != 0) return aborted();
     {
         uint8_t d[8] = {0};
         size_t last = len % 7u == 0u ? 7u : len % 7u;
@@ -459,14 +428,7 @@ static void test_download_errors(void)
     /* a whole image, then an end whose unused-byte count disagrees with the size */
     CHECK(prog(SLIPEST_CO_PROG_CLEAR) == 0u);
     sdo8(0xC6u, 0x1F50u, 1u, (uint32_t)len);
-    for (off = 0u, seq = 0u; off < len; off += 7u) {
-        uint8_t d[8] = {0};
-        size_t k = len - off < 7u ? len - off : 7u;
-        seq = seq % SLIPEST_CO_BLKSIZE + 1u;
-        d[0] = (uint8_t)(seq | (off + k >= len ? 0x80u : 0u));
-        memcpy(&d[1], img + off, k);
-        send(SDO_RX, 8u, d);
-    }
+    CHECK(block_segments(img, len) == 0);
     sdo8((uint8_t)(0xC1u | ((len % 7u == 0u ? 1u : 0u) << 2)), 0u, 0u, 0u); /* 7 unused where 7 - len % 7 are */
     CHECK(aborted() == SLIPEST_CO_ABORT_LENGTH);
     /* a size that is a multiple of 7 ends with no unused bytes: 1 is refused */
@@ -559,13 +521,8 @@ static void test_download_interrupted_by_another_request(void)
 
 int main(void)
 {
-    FILE *fp = fopen(SLIPEST_TEST_IMAGE, "rb");
-    if (fp == NULL) {
-        fprintf(stderr, "cannot open %s\n", SLIPEST_TEST_IMAGE);
-        return 1;
-    }
-    base_len = fread(base, 1, sizeof base, fp);
-    fclose(fp);
+    base_len = image_edit_load(SLIPEST_TEST_IMAGE, base, sizeof base);
+    if (base_len == 0u) return 1;
     test_block_upload();
     test_block_upload_errors();
     test_segmented_upload();

@@ -12,15 +12,9 @@
 #include "store_upload.h"
 #include "slipest_store.h"
 
-#define SECTOR 128u
-#define N_SECT (SLIPEST_STORE_NVM_SECTORS(SECTOR))
+#include "store_harness.h"
 
-static uint8_t mem[N_SECT * SECTOR];
-static ram_nvm_t ram;
-static slipest_nvm_t nvm;
-static slipest_store_t st;
-static uint8_t base_img[SLIPEST_IMAGE_MAX_SIZE];
-static size_t base_len;
+
 static const uint8_t key[32] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16,
                                 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31, 32};
 static const uint8_t other_key[32] = {9};
@@ -434,13 +428,8 @@ static void test_arguments(void)
 
 int main(void)
 {
-    FILE *fp = fopen(SLIPEST_TEST_IMAGE, "rb");
-    if (fp == NULL) {
-        fprintf(stderr, "cannot open %s\n", SLIPEST_TEST_IMAGE);
-        return 1;
-    }
-    base_len = fread(base_img, 1, sizeof base_img, fp);
-    fclose(fp);
+    base_len = image_edit_load(SLIPEST_TEST_IMAGE, base_img, sizeof base_img);
+    if (base_len == 0u) return 1;
     ram_nvm_init(&ram, mem, SECTOR, N_SECT, &nvm);
     printf("sizeof(slipest_store_t) = %u bytes\n", (unsigned)sizeof(slipest_store_t));
     test_boot_upload_activate_rollback();

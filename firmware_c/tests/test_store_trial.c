@@ -12,18 +12,12 @@
 #include "slipest_image.h"
 #include "slipest_store.h"
 
-#define SECTOR 128u
-#define N_SECT (SLIPEST_STORE_NVM_SECTORS(SECTOR))
+#include "store_harness.h"
+
 #define SLOT1 ((2u + SLIPEST_STORE_SLOT_SECTORS(SECTOR)) * SECTOR) /* byte address of slot 1 */
 #define SLOT0 (2u * SECTOR)
 #define REC_CRC_AT (SLIPEST_STORE_RECORD_SIZE - 4u) /* the record CRC covers the bytes before it */
 
-static uint8_t mem[N_SECT * SECTOR];
-static ram_nvm_t ram;
-static slipest_nvm_t nvm;
-static slipest_store_t st;
-static uint8_t base_img[SLIPEST_IMAGE_MAX_SIZE];
-static size_t base_len;
 
 /* a copy of the base image with model version v, its CRC redone (the base image carries no tag) */
 static size_t make_image(uint8_t *out, uint32_t v)
@@ -293,13 +287,8 @@ static void test_arguments(void)
 
 int main(void)
 {
-    FILE *fp = fopen(SLIPEST_TEST_IMAGE, "rb");
-    if (fp == NULL) {
-        fprintf(stderr, "cannot open %s\n", SLIPEST_TEST_IMAGE);
-        return 1;
-    }
-    base_len = fread(base_img, 1, sizeof base_img, fp);
-    fclose(fp);
+    base_len = image_edit_load(SLIPEST_TEST_IMAGE, base_img, sizeof base_img);
+    if (base_len == 0u) return 1;
     test_first_model_on_trial();
     test_confirm_and_revert();
     test_revert_failures();

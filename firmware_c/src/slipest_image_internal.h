@@ -55,10 +55,6 @@ SLIPEST_IMAGE_INTERNAL slipest_status_t slipest_image_stream_seal(const slipest_
 SLIPEST_IMAGE_INTERNAL slipest_status_t slipest_image_stream_model(const slipest_image_stream_t *w,
                                                                    slipest_model_q_t *q, slipest_model_f32_t *mf);
 
-/* A uint32 from its 4 little-endian bytes at p: slipest_le32() (slipest_bytes.h) as a function, kept only
- * for slipest_store.c until it includes slipest_bytes.h itself. */
-SLIPEST_IMAGE_INTERNAL uint32_t slipest_image_le32(const uint8_t *p);
-
 /* Where the header's hash32 sits in the image's format (the stream's seal, the whole-buffer expect32). */
 static inline size_t slipest_image_hash32_at(const slipest_image_stream_t *w)
 {

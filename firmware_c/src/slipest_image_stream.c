@@ -10,11 +10,6 @@
 
 #include <string.h>
 
-/* slipest_le32() as a function: the model store reads its records' words through it (until it includes
- * slipest_bytes.h itself), and the seal below calls it too, so that a build whose compiler does not inline
- * slipest_le32() keeps one out-of-line copy of it here, not two. */
-uint32_t slipest_image_le32(const uint8_t *p) { return slipest_le32(p); }
-
 slipest_status_t slipest_image_stream_init(slipest_image_stream_t *w, size_t len, slipest_image_q_storage_t *qs,
                                            slipest_image_f32_storage_t *fs, int check_f32)
 {
@@ -117,11 +112,11 @@ slipest_status_t slipest_image_stream_feed(slipest_image_stream_t *w, const uint
 
 slipest_status_t slipest_image_stream_seal(const slipest_image_stream_t *w)
 {
-    if (slipest_image_le32(&w->tail[SLIPEST_IMAGE_TRAILER_OFF_CRC32]) != (w->crc ^ 0xFFFFFFFFu)) {
+    if (slipest_le32(&w->tail[SLIPEST_IMAGE_TRAILER_OFF_CRC32]) != (w->crc ^ 0xFFFFFFFFu)) {
         return SLIPEST_E_CRC;
     }
     /* the header's hash32 is the first 4 bytes of the trailer's sha256, which is big-endian */
-    return (slipest_image_le32(&w->hdr[slipest_image_hash32_at(w)]) ==
+    return (slipest_le32(&w->hdr[slipest_image_hash32_at(w)]) ==
             slipest_be32(&w->tail[SLIPEST_IMAGE_TRAILER_OFF_SHA256]))
                ? SLIPEST_OK
                : SLIPEST_E_HASH;

@@ -133,6 +133,70 @@ def library_footprint(map_file: Path, archive: str) -> dict[str, dict[str, int]]
     return per_obj
 
 
+_LTO_OBJECT = re.compile(r"\.ltrans\d*\.ltrans\.o$")
+_LINE_ROW = re.compile(r"^(\S+)\s+(\d+|-)\s+0x([0-9a-f]+)", re.M)
+
+
+def lto_footprint(map_file: Path, image: Path, archive: Path, tools: dict[str, str]) -> dict[str, dict[str, int]]:
+    """Bytes per library source in an image whose library was optimised at link time (-flto, built with -g), keyed
+    like `library_footprint` ("x.c.obj"). The linker map names only GCC's link-time partitions (*.ltrans.o): their
+    sections are the total. Code is split by the debug line table (an inlined function's bytes count with the file
+    that defines it; a header's inline helpers with the .c file they were inlined into, else with the function's
+    own file); constants by the file that defines their symbol (`nm` of `archive`, the same sources built without
+    -flto). What neither covers (alignment padding) is "(link-time partition)". `tools`: the build's nm and objdump."""
+    text = Path(map_file).read_text()
+    start = text.find("Linker script and memory map")
+    if start < 0:
+        raise InputError(f"{map_file}: no memory map section")
+    ranges, consts, flash, ram = [], [], 0, 0  # the partitions' code, and their constants and data
+    for name, addr, size, origin in _MAP_ENTRY.findall(text[start:]):
+        if _LTO_OBJECT.search(origin):
+            size_b, addr_i = int(size, 16), int(addr, 16)
+            flash += size_b if name.startswith((".text", ".rodata", ".data")) else 0
+            ram += size_b if name.startswith((".data", ".bss")) or name == "COMMON" else 0
+            if name.startswith((".text", ".rodata", ".data")):  # not the debug sections (address 0)
+                (ranges if name.startswith(".text") else consts).append((addr_i, addr_i + size_b))
+    inside = lambda a, rs=ranges: any(lo <= a < hi for lo, hi in rs)  # noqa: E731
+    home: dict[str, str] = {}
+    for line in subprocess.run([tools["nm"], "-A", str(archive)], capture_output=True, text=True,
+                               check=True).stdout.splitlines():
+        m = re.match(r".*:(\S+\.o(?:bj)?):\s*(?:[0-9a-fA-F]+)?\s+([tTrRdD])\s+(\S+)$", line)
+        if m:
+            home.setdefault(m.group(3), m.group(1))
+    symbols = []  # (start, size, type, name) of the image
+    for line in subprocess.run([tools["nm"], "-S", str(image)], capture_output=True, text=True,
+                               check=True).stdout.splitlines():
+        f = line.split()
+        if len(f) == 4:
+            symbols.append((int(f[0], 16), int(f[1], 16), f[2], f[3].split(".")[0]))
+    per_obj: dict[str, dict[str, int]] = {}
+
+    def add(source: str | None, n: int) -> None:
+        per_obj.setdefault(source or "(link-time partition)", {"flash": 0, "ram": 0})["flash"] += n
+
+    def owner(a: int) -> str | None:
+        return next((home.get(nm_) for lo, n, _t, nm_ in symbols if lo <= a < lo + n and nm_ in home), None)
+
+    lines = subprocess.run([tools["objdump"], "--dwarf=decodedline", str(image)], capture_output=True, text=True,
+                           check=True).stdout
+    prev = None  # (file, address, the .c file of this sequence so far)
+    for f, ln, a in _LINE_ROW.findall(lines):
+        addr = int(a, 16)
+        if prev is not None and inside(prev[1]):
+            src = prev[0] if prev[0].endswith(".c") else prev[2]
+            add(f"{src}.obj" if src else owner(prev[1]), addr - prev[1])
+        prev = None if ln == "-" else (f, addr, f if f.endswith(".c") else (prev[2] if prev else None))
+    for lo, n, t, nm_ in symbols:
+        if nm_ in home and inside(lo, consts):
+            add(home[nm_], n)
+    covered = sum(v["flash"] for v in per_obj.values())
+    if covered > flash:
+        raise InputError(f"{image}: {covered} B attributed, more than its link-time partitions' {flash} B")
+    add(None, flash - covered)
+    per_obj["(link-time partition)"]["ram"] = ram
+    return per_obj
+
+
 def by_source(footprint: dict[str, dict[str, int]]) -> dict[str, dict[str, int]]:
     """Objects keyed by source stem: CMake names them x.c.obj on bare metal and x.c.o on Linux."""
     return {re.sub(r"\.c\.o(bj)?$", "", k): v for k, v in footprint.items()}

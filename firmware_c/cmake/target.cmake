@@ -321,18 +321,19 @@ endif()
 # store, the image reader and the model checks run at boot and once per upload or activation)
 # The CANopen node and the model store are flash-bound (the keyless node's 12,288 B budget, test_firmware.py), not
 # time-bound: GCC's -Os still trades bytes for speed there. -fno-optimize-sibling-calls: a tail call's epilogue
-# plus branch is longer on Thumb-2 than a BL followed by the one shared POP; -fno-inline-small-functions and
-# -fno-ipa-sra keep the SDO helpers (frame8, put_mux, abort_cur...) as single out-of-line copies; the store's
+# plus branch is longer on Thumb-2 than a BL followed by the one shared POP; -fno-inline-small-functions keeps the
+# SDO helpers (frame8, put_mux, abort_cur...) as single out-of-line copies; the store's
 # functions (record encode / decode, walk, commit, upload_failed) run once per boot, upload or command, so none is
-# inlined (-fno-inline). Three more speed transformations GCC keeps at -Os cost bytes here (104 B on the keyless M4
-# node, measured with `fleetlab bench c` after issue 45's 302-3 objects): jump threading copies blocks to skip a
+# inlined (-fno-inline). Two more speed transformations GCC keeps at -Os cost bytes here (measured with `fleetlab
+# bench c` after issue 45's 302-3 objects): jump threading copies blocks to skip a
 # branch (-fno-thread-jumps), the second scheduling pass lengthens register live ranges and so the spills
-# (-fno-schedule-insns2), and caller-saves (CANopen sources) / dominator jump threading (store) copy code around calls
-# and branches. None of these files holds an inference kernel: instructions per inference are unchanged.
+# (-fno-schedule-insns2); and dominator jump threading (store) copies code around branches. -fno-ipa-sra and
+# -fno-caller-saves saved bytes in the CANopen sources before the node was linked with link-time optimisation, and
+# cost 54 since. None of these files holds an inference kernel: instructions per inference are unchanged.
 set_source_files_properties(${FW}/src/slipest_co.c ${FW}/src/slipest_co_sdo.c ${FW}/src/slipest_co_od_access.c
                             ${FW}/src/slipest_co_model.c
                             PROPERTIES COMPILE_OPTIONS
-                            "-Os;-fno-optimize-sibling-calls;-fno-inline-small-functions;-fno-ipa-sra;-fno-thread-jumps;-fno-schedule-insns2;-fno-caller-saves")
+                            "-Os;-fno-optimize-sibling-calls;-fno-inline-small-functions;-fno-thread-jumps;-fno-schedule-insns2")
 set_source_files_properties("${GEN}/slipest_co_od.c" PROPERTIES COMPILE_OPTIONS -Os)
 set_source_files_properties(${FW}/src/slipest_store.c PROPERTIES COMPILE_OPTIONS
                             "-Os;-fno-optimize-sibling-calls;-fno-inline;-fno-thread-jumps;-fno-schedule-insns2;-fno-tree-dominator-opts")

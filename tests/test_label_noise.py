@@ -17,8 +17,8 @@ from fleetlab.fusion.fitness import CalibrationFitness
 from fleetlab.fusion.label_audit import flag_labels
 from fleetlab.fusion.pipeline import Sources
 from fleetlab.fusion.registry import Budget, FusedModel
-from fleetlab.models import build, flatten
-from fleetlab.models.train import weighted_gce
+from fleetlab.models import build, flatten, load_flat
+from fleetlab.models.train import adjacent_transition, class_weights, weighted_ce, weighted_forward_ce, weighted_gce
 
 N = 20000
 
@@ -163,8 +163,102 @@ def test_audit_flags_labels_the_predictions_contradict():
     assert set(np.flatnonzero(flagged)) == set(wrong)
 
 
+def test_adjacent_transition_matches_the_noise_model():
+    """T[i, j] = P(label j | true i) of `adjacent:RATE`: rows sum to 1, low and high never swap, and the
+    frequencies that LabelNoise.apply draws agree with it."""
+    t = adjacent_transition(0.3)
+    torch.testing.assert_close(t.sum(dim=1), torch.ones(3))
+    assert t[0, 2] == 0 and t[2, 0] == 0 and t[1, 0] == t[1, 2]
+    y = _labels()
+    noisy = LabelNoise("adjacent", 0.3).apply(y, np.random.default_rng(2))
+    seen = np.array([np.bincount(noisy[y == i], minlength=3) / np.sum(y == i) for i in range(3)])
+    assert np.abs(seen - t.numpy()).max() < 0.02
+    torch.testing.assert_close(adjacent_transition(0.0), torch.eye(3))
+    with pytest.raises(ValueError, match="noise rate"):
+        adjacent_transition(1.0)
+
+
+def test_forward_corrected_loss_matches_its_formula_and_is_ce_at_rate_zero():
+    gen = torch.Generator().manual_seed(0)
+    logits, y = torch.randn(50, 3, generator=gen), torch.randint(0, 3, (50,), generator=gen)
+    w = torch.tensor([1.0, 2.0, 0.5])
+    q = (torch.softmax(logits, 1) @ adjacent_transition(0.2))[torch.arange(50), y]  # (Tᵀ p)_ỹ
+    torch.testing.assert_close(weighted_forward_ce(logits, y, w, 0.2), -(w[y] * q.log()).sum() / w[y].sum())
+    torch.testing.assert_close(weighted_forward_ce(logits, y, w, 0.0), weighted_ce(logits, y, w))
+    # a confident contradiction stays finite: log (Tᵀ p)_ỹ as a logsumexp, not the log of an underflowed sum
+    far = torch.tensor([[0.0, -200.0, 200.0]])
+    assert torch.isfinite(weighted_forward_ce(far, torch.tensor([0]), w, 0.2))
+
+
+def test_forward_correction_recovers_the_exact_posterior_from_noisy_labels():
+    """Why forward correction: fitted to labels drawn from Tᵀ p*, its optimum is p* itself, where CE's optimum
+    is the noisy distribution Tᵀ p*. Minimise both over one row's logits on the expected noisy labels."""
+    clean = torch.tensor([0.7, 0.25, 0.05])
+    noisy = clean @ adjacent_transition(0.2)
+    fitted = {}
+    for name, rate in (("ce", 0.0), ("fc", 0.2)):
+        z = torch.zeros(1, 3, requires_grad=True)
+        opt = torch.optim.Adam([z], lr=0.05)
+        for _ in range(800):  # the expected loss: label c with weight P(ỹ = c)
+            opt.zero_grad()
+            weighted_forward_ce(z.expand(3, 3), torch.arange(3), noisy, rate).backward()
+            opt.step()
+        fitted[name] = torch.softmax(z.detach(), 1)[0]
+    torch.testing.assert_close(fitted["fc"], clean, atol=5e-3, rtol=0)
+    torch.testing.assert_close(fitted["ce"], noisy, atol=5e-3, rtol=0)
+    assert (fitted["ce"] - clean).abs().max() > 0.05  # CE learns the noise
+
+
+def test_forward_corrected_fitness_is_the_loss_of_each_model():
+    x = np.random.default_rng(0).normal(size=(60, 12)).astype(np.float32)
+    y = np.random.default_rng(1).integers(0, 3, 60)
+    flats = torch.stack([flatten(build("sn-s", seed=s)) for s in range(4)])
+    got = CalibrationFitness("sn-s", x, y, loss="fc", noise_rate=0.3)(flats)
+    for flat, j in zip(flats, got):
+        with torch.no_grad():
+            logits = load_flat(build("sn-s"), flat).eval()(torch.from_numpy(x))
+        torch.testing.assert_close(j, weighted_forward_ce(logits, torch.from_numpy(y), class_weights(y), 0.3),
+                                   rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(CalibrationFitness("sn-s", x, y, loss="fc", noise_rate=0.0)(flats),
+                               CalibrationFitness("sn-s", x, y)(flats), rtol=1e-6, atol=1e-7)
+
+
+def _small_inputs(noise_rate, seed=1):
+    from fleetlab.fusion.registry import FusionInputs
+
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(90, 12)).astype(np.float32)
+    y = np.digitize(x[:, 3], [-0.4, 0.6]).astype(np.int64)
+    flats = torch.stack([flatten(build("sn-s", seed=s)) for s in range(3)])
+    return FusionInputs("sn-s", ("earth", "a", "b"), flats, flats, None, x, y, seed=seed, buffer_seed=2,
+                        budget=Budget(steps=3, ants=8, noise_rate=noise_rate))
+
+
+def test_the_assumed_noise_rate_reaches_the_forward_corrected_search():
+    """acomerge-fc assuming no noise is AcoMerge itself (the same fitness, hence the same search); assuming
+    some, it searches another objective. The budget's noise_rate is what reaches the fitness."""
+    plain = registry.fit("acomerge", _small_inputs(0.0))
+    assert torch.equal(registry.fit("acomerge-fc", _small_inputs(0.0)).flat, plain.flat)
+    corrected = registry.fit("acomerge-fc", _small_inputs(0.3))
+    assert corrected.details["config"]["loss"] == "fc" and corrected.details["config"]["noise_rate"] == 0.3
+    assert corrected.details["best_fitness"] != plain.details["best_fitness"]
+
+
+def test_earth_ft_fc_and_acomerge_robust_fc_fine_tune_on_the_corrected_loss():
+    a, b = registry.fit("earth-ft-fc", _small_inputs(0.3)), registry.fit("earth-ft", _small_inputs(0.3))
+    assert not torch.allclose(a.flat, b.flat)
+    robust = registry.fit("acomerge-robust-fc", _small_inputs(0.3))
+    assert robust.method == "acomerge-robust-fc" and robust.details["config"]["loss"] == "fc"
+    assert torch.isfinite(robust.flat).all() and robust.flat.shape == b.flat.shape
+
+
+def test_bad_assumed_noise_rate_is_refused():
+    with pytest.raises(ValueError, match="noise-rate"):
+        EvalSettings(cal_sizes=(150,), runs=1, methods=("acomerge-fc",), budget=Budget(noise_rate=1.0))
+
+
 def test_robust_methods_are_opt_in():
-    for name in ("earth-ft-gce", "acomerge-gce", "acomerge-audit"):
+    for name in ("earth-ft-gce", "acomerge-gce", "acomerge-audit", "earth-ft-fc", "acomerge-fc", "acomerge-robust-fc"):
         assert name in registry.selectable() and name not in registry.default_methods()
 
 

@@ -56,6 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "symmetric:RATE (any other class), adjacent:RATE (low<->moderate, moderate<->high, the "
                         "confusion visual odometry makes), vo:SCALE (the slip measured again by a visual-odometry "
                         "model, SCALE times its default errors). The table says how many labels were changed")
+    options.noise_rate(p)
     p.add_argument("--label-noise-sweep", metavar="KIND:R1,R2,...",
                    help="run the whole evaluation at each rate (source models trained once), e.g. "
                         "adjacent:0,0.1,0.2,0.3,0.4; prints one table of balanced accuracy per rate and, with "
@@ -84,7 +85,7 @@ def settings_from_args(args: argparse.Namespace) -> EvalSettings:
         protocol=args.protocol, arch=args.arch, cal_sizes=tuple(args.cal_sizes or DEFAULT_CAL_SIZES),
         runs=args.runs, seed=args.seed, epochs=args.epochs,
         budget=Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, finetune_lr=args.finetune_lr,
-                      device=options.resolved_device(args), rng=args.rng),
+                      device=options.resolved_device(args), rng=args.rng, noise_rate=args.noise_rate),
         methods=tuple(parse_methods(args.methods)), buffer_ablation=args.buffer_ablation,
         fleet_ablation=args.fleet_ablation, label_noise=args.label_noise,
     )

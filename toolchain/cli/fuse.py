@@ -49,6 +49,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     options.seed(p, "the experts, the split and the method's search")
     options.epochs(p)
     options.search_budget(p, "AcoMerge generations = optimisation steps of the method", copies=True)
+    options.noise_rate(p)
     p.add_argument("--finetune-steps", type=int, default=FINETUNE_STEPS,
                    help=f"Adam steps of the Earth fine-tune reference (default: {FINETUNE_STEPS})")
     options.threads(p)
@@ -80,7 +81,7 @@ def _fuse(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     budget = Budget(steps=args.generations, ants=args.ants, sigma=args.sigma, copies=args.copies, threads=args.threads,
-                    device=device, rng=args.rng)
+                    device=device, rng=args.rng, noise_rate=args.noise_rate)
     if device != "cpu" and progress:
         print(f"{label}: searching on {device_label(device)}", file=sys.stderr)
     fused = fuse(args.method, src, cal.x_cal, cal.y_cal, seed=args.seed, buffer_seed=args.seed, budget=budget)

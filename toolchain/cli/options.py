@@ -10,7 +10,7 @@ from ..compute import AUTO_THREADS, MAX_THREADS, resolve_device
 from ..data.splits import PROTOCOLS
 from ..fusion.acomerge import AcoMergeConfig
 from ..models.mlp import ARCHS, MAX_HIDDEN_LAYERS, MAX_UNITS, MIN_UNITS, canonical_arch
-from ..models.train import EXPERT_EPOCHS
+from ..models.train import EXPERT_EPOCHS, FC_RATE
 from ..errors import InputError
 
 ACO = AcoMergeConfig()  # the paper's AcoMerge defaults: the one source of every search default below
@@ -63,6 +63,14 @@ def search_budget(p: argparse.ArgumentParser, generations_help: str, copies: boo
     p.add_argument("--sigma", type=float, default=ACO.sigma,
                    help=f"std of the Gaussian-perturbed expert copies in the buffer (default: {ACO.sigma:g}, the "
                    "paper's value; the reference code used 0.005)")
+
+
+def noise_rate(p: argparse.ArgumentParser) -> None:
+    """--noise-rate: the adjacent label-noise rate that the forward-corrected methods assume (issue 46)."""
+    p.add_argument("--noise-rate", type=float, default=FC_RATE, metavar="EPS",
+                   help="the share of D_Cal's labels that the forward-corrected methods (acomerge-fc, earth-ft-fc, "
+                        "acomerge-robust-fc) assume a neighbouring class took, e.g. from the visual odometry's "
+                        f"measured accuracy; other methods ignore it (default: {FC_RATE})")
 
 
 def threads(p: argparse.ArgumentParser) -> None:

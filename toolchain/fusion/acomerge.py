@@ -89,7 +89,7 @@ from tqdm.auto import tqdm
 
 from ..compute import torch_threads
 from ..models import n_params
-from ..models.train import LOSSES
+from ..models.train import FC_RATE, LOSSES
 from .buffer import BUFFER_KINDS, make_buffer
 from .fitness import CalibrationFitness
 from ..errors import InputError
@@ -125,7 +125,8 @@ class AcoMergeConfig:
     spiral_b: float = 1.0  # b, the logarithmic-spiral shape constant
     clip: float | None = None  # optional |value| bound on IWOA positions (paper: none)
     # execution
-    loss: str = "ce"  # the fitness: weighted CE, or 'gce' (noise-robust; CPU search only, see methods.py)
+    loss: str = "ce"  # the fitness: weighted CE, or 'gce' / 'fc' (noise-robust; CPU search only, see methods.py)
+    noise_rate: float = FC_RATE  # the adjacent label-noise rate ε that the 'fc' fitness assumes (models/train.py)
     chunk: int = 150  # ants per forward chunk of a deeper net (bounds its activations' memory; SN-S bounds its own)
     # torch intra-op threads during the run (0: chosen at its start from the cores free then, see
     # compute.default_threads); the result is deterministic for a seed and a thread count
@@ -157,6 +158,8 @@ class AcoMergeConfig:
             raise InputError("iwoa_every ≥ 1, gb_every ≥ 0, deposit > 0 and tau_init > 0 are required")
         if self.loss not in LOSSES or (self.loss != "ce" and self.device != "cpu"):
             raise InputError(f"loss must be one of {LOSSES}, and 'ce' on a GPU (the lockstep engine's fitness)")
+        if not 0.0 <= self.noise_rate < 1.0:
+            raise InputError(f"noise_rate must lie in [0, 1), got {self.noise_rate}")
         if self.chunk < 1 or self.threads < 0:
             raise InputError("chunk must be at least 1 and threads at least 0 (0: chosen from the free cores)")
         if self.device != "cpu" and not self.device.startswith("cuda"):
@@ -426,7 +429,7 @@ def acomerge(
     The whole-model IWOA ablation records only the first three.
     """
     cfg, experts, cand = checked_inputs(experts_flat, arch, config, seed, buffer)
-    fitness = CalibrationFitness(arch, x_cal, y_cal, chunk=cfg.chunk, loss=cfg.loss)
+    fitness = CalibrationFitness(arch, x_cal, y_cal, chunk=cfg.chunk, loss=cfg.loss, noise_rate=cfg.noise_rate)
     return search(experts, cand, fitness, cfg, seed=seed, progress=progress)
 
 

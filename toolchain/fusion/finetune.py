@@ -11,7 +11,7 @@ import copy
 import numpy as np
 
 from ..models import SlipNet
-from ..models.train import EXPERT_BATCH, EXPERT_LR, train_classifier
+from ..models.train import EXPERT_BATCH, EXPERT_LR, FC_RATE, train_classifier
 from .acomerge import AcoMergeConfig
 from ..errors import InputError
 
@@ -27,8 +27,10 @@ def finetune(
     batch_size: int = EXPERT_BATCH,
     seed: int = 0,
     loss: str = "ce",
+    noise_rate: float = FC_RATE,
 ) -> SlipNet:
-    """A fine-tuned COPY of `model`: `steps` Adam updates on class-weighted CE (or `loss` 'gce') over (x, y).
+    """A fine-tuned COPY of `model`: `steps` Adam updates on class-weighted CE (or `loss` 'gce', or 'fc' assuming
+    adjacent label noise at `noise_rate`) over (x, y).
 
     The input model is left untouched. Seeded (batch order and dropout masks).
     """
@@ -38,4 +40,4 @@ def finetune(
         raise InputError("cannot fine-tune on an empty calibration set")
     tuned = copy.deepcopy(model)
     return train_classifier(tuned, x, y, epochs=None, steps=steps, lr=lr, batch_size=batch_size, seed=seed,
-                            fused_adam=True, loss=loss)  # per-run work: the fast Adam (models/train.py, adam)
+                            fused_adam=True, loss=loss, noise_rate=noise_rate)  # per-run work: the fast Adam (models/train.py, adam)

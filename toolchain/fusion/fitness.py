@@ -25,7 +25,7 @@ import torch
 from ..data.contracts import N_CLASSES
 from ..models import batched_logits
 from ..models.mlp import LN_EPS, hidden_sizes, param_shapes
-from ..models.train import GCE_Q, LOSSES, class_weights
+from ..models.train import FC_RATE, GCE_Q, LOSSES, adjacent_transition, class_weights
 from ..errors import InputError
 
 
@@ -75,7 +75,8 @@ class CalibrationFitness:
     `chunk` bounds the models per forward pass of the generic (deeper) path; the SN-S path takes
     any number at once and bounds its activations itself (piece_size)."""
 
-    def __init__(self, arch: str, x: np.ndarray, y: np.ndarray, chunk: int = 100, loss: str = "ce"):
+    def __init__(self, arch: str, x: np.ndarray, y: np.ndarray, chunk: int = 100, loss: str = "ce",
+                 noise_rate: float = FC_RATE):
         x = np.asarray(x, dtype=np.float32)
         y = np.asarray(y, dtype=np.int64)
         if x.ndim != 2 or x.shape[0] != y.shape[0] or x.shape[0] == 0:
@@ -88,7 +89,8 @@ class CalibrationFitness:
             raise InputError(f"unknown fitness loss {loss!r}; choose one of {', '.join(LOSSES)}")
         self.arch = arch
         self.chunk = chunk
-        self.loss = loss  # 'ce', or 'gce' (bounded, for noisy labels: models/train.py, weighted_gce)
+        self.loss = loss  # 'ce', 'gce' (bounded) or 'fc' (forward-corrected), for noisy labels: models/train.py
+        self.noise_rate = noise_rate  # the adjacent-noise rate ε that 'fc' assumes
         self.x = torch.from_numpy(x)
         self.y = torch.from_numpy(y)
         self.class_weight = class_weights(y)
@@ -106,6 +108,8 @@ class CalibrationFitness:
         # y_n·N + n, and the per-row factor −w_{y_n} (what torch's weighted NLL multiplies by).
         self.picked = self.y * n + torch.arange(n)
         self.neg_row_weight = -self.class_weight[self.y]
+        if loss == "fc":  # log T[i, y_n] (3, N), −inf where T is 0: added to log p before a logsumexp over i
+            self.log_t_cols = adjacent_transition(noise_rate).log()[:, self.y].contiguous()
 
     def __call__(self, flats: torch.Tensor) -> torch.Tensor:
         w0, c0 = time.perf_counter(), time.process_time()
@@ -130,12 +134,16 @@ class CalibrationFitness:
             return torch.cat([self._generic(flats[i:j]) for i, j in _pieces(p, self.chunk)])
 
     def _loss(self, logits_t: torch.Tensor) -> torch.Tensor:
-        """(P, 3, N) logits -> (P,) weighted CE: per row −w_{y_n}·log softmax(·)_{y_n}, summed per ant / Σ w_{y_n}.
+        """(P, 3, N) logits -> (P,) weighted CE: per row −w_{y_n}·log softmax(·)_{y_n}, summed per ant / Σ w_{y_n}
+        (GCE or the forward-corrected CE in their place where `loss` says so).
 
         The same operations as torch's cross_entropy with weights and reduction 'none' (log_softmax
         over the classes, then the picked value times −w), so the same bits; picking with one
         `index_select` instead of the 2-D NLL kernel takes 40 % less time (issue 30)."""
         p = logits_t.shape[0]
+        if self.loss == "fc":  # forward correction: log (Tᵀ p)_{y_n} = logsumexp_i (log p_i + log T[i, y_n])
+            log_p = torch.logsumexp(torch.log_softmax(logits_t, dim=1).add_(self.log_t_cols), dim=1)
+            return log_p.mul_(self.neg_row_weight).sum(dim=1).div_(self.weight_total)
         log_p = torch.log_softmax(logits_t, dim=1).view(p, -1).index_select(1, self.picked)
         if self.loss == "gce":  # w (1 − p^q) / q = −w (exp(q log p) − 1) / q
             log_p = log_p.mul_(GCE_Q).exp_().sub_(1.0).div_(GCE_Q)

@@ -44,7 +44,7 @@ def aco_config(budget: Budget, phases: tuple[str, ...] | None = None, loss: str 
     """AcoMerge's configuration under `budget` (the paper's values for everything else)."""
     cfg = dataclasses.replace(AcoMergeConfig(), generations=budget.steps, n_ants=budget.ants, copies=budget.copies,
                               sigma=budget.sigma, threads=budget.threads, device=budget.device,
-                              rng=budget.rng, loss=loss)
+                              rng=budget.rng, loss=loss, noise_rate=budget.noise_rate)
     return dataclasses.replace(cfg, phases=phases) if phases else cfg
 
 
@@ -153,6 +153,29 @@ def _acomerge_gce(inp: FusionInputs) -> FusedModel:
         inp.budget, device="cpu"))])[0]
 
 
+def _earth_ft_fc(inp: FusionInputs) -> FusedModel:
+    earth = bl.model_from_flat(inp.arch, inp.experts[0])
+    tuned = bl.earth_finetune(earth, inp.x_cal, inp.y_cal, inp.seed, steps=inp.budget.steps, lr=inp.budget.finetune_lr,
+                              loss="fc", noise_rate=inp.budget.noise_rate)
+    return _flat("earth-ft-fc", inp, flatten(tuned))
+
+
+def _on_cpu(inps: list[FusionInputs]) -> list[FusionInputs]:
+    """The draws with their budget on the CPU: the GPU engine's fitness is CE only."""
+    return [dataclasses.replace(inp, budget=dataclasses.replace(inp.budget, device="cpu")) for inp in inps]
+
+
+def _acomerge_fc_many(inps: list[FusionInputs]) -> list[FusedModel]:
+    """AcoMerge whose fitness is the forward-corrected CE at the budget's assumed noise rate (the CPU search)."""
+    return _aco_on_buffer("acomerge-fc", loss="fc")(_on_cpu(inps))
+
+
+def _acomerge_robust_fc_many(inps: list[FusionInputs]) -> list[FusedModel]:
+    """acomerge-robust with the forward-corrected loss in both the experts' fine-tuning and the search's fitness."""
+    inps = _on_cpu(inps)
+    return fit_acomerge_robust_many(inps, aco_config(inps[0].budget, loss="fc"), name="acomerge-robust-fc")
+
+
 def _acomerge_audit_many(inps: list[FusionInputs]) -> list[FusedModel]:
     """AcoMerge on D_Cal without the labels a confident-learning audit flags (fusion/label_audit.py)."""
     kept, flagged = [], []
@@ -200,3 +223,6 @@ _register_many("acomerge-fleet-only", _aco_fleet_ablation("acomerge-fleet-only")
 register("earth-ft-gce", _earth_ft_gce, "Earth + FullFinetune (GCE)", "Noise-robust")
 register("acomerge-gce", _acomerge_gce, "AcoMerge (GCE fitness)", "Noise-robust")
 _register_many("acomerge-audit", _acomerge_audit_many, "AcoMerge (label audit)", "Noise-robust")
+register("earth-ft-fc", _earth_ft_fc, "Earth + FullFinetune (forward-corrected)", "Noise-robust")
+_register_many("acomerge-fc", _acomerge_fc_many, "AcoMerge (forward-corrected fitness)", "Noise-robust")
+_register_many("acomerge-robust-fc", _acomerge_robust_fc_many, "AcoMerge-robust (forward-corrected)", "Noise-robust")

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from ..models import SlipNet, build, load_flat
-from ..models.train import EXPERT_LR
+from ..models.train import EXPERT_LR, FC_RATE
 from .acomerge import AcoMergeConfig
 from ..errors import InputError
 
@@ -35,6 +35,8 @@ class Budget:
     threads: int = 1  # torch intra-op threads of a search that batches its candidates
     device: str = "cpu"  # where AcoMerge searches: 'cpu' (the reference) or a GPU, 'cuda[:N]'
     rng: str = "device"  # where a GPU search draws its random numbers: 'device' or 'host' (AcoMergeConfig.rng)
+    # the adjacent label-noise rate ε that the forward-corrected methods (`*-fc`, issue 46) assume D_Cal has
+    noise_rate: float = FC_RATE
 
 
 @dataclass(frozen=True)

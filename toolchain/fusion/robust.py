@@ -43,33 +43,35 @@ from .registry import FusedModel, FusionInputs
 NAME = "acomerge-robust"
 
 
-def finetuned_experts(inp: FusionInputs) -> torch.Tensor:
-    """(K, T): each aligned expert fine-tuned on D_Cal as Earth + FullFinetune would be.
+def finetuned_experts(inp: FusionInputs, loss: str = "ce") -> torch.Tensor:
+    """(K, T): each aligned expert fine-tuned on D_Cal as Earth + FullFinetune would be (with `loss`: 'ce', or a
+    noise-robust one of models/train.py at the budget's assumed noise rate).
 
     Expert k uses seed `inp.seed + k`, so the K fine-tunings draw different batches.
     """
     b = inp.budget
     tuned = [
         flatten(finetune(model_from_flat(inp.arch, inp.aligned[k]), inp.x_cal, inp.y_cal, steps=b.steps,
-                         lr=b.finetune_lr, seed=inp.seed + k))
+                         lr=b.finetune_lr, seed=inp.seed + k, loss=loss, noise_rate=b.noise_rate))
         for k in range(inp.aligned.shape[0])
     ]
     return torch.stack(tuned).to(torch.float32)
 
 
-def fit_acomerge_robust_many(inps: list[FusionInputs], config: AcoMergeConfig) -> list[FusedModel]:
+def fit_acomerge_robust_many(inps: list[FusionInputs], config: AcoMergeConfig, name: str = NAME) -> list[FusedModel]:
     """Per calibration draw, fine-tune the aligned experts on D_Cal, then AcoMerge over a buffer around
-    them: the fine-tunings one by one (CPU), the searches together (batched on a GPU, see lockstep.py)."""
-    tuned_all = [finetuned_experts(inp) for inp in inps]
+    them: the fine-tunings one by one (CPU), the searches together (batched on a GPU, see lockstep.py).
+    The fine-tuning uses the search's fitness loss (`config.loss`), so a noise-robust variant is robust in both."""
+    tuned_all = [finetuned_experts(inp, config.loss) for inp in inps]
     runs = [(tuned, inp.x_cal, inp.y_cal, inp.seed,
              make_buffer(tuned, copies=config.copies, sigma=config.sigma, seed=inp.buffer_seed))
             for inp, tuned in zip(inps, tuned_all)]
     out = []
-    for inp, res in zip(inps, run_acomerge_many(runs, inps[0].arch, config, desc=NAME)):
+    for inp, res in zip(inps, run_acomerge_many(runs, inps[0].arch, config, desc=name)):
         details = {"config": config.to_dict(), "best_fitness": res.best_fitness,
                    "best_origin": res.best_origin.replace("expert", "fine-tuned expert"),
                    "evaluations": res.evaluations, "finetuned_expert_fitness": res.expert_fitness,
                    "finetune_steps_per_expert": inp.budget.steps, "history": res.history}
-        out.append(FusedModel(method=NAME, arch=inp.arch, flat=torch.as_tensor(res.best_flat, dtype=torch.float32),
+        out.append(FusedModel(method=name, arch=inp.arch, flat=torch.as_tensor(res.best_flat, dtype=torch.float32),
                               curve=[float(v) for v in res.history.get("best_so_far", [])], details=details))
     return out

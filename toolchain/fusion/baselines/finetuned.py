@@ -13,7 +13,7 @@ import numpy as np
 
 from ...data.dataset import Dataset
 from ...models import SlipNet, build
-from ...models.train import EXPERT_BATCH, EXPERT_EPOCHS, EXPERT_LR, train_classifier
+from ...models.train import EXPERT_BATCH, EXPERT_EPOCHS, EXPERT_LR, FC_RATE, train_classifier
 from ..experts import expert_roles
 from ..finetune import finetune
 from .common import BUDGET_STEPS
@@ -31,11 +31,12 @@ def model_base(
 
 def earth_finetune(
     earth_expert: SlipNet, x_cal: np.ndarray, y_cal: np.ndarray, seed: int, steps: int = BUDGET_STEPS,
-    lr: float = EXPERT_LR, batch_size: int = EXPERT_BATCH, loss: str = "ce",
+    lr: float = EXPERT_LR, batch_size: int = EXPERT_BATCH, loss: str = "ce", noise_rate: float = FC_RATE,
 ) -> SlipNet:
-    """Earth + FullFinetune: every weight of the Earth expert fine-tuned on D_Cal (a copy); `loss` 'gce'
-    for noisy labels (models/train.py)."""
-    return finetune(earth_expert, x_cal, y_cal, steps=steps, lr=lr, batch_size=batch_size, seed=seed, loss=loss)
+    """Earth + FullFinetune: every weight of the Earth expert fine-tuned on D_Cal (a copy); `loss` 'gce' or 'fc'
+    (assuming adjacent noise at `noise_rate`) for noisy labels (models/train.py)."""
+    return finetune(earth_expert, x_cal, y_cal, steps=steps, lr=lr, batch_size=batch_size, seed=seed, loss=loss,
+                    noise_rate=noise_rate)
 
 
 def joint_sources(dataset: Dataset) -> tuple[np.ndarray, np.ndarray]:

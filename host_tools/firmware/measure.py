@@ -144,6 +144,8 @@ def lto_footprint(map_file: Path, image: Path, archive: Path, tools: dict[str, s
     that defines it; a header's inline helpers with the .c file they were inlined into, else with the function's
     own file); constants by the file that defines their symbol (`nm` of `archive`, the same sources built without
     -flto). What neither covers (alignment padding) is "(link-time partition)". `tools`: the build's nm and objdump."""
+    if not tools.get("objdump") or not tools.get("nm"):
+        raise InputError(f"{image}: the build recorded no nm or objdump of its toolchain (configure it again)")
     text = Path(map_file).read_text()
     start = text.find("Linker script and memory map")
     if start < 0:

@@ -70,10 +70,25 @@ def test_configure_rejects_a_missing_listed_file(tmp_path):
 
 # --------------------------------------------------------------------------- 1 MISRA C:2012
 @pytest.fixture(scope="module")
-def misra_findings():
+def misra_runs():
+    """Two MISRA runs at once over the same tree (as `fleetlab assure` in two terminals, or two CI jobs)."""
     from fleetlab.assurance import misra
+    from fleetlab.assurance.sources import concurrently
 
-    return misra.run_cppcheck(BUNDLE)
+    return concurrently([lambda: misra.run_cppcheck(BUNDLE), lambda: misra.run_cppcheck(BUNDLE)])
+
+
+@pytest.fixture(scope="module")
+def misra_findings(misra_runs):
+    return misra_runs[0]
+
+
+def test_misra_runs_at_once_agree_and_leave_the_sources_as_they_were(misra_runs):
+    """cppcheck's addon writes a dump of each file it checks: beside the sources unless given a build folder, where
+    a second run deleted the first one's dumps (the addon then checked nothing in them) and an installed wheel's
+    read-only tree refused them. Each run now has its own folder: the two agree, and firmware_c/src keeps its files."""
+    assert misra_runs[0] == misra_runs[1] and len(misra_runs[0][0]) > 0
+    assert not [p.name for p in (REPO / "firmware_c" / "src").iterdir() if p.suffix in (".dump", ".ctu-info")]
 
 
 def test_misra_findings_are_all_recorded_deviations(misra_findings):

@@ -63,8 +63,13 @@ def run_cppcheck(bundle: Path | None = None, work: Path | None = None,
     with tempfile.TemporaryDirectory() as tmp:
         gen = generate_dbc(Path(work or tmp) / "generated", bundle)
         incs = [a for d in include_dirs(bundle, gen.parent) for a in ("-I", str(d))]
+        # the addon's dump files go to a build folder of this run: without one cppcheck writes them beside the
+        # sources (a read-only tree in an installed wheel) and two runs at once delete each other's
+        build = Path(tmp) / "cppcheck"
+        build.mkdir()
         res = run([cppcheck, "--addon=misra", "--std=c99", "-q", "--enable=style", "--error-exitcode=0",
-                   "--template={file}:{line}:{id}", *incs, *(sources or library_sources()), gen], timeout=1200)
+                   f"--cppcheck-build-dir={build}", "--template={file}:{line}:{id}", *incs,
+                   *(sources or library_sources()), gen], timeout=1200)
         found, other = [], []
         for m in _FINDING.finditer(res.stderr):
             found.append((m["rule"], rel(m["file"], gen.parent), int(m["line"])))

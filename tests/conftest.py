@@ -8,6 +8,15 @@ from pathlib import Path
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def pytest_configure(config):
+    """Under pytest-xdist (scripts/test.sh) each worker process gets its own build root, unless one was given: the
+    default build/ folders (bench, assure, coverage, the emulator's builds) are shared paths that two tests at once
+    would configure and build over each other. Subprocesses inherit it."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    if worker and not os.environ.get("FLEETLAB_BUILD_ROOT"):
+        os.environ["FLEETLAB_BUILD_ROOT"] = str(REPO_ROOT / "build" / f"pytest-{worker}")
 DEFAULT_REAL_DATA = REPO_ROOT.parent / "shared" / "data" / "fleet_to_lab"
 HOW_TO_SUPPLY = ("download the original Fleet-To-Lab CSV files (MIT licence; see docs/real_data.md) into one folder "
                  "and set FLEETLAB_REAL_DATA=/that/folder")

@@ -27,7 +27,7 @@ from ..fusion.fitness import fitness_seconds
 from ..fusion.pipeline import Sources, fuse_many
 from ..fusion.registry import Budget
 from ..models import batched_logits, canonical_arch
-from ..models.train import EXPERT_EPOCHS
+from ..models.train import EXPERT_EPOCHS, check_noise_rate
 from .methods import buffer_methods, default_methods, fleet_methods, selectable
 from .metrics import SCALAR_METRICS, classification_metrics
 
@@ -54,8 +54,7 @@ class EvalSettings:
         if self.runs < 1 or self.epochs < 1 or b.steps < 1 or b.ants < 1 or b.sigma < 0 or not b.finetune_lr > 0:
             raise InputError("runs, epochs, generations and ants must all be at least 1, sigma not negative, "
                              "the fine-tuning rate positive")
-        if not 0.0 <= b.noise_rate < 1.0:
-            raise InputError(f"the assumed label-noise rate (--noise-rate) must lie in [0, 1), got {b.noise_rate}")
+        check_noise_rate(b.noise_rate, "the assumed label-noise rate (--noise-rate)")
         if not self.cal_sizes or min(self.cal_sizes) < 3:
             raise InputError(f"calibration sizes must be at least 3 rows, got {list(self.cal_sizes)}")
         if self.label_noise:

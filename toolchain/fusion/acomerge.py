@@ -89,7 +89,7 @@ from tqdm.auto import tqdm
 
 from ..compute import torch_threads
 from ..models import n_params
-from ..models.train import FC_RATE, LOSSES
+from ..models.train import FC_RATE, LOSSES, check_noise_rate
 from .buffer import BUFFER_KINDS, make_buffer
 from .fitness import CalibrationFitness
 from ..errors import InputError
@@ -158,8 +158,7 @@ class AcoMergeConfig:
             raise InputError("iwoa_every ≥ 1, gb_every ≥ 0, deposit > 0 and tau_init > 0 are required")
         if self.loss not in LOSSES or (self.loss != "ce" and self.device != "cpu"):
             raise InputError(f"loss must be one of {LOSSES}, and 'ce' on a GPU (the lockstep engine's fitness)")
-        if not 0.0 <= self.noise_rate < 1.0:
-            raise InputError(f"noise_rate must lie in [0, 1), got {self.noise_rate}")
+        check_noise_rate(self.noise_rate, "noise_rate")
         if self.chunk < 1 or self.threads < 0:
             raise InputError("chunk must be at least 1 and threads at least 0 (0: chosen from the free cores)")
         if self.device != "cpu" and not self.device.startswith("cuda"):

@@ -25,7 +25,7 @@ import torch
 from ..data.contracts import N_CLASSES
 from ..models import batched_logits
 from ..models.mlp import LN_EPS, hidden_sizes, param_shapes
-from ..models.train import FC_RATE, GCE_Q, LOSSES, adjacent_transition, class_weights
+from ..models.train import FC_RATE, GCE_Q, LOSSES, class_weights, log_transition_columns
 from ..errors import InputError
 
 
@@ -109,7 +109,7 @@ class CalibrationFitness:
         self.picked = self.y * n + torch.arange(n)
         self.neg_row_weight = -self.class_weight[self.y]
         if loss == "fc":  # log T[i, y_n] (3, N), −inf where T is 0: added to log p before a logsumexp over i
-            self.log_t_cols = adjacent_transition(noise_rate).log()[:, self.y].contiguous()
+            self.log_t_cols = log_transition_columns(noise_rate, self.y).contiguous()
 
     def __call__(self, flats: torch.Tensor) -> torch.Tensor:
         w0, c0 = time.perf_counter(), time.process_time()

@@ -60,11 +60,16 @@ GCE_Q = 0.7
 FC_RATE = 0.2  # the ε that 'fc' assumes by default (docs/paper_table.md, "Noisy calibration labels")
 
 
+def check_noise_rate(rate: float, what: str = "assumed label-noise rate") -> None:
+    """The one bound of an assumed adjacent-noise rate ε: [0, 1) (at 1 no label would be kept)."""
+    if not 0.0 <= rate < 1.0:
+        raise InputError(f"{what} must lie in [0, 1), got {rate}")
+
+
 def adjacent_transition(rate: float, n_classes: int = N_CLASSES) -> torch.Tensor:
     """(C, C) T[i, j] = P(label j | true class i) of `adjacent:rate` noise (data/label_noise.py): the label stays
     with 1 − rate, else moves one class up or down (an inner class either way, half each)."""
-    if not 0.0 <= rate < 1.0:
-        raise InputError(f"assumed label-noise rate must lie in [0, 1), got {rate}")
+    check_noise_rate(rate)
     t = torch.zeros(n_classes, n_classes, dtype=torch.float64)
     for i in range(n_classes):
         neighbours = [j for j in (i - 1, i + 1) if 0 <= j < n_classes]
@@ -74,11 +79,16 @@ def adjacent_transition(rate: float, n_classes: int = N_CLASSES) -> torch.Tensor
     return t.to(torch.float32)
 
 
+def log_transition_columns(rate: float, y: torch.Tensor, n_classes: int = N_CLASSES) -> torch.Tensor:
+    """(C, N) log T[i, y_n], −inf where T is 0: what forward correction adds to log p_i before a logsumexp over i."""
+    return adjacent_transition(rate, n_classes).log()[:, y]
+
+
 def corrected_log_prob(log_p: torch.Tensor, y: torch.Tensor, rate: float) -> torch.Tensor:
     """(N,) log (Tᵀ p)_{y_n} of forward correction from (N, C) log-probabilities: log Σ_i T[i, y_n] p_i as a
     logsumexp of log T[i, y_n] + log p_i, finite where p_{y_n} underflows. Rate 0 gives log p_{y_n} itself."""
-    log_t = adjacent_transition(rate, log_p.shape[1]).log().to(log_p.dtype)  # −inf where T is 0
-    return torch.logsumexp(log_p + log_t[:, y].T, dim=1)
+    log_t = log_transition_columns(rate, y, log_p.shape[1]).to(log_p.dtype)
+    return torch.logsumexp(log_p + log_t.T, dim=1)
 
 
 def weighted_gce(logits: torch.Tensor, y: torch.Tensor, weights: torch.Tensor, q: float = GCE_Q) -> torch.Tensor:

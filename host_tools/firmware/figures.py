@@ -111,8 +111,9 @@ def canopen_node_figures(build_dir: Path) -> dict:
     """RAM and flash of the CANopen node with two model slots, as linked and run in its target images
     (launch model provisioned into slot A, upload by SDO block download, activation, one window): flash =
     the library's code and constants in the image, optimised at link time as flight firmware is built, by source
-    (node, CANopen, store, kernel; the flight image links no built-in model, its models are data in the slots); RAM = their static data + the node context + the
-    store (one model in RAM, one sector buffer) + the peak stack of the heaviest call. The NVM area is
+    (node, CANopen, store, kernel; the flight image links no built-in model, its models are data in the slots);
+    RAM = their static data + the node context + the store (one model in RAM, one sector buffer) + the peak stack
+    of the heaviest call. The NVM area is
     the integrator's flash and is not counted. The main figures are the keyless node's; "with_auth" is
     the same node built to authenticate images (HMAC-SHA256 linked, signed images only)."""
     fig = _canopen_image_figures(build_dir, "slipest_co_node.elf")

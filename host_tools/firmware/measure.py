@@ -110,14 +110,19 @@ def costs_from_counts(name: str, qonly: dict, full: dict | None) -> dict[str, fl
     }
 
 
-def library_footprint(map_file: Path, archive: str) -> dict[str, dict[str, int]]:
-    """Bytes per object of `archive` in the linked image: flash (text+rodata+data) and static RAM (data+bss)."""
+def _map_entries(map_file: Path) -> list[tuple[str, str, str, str]]:
+    """(section, address, size, input file) of every input section a linker map places."""
     text = Path(map_file).read_text()
     start = text.find("Linker script and memory map")
     if start < 0:
         raise InputError(f"{map_file}: no memory map section")
+    return _MAP_ENTRY.findall(text[start:])
+
+
+def library_footprint(map_file: Path, archive: str) -> dict[str, dict[str, int]]:
+    """Bytes per object of `archive` in the linked image: flash (text+rodata+data) and static RAM (data+bss)."""
     per_obj: dict[str, dict[str, int]] = {}
-    for name, _addr, size, origin in _MAP_ENTRY.findall(text[start:]):
+    for name, _addr, size, origin in _map_entries(map_file):
         m = re.match(re.escape(archive) + r"\((.+)\)$", Path(origin).name)
         if not m:
             continue
@@ -146,18 +151,15 @@ def lto_footprint(map_file: Path, image: Path, archive: Path, tools: dict[str, s
     -flto). What neither covers (alignment padding) is "(link-time partition)". `tools`: the build's nm and objdump."""
     if not tools.get("objdump") or not tools.get("nm"):
         raise InputError(f"{image}: the build recorded no nm or objdump of its toolchain (configure it again)")
-    text = Path(map_file).read_text()
-    start = text.find("Linker script and memory map")
-    if start < 0:
-        raise InputError(f"{map_file}: no memory map section")
     ranges, consts, flash, ram = [], [], 0, 0  # the partitions' code, and their constants and data
-    for name, addr, size, origin in _MAP_ENTRY.findall(text[start:]):
-        if _LTO_OBJECT.search(origin):
-            size_b, addr_i = int(size, 16), int(addr, 16)
-            flash += size_b if name.startswith((".text", ".rodata", ".data")) else 0
-            ram += size_b if name.startswith((".data", ".bss")) or name == "COMMON" else 0
-            if name.startswith((".text", ".rodata", ".data")):  # not the debug sections (address 0)
-                (ranges if name.startswith(".text") else consts).append((addr_i, addr_i + size_b))
+    for name, addr, size, origin in _map_entries(map_file):
+        if not _LTO_OBJECT.search(origin):
+            continue
+        size_b, addr_i = int(size, 16), int(addr, 16)
+        ram += size_b if name.startswith((".data", ".bss")) or name == "COMMON" else 0
+        if name.startswith((".text", ".rodata", ".data")):  # not the debug sections (address 0)
+            flash += size_b
+            (ranges if name.startswith(".text") else consts).append((addr_i, addr_i + size_b))
     inside = lambda a, rs=ranges: any(lo <= a < hi for lo, hi in rs)  # noqa: E731
     home: dict[str, str] = {}
     for line in subprocess.run([tools["nm"], "-A", str(archive)], capture_output=True, text=True,
@@ -165,19 +167,19 @@ def lto_footprint(map_file: Path, image: Path, archive: Path, tools: dict[str, s
         m = re.match(r".*:(\S+\.o(?:bj)?):\s*(?:[0-9a-fA-F]+)?\s+([tTrRdD])\s+(\S+)$", line)
         if m:
             home.setdefault(m.group(3), m.group(1))
-    symbols = []  # (start, size, type, name) of the image
+    symbols = []  # (start, size, name without GCC's clone suffix) of the image
     for line in subprocess.run([tools["nm"], "-S", str(image)], capture_output=True, text=True,
                                check=True).stdout.splitlines():
         f = line.split()
         if len(f) == 4:
-            symbols.append((int(f[0], 16), int(f[1], 16), f[2], f[3].split(".")[0]))
+            symbols.append((int(f[0], 16), int(f[1], 16), f[3].split(".")[0]))
     per_obj: dict[str, dict[str, int]] = {}
 
     def add(source: str | None, n: int) -> None:
         per_obj.setdefault(source or "(link-time partition)", {"flash": 0, "ram": 0})["flash"] += n
 
     def owner(a: int) -> str | None:
-        return next((home.get(nm_) for lo, n, _t, nm_ in symbols if lo <= a < lo + n and nm_ in home), None)
+        return next((home[nm_] for lo, n, nm_ in symbols if lo <= a < lo + n and nm_ in home), None)
 
     lines = subprocess.run([tools["objdump"], "--dwarf=decodedline", str(image)], capture_output=True, text=True,
                            check=True).stdout
@@ -188,7 +190,7 @@ def lto_footprint(map_file: Path, image: Path, archive: Path, tools: dict[str, s
             src = prev[0] if prev[0].endswith(".c") else prev[2]
             add(f"{src}.obj" if src else owner(prev[1]), addr - prev[1])
         prev = None if ln == "-" else (f, addr, f if f.endswith(".c") else (prev[2] if prev else None))
-    for lo, n, t, nm_ in symbols:
+    for lo, n, nm_ in symbols:
         if nm_ in home and inside(lo, consts):
             add(home[nm_], n)
     covered = sum(v["flash"] for v in per_obj.values())

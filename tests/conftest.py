@@ -1,4 +1,4 @@
-"""Shared pytest fixtures."""
+"""Shared pytest fixtures, and the hooks that order the files and give each xdist worker its build root."""
 
 from __future__ import annotations
 
@@ -8,6 +8,9 @@ from pathlib import Path
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_REAL_DATA = REPO_ROOT.parent / "shared" / "data" / "fleet_to_lab"
+HOW_TO_SUPPLY = ("download the original Fleet-To-Lab CSV files (MIT licence; see docs/real_data.md) into one folder "
+                 "and set FLEETLAB_REAL_DATA=/that/folder")
 
 
 # The longest test files (minutes each: cross builds for every CPU, Frama-C, the demo, fuzzing), started first so
@@ -29,9 +32,6 @@ def pytest_configure(config):
     worker = os.environ.get("PYTEST_XDIST_WORKER")
     if worker and not os.environ.get("FLEETLAB_BUILD_ROOT"):
         os.environ["FLEETLAB_BUILD_ROOT"] = str(REPO_ROOT / "build" / f"pytest-{worker}")
-DEFAULT_REAL_DATA = REPO_ROOT.parent / "shared" / "data" / "fleet_to_lab"
-HOW_TO_SUPPLY = ("download the original Fleet-To-Lab CSV files (MIT licence; see docs/real_data.md) into one folder "
-                 "and set FLEETLAB_REAL_DATA=/that/folder")
 
 
 def real_data_path() -> Path:

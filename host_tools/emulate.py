@@ -249,6 +249,7 @@ def _run_segment(link: Link, seg: fault_mod.Segment, ref: Reference, timeout: fl
     items = seg.items
     chunk_times: list[tuple[float, float]] = []  # (start, end) of each chunk's write
     item_chunk = np.zeros(len(items), dtype=np.int64)  # chunk index of every item
+    item_sent: dict[int, float] = {}  # real time only: when each item's write began
     # real time: after the leading CONTROL reset, one chunk = one sample's three frames
     # (or one feature set) per period; otherwise chunks of CHUNK items at full speed
     if realtime:
@@ -267,7 +268,14 @@ def _run_segment(link: Link, seg: fault_mod.Segment, ref: Reference, timeout: fl
         if pacer is not None:
             pacer.wait(c * period)
         ta = time.perf_counter()
-        link.write(chunk)
+        if realtime:
+            # item by item, each write's start time kept: on a loaded host the estimate can be read back
+            # before a chunk's write() returns, so the end of the chunk is no lower bound for its last item
+            for j, it in enumerate(chunk):
+                item_sent[i + j] = time.perf_counter()
+                link.write([it])
+        else:
+            link.write(chunk)
         chunk_times.append((ta, time.perf_counter()))
         for j, it in enumerate(chunk):
             model.feed(it, i + j)
@@ -294,10 +302,11 @@ def _run_segment(link: Link, seg: fault_mod.Segment, ref: Reference, timeout: fl
     for v in verdicts:
         k = v.expected.trigger_item
         if v.got is not None and k >= 0:
-            # the k-th item of a chunk left the host at about ta + (pos+1)/len * (tb - ta)
+            # real time: from the start of the trigger item's write; full speed: the k-th item of a chunk
+            # left the host at about ta + (pos+1)/len * (tb - ta)
             c = int(item_chunk[k])
             ta, tb = chunk_times[c]
-            t_sent = ta + (k - bounds[c] + 1) / (bounds[c + 1] - bounds[c]) * (tb - ta)
+            t_sent = item_sent.get(k, ta + (k - bounds[c] + 1) / (bounds[c + 1] - bounds[c]) * (tb - ta))
             result.latencies_us.append(max(0.0, (v.got.t_recv - t_sent) * 1e6))
     problems = compare_status(expected_counters, final)
     if final is not None and ref.model_hash32 is not None and final.model_hash != ref.model_hash32:

@@ -263,8 +263,11 @@ def objects() -> list[Entry]:
             ("Transmission type", UNSIGNED8, "ro", 0xFF),  # event-driven (manufacturer-specific)
         ])
         _, _, fields = PDO_RECORDS[rec]
+        # "map" (argument: the mapped record): the node computes each value from the mapped sub-index
+        # (slipest_co_od_access.c), so its tables keep no copy of it; the value here is what the EDS and the docs
+        # show, and generate.py checks that the two agree
         e += _record(mapping, f"{kind}{number} mapping parameter", [
-            (f"Mapped object {k}", UNSIGNED32, "ro", (rec << 16) | (k << 8) | (8 * TYPE_BYTES[t]))
+            (f"Mapped object {k}", UNSIGNED32, "ro", (rec << 16) | (k << 8) | (8 * TYPE_BYTES[t]), "map", rec)
             for k, (_, t) in enumerate(fields, start=1)
         ])
     e += _record(IDX_PROGRAM_DATA, "Program data", [("Program number 1", DOMAIN, "rw", 0, "domain")])

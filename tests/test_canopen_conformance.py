@@ -71,6 +71,16 @@ def test_eds_validate_catches_what_it_is_run_for(tmp_path):
     assert res.returncode == 1 and "ModifiedBy was missing" in res.stderr
 
 
+def test_generator_refuses_a_mapping_the_node_would_compute_otherwise():
+    """A PDO mapping entry's EDS value must be what the C node computes from the mapped sub-index (OD kind "map")."""
+    ents = od.objects()
+    generate._check_mappings(ents)  # the real dictionary agrees
+    entry = next(e for e in ents if e.kind == "map")
+    entry.default ^= 0x08  # another bit length than the mapped value's
+    with pytest.raises(ValueError, match="is not what the node computes"):
+        generate._check_mappings(ents)
+
+
 def test_eds_file_info_is_the_object_dictionarys_not_the_clocks():
     """FileVersion/FileRevision are the dictionary's version and the dates are fixed in objects.py: the EDS is the
     same bytes whenever it is generated (tests/test_determinism.py compares them across machines too)."""
@@ -144,6 +154,12 @@ def test_every_readable_object_answers_in_every_boot_state(bdir, tmp_path, new_b
             if state.endswith("power cycle"):
                 session.power_cycle()
         values = read_everything(session)
+    # every constant and every PDO mapping entry (which the node computes from the mapped sub-index) reads as the EDS
+    # says: its DefaultValue, with the node id added where the EDS adds $NODEID
+    for e in od.objects():
+        if e.kind in ("const", "map"):
+            want = e.default if isinstance(e.default, int) else NODE_ID + int(e.default.removeprefix("$NODEID+"), 0)
+            assert values[(e.index, e.sub)] == want.to_bytes(od.TYPE_BYTES[e.dtype], "little"), (hex(e.index), e.sub)
     sha = values[(od.IDX_ACTIVE_MODEL, 3)].hex()
     version = int.from_bytes(values[(od.IDX_ACTIVE_MODEL, 1)], "little")
     expected = {"built-in model": example, "no store (emulator without --nvm)": example, "no model (flight image)": None}

@@ -57,12 +57,6 @@ extern "C" {
 
 /** State of the SDO server (one transfer at a time). */
 typedef struct {
-    uint32_t size;    /**< announced bytes of the transfer */
-    uint32_t done;    /**< bytes transferred so far */
-    uint32_t last_ms; /**< tick of the transfer's last frame (timeout) */
-    uint16_t index;   /**< object of the transfer */
-    uint16_t entry;   /**< its OD entry */
-    uint16_t crc;     /**< running CRC of a block download */
     uint8_t sub;      /**< sub-index of the transfer */
     uint8_t state;    /**< idle, segmented download/upload, block download (sub-block or end) */
     uint8_t toggle;   /**< toggle bit expected next (segmented) */
@@ -70,21 +64,20 @@ typedef struct {
     uint8_t seq_ok;   /**< last in-order sequence number of the current block */
     uint8_t seq_bad;  /**< a segment of this block came out of order */
     uint8_t blksize;  /**< block upload: segments per block, as the client asked */
-    uint8_t buf[32];  /**< value being uploaded, or a small value being downloaded */
+    uint16_t index;   /**< object of the transfer */
+    uint16_t entry;   /**< its OD entry */
+    uint16_t crc;     /**< running CRC of a block download */
+    uint32_t size;    /**< announced bytes of the transfer */
+    uint32_t done;    /**< bytes transferred so far */
+    uint32_t last_ms; /**< tick of the transfer's last frame (timeout) */
 } slipest_co_sdo_t;
 
-/** CANopen node context (all state; no globals, no malloc). Treat as opaque. */
+/** CANopen node context (all state; no globals, no malloc). Treat as opaque.
+ *  The order is for code size: Thumb's two-byte loads and stores reach a byte field only in the first 32 bytes of
+ *  the struct, a 16-bit one in the first 64, a word in the first 128. So the fields the code touches most come
+ *  first, smallest first (the SDO server's inside the struct at offset 12), then the counters, and the arrays last
+ *  (docs/model_update.md, "RAM and flash on the M4"). */
 typedef struct {
-    slipest_node_t est;                  /**< the estimator (the plain profile's node) */
-    slipest_store_t *store;              /**< model slots, or NULL (no model upload) */
-    const slipest_model_q_t *builtin_q;  /**< model when no slot holds one, or NULL (none built in) */
-    const slipest_model_f32_t *builtin_f; /**< its float model, or NULL */
-    const uint8_t *builtin_sha256;       /**< its 32-byte sha256 content hash, or NULL (not known) */
-    slipest_co_sdo_t sdo;                /**< SDO server */
-    uint32_t serial;                     /**< identity serial number (0x1018 sub 4) */
-    uint32_t hb_last_ms;                 /**< tick of the last heartbeat */
-    uint32_t cnt[SLIPEST_CO_N_COUNTERS]; /**< CANopen counters (the first six mirror est's) */
-    uint16_t hb_ms;                      /**< producer heartbeat time, 0 = off */
     uint8_t node_id;                     /**< 1..127 */
     uint8_t nmt;                         /**< SLIPEST_CO_NMT_* */
     uint8_t err_reg;                     /**< error register 0x1001 */
@@ -94,8 +87,19 @@ typedef struct {
     uint8_t prog_stopped;                /**< 0x1F51 "stop": no estimates until "start" (SDO, heartbeat go on) */
     uint8_t cleared;                     /**< 0x1F51 "clear" since the last 0x1F50 download: the next may begin */
     uint8_t restart;                     /**< after the frame's answer: 0 none, 1 start, 2 reset (0x1F51), 3 NMT reset */
+    uint16_t hb_ms;                      /**< producer heartbeat time, 0 = off */
+    slipest_co_sdo_t sdo;                /**< SDO server */
+    slipest_store_t *store;              /**< model slots, or NULL (no model upload) */
+    const slipest_model_q_t *builtin_q;  /**< model when no slot holds one, or NULL (none built in) */
+    const slipest_model_f32_t *builtin_f; /**< its float model, or NULL */
+    const uint8_t *builtin_sha256;       /**< its 32-byte sha256 content hash, or NULL (not known) */
+    uint32_t serial;                     /**< identity serial number (0x1018 sub 4) */
+    uint32_t hb_last_ms;                 /**< tick of the last heartbeat */
     uint32_t reverts_seen;               /**< the store's trial_reverts the last boot EMCY reported */
+    uint32_t cnt[SLIPEST_CO_N_COUNTERS]; /**< CANopen counters (the first six mirror est's) */
+    uint8_t sdo_buf[32];                 /**< the SDO server's value being uploaded, or a small value being downloaded */
     uint8_t pdo[SLIPEST_CO_N_PDO][8];    /**< last payload of each PDO */
+    slipest_node_t est;                  /**< the estimator (the plain profile's node) */
 } slipest_co_t;
 
 /**

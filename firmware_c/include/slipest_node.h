@@ -43,24 +43,26 @@ typedef struct {
     uint32_t saturations;     /**< saturation events, all windows */
 } slipest_counters_t;
 
-/** Node context: all state of one estimator node (no globals, no malloc). */
+/** Node context: all state of one estimator node (no globals, no malloc). The order is for code size, as in
+ *  slipest_co_t: Thumb's two-byte loads reach a byte field only in the first 32 bytes, so the flags and counters come
+ *  first and the arrays and the extractor last. */
 typedef struct slipest_node_s {
-    slipest_extractor_t ex;     /**< window feature extractor */
-    int16_t asm_sample[SLIPEST_N_CHANNELS]; /**< sample being assembled from TELEM_WHEEL/IMU/ATTITUDE */
-    uint16_t asm_counter;                   /**< its sample counter */
     uint8_t asm_mask;  /**< bit i: frame type i received */
     uint8_t asm_valid; /**< asm_counter is meaningful */
-    int16_t feat_q[SLIPEST_N_FEATURES]; /**< feature set being assembled from FEATURES_0..3 */
-    uint16_t feat_counter;              /**< its window counter */
     uint8_t feat_mask;                  /**< bit i: FEATURES_i received */
-    slipest_counters_t c;               /**< counters */
-    const slipest_model_q_t *mq;   /**< active fixed-point model (validated) */
-    const slipest_model_f32_t *mf; /**< active float model, NULL for none */
-    uint32_t link_rejected; /**< rejected before a frame existed (CRC, COBS, SLCAN syntax) */
+    uint16_t asm_counter;                   /**< its sample counter */
+    uint16_t feat_counter;              /**< its window counter */
     /** what goes out every SLIPEST_STATUS_EVERY windows, set by the entry point that takes the
      *  frame (slipest_node_handle(): the packed status frames; slipest_node_telemetry(): a
      *  marker). A pointer, so that an image using only the latter links no status packer. */
     int (*status)(const struct slipest_node_s *node, slipest_frame_t *out, size_t cap);
+    const slipest_model_q_t *mq;   /**< active fixed-point model (validated) */
+    const slipest_model_f32_t *mf; /**< active float model, NULL for none */
+    uint32_t link_rejected; /**< rejected before a frame existed (CRC, COBS, SLCAN syntax) */
+    slipest_counters_t c;               /**< counters */
+    int16_t asm_sample[SLIPEST_N_CHANNELS]; /**< sample being assembled from TELEM_WHEEL/IMU/ATTITUDE */
+    int16_t feat_q[SLIPEST_N_FEATURES]; /**< feature set being assembled from FEATURES_0..3 */
+    slipest_extractor_t ex;     /**< window feature extractor */
 } slipest_node_t;
 
 /**

@@ -183,25 +183,28 @@ typedef struct {
     uint8_t params[SLIPEST_STORE_PARAMS_MAX];           /**< the stored parameters */
 } slipest_store_record_t;
 
-/** All state of a model store (caller-allocated; no globals, no malloc). Treat as opaque. */
+/** All state of a model store (caller-allocated; no globals, no malloc). Treat as opaque.
+ *  The order is for code size, as in slipest_co_t: Thumb's two-byte loads and stores reach a byte field only in the
+ *  first 32 bytes, a word in the first 128; so the flags and the commit record come first, the buffers last. */
 typedef struct {
-    slipest_nvm_t nvm;                    /**< copy of the NVM interface */
-    const slipest_store_auth_t *auth;     /**< image authentication, NULL = none */
-    uint32_t slot_sectors;                /**< sectors per slot */
-    slipest_store_record_t rec;           /**< newest valid commit record (seq 0: none) */
+    uint8_t have_model;                   /**< mq (and mf) hold the active slot's model */
+    uint8_t reverted;                     /**< a trial was reverted since slipest_store_open() */
     uint8_t rec_sector;                   /**< record sector holding rec */
-    slipest_slot_state_t slot_state[SLIPEST_STORE_N_SLOTS]; /**< state per slot */
-    slipest_slot_info_t ready;            /**< the validated upload (state READY) */
-    uint32_t ready_crc;                   /**< its image CRC-32 */
-    slipest_upload_state_t upload;        /**< upload state */
     int8_t upload_slot;                   /**< slot being written, or SLIPEST_STORE_NO_SLOT */
+    slipest_store_record_t rec;           /**< newest valid commit record (seq 0: none) */
+    slipest_upload_state_t upload;        /**< upload state */
+    slipest_slot_state_t slot_state[SLIPEST_STORE_N_SLOTS]; /**< state per slot */
+    uint32_t slot_sectors;                /**< sectors per slot */
     uint32_t total_len;                   /**< announced image length of the upload */
     uint32_t received;                    /**< bytes received so far */
     uint32_t buf_fill;                    /**< bytes in buf not yet programmed */
-    uint8_t buf[SLIPEST_STORE_SECTOR_MAX]; /**< one sector: write buffer and read-back buffer */
+    const slipest_store_auth_t *auth;     /**< image authentication, NULL = none */
+    slipest_nvm_t nvm;                    /**< copy of the NVM interface */
+    slipest_store_counters_t c;           /**< counters */
+    slipest_slot_info_t ready;            /**< the validated upload (state READY) */
+    uint32_t ready_crc;                   /**< its image CRC-32 */
     uint8_t sha256[32];                   /**< trailer sha256 of the active image */
-    uint8_t have_model;                   /**< mq (and mf) hold the active slot's model */
-    uint8_t reverted;                     /**< a trial was reverted since slipest_store_open() */
+    uint8_t buf[SLIPEST_STORE_SECTOR_MAX]; /**< one sector: write buffer and read-back buffer */
     slipest_model_q_t mq;                 /**< active fixed-point model (arrays in qs or tqs) */
     slipest_image_q_storage_t qs;         /**< its arrays, from a format-1 image */
 #ifndef SLIPEST_Q_ONLY
@@ -217,7 +220,6 @@ typedef struct {
 #endif
     slipest_image_stream_t walk;          /**< the validator's state while a slot is streamed (not on the stack:
                                                it holds a row sum per unit of the widest block) */
-    slipest_store_counters_t c;           /**< counters */
 } slipest_store_t;
 
 /**

@@ -55,6 +55,14 @@ static inline void slipest_le_put(uint8_t *p, uint32_t v, uint32_t nbytes)
     }
 }
 
+/* v as two little-endian bytes. (A fixed width, not slipest_le_put(): each file that calls the loop links its own copy
+ * of it, a call of this one is two stores.) */
+static inline void slipest_put_le16(uint8_t *p, uint16_t v)
+{
+    p[0] = (uint8_t)(v & 0xFFu);
+    p[1] = (uint8_t)((v >> 8) & 0xFFu);
+}
+
 /* v as four little-endian bytes. */
 static inline void slipest_put_le32(uint8_t *p, uint32_t v)
 {

@@ -21,7 +21,7 @@ int slipest_co_emcy(slipest_co_t *co, uint16_t code, uint8_t reg_bits, int statu
     out->id = 0x080u + co->node_id;
     out->dlc = 8u;
     (void)memset(out->data, 0, sizeof out->data);
-    slipest_le_put(out->data, code, 2u);
+    slipest_put_le16(out->data, code);
     out->data[2] = co->err_reg;
     out->data[3] = (uint8_t)(int8_t)status; /* manufacturer field: the slipest status (two's complement) */
     co->cnt[SLIPEST_CO_CNT_EMCY_SENT]++;

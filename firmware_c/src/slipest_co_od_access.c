@@ -141,6 +141,15 @@ uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e,
             v |= SLIPEST_CO_FLASH_BUSY;
         }
         break;
+    case SLIPEST_CO_KIND_MAP: {
+        /* a PDO mapping entry (0x1600.., 0x1A00..): the mapped record (arg: its row of slipest_co_objects), this
+         * entry's sub-index, and the bit length of what that sub-index holds; computed here so that the constants
+         * table keeps no copy of the mappings (generate.py checks every one against the EDS value) */
+        const slipest_co_object_t *o = &slipest_co_objects[arg];
+        unsigned sub = co->sdo.sub; /* < the mapped record's n_subs: generate.py */
+        v = ((uint32_t)o->index << 16) | ((uint32_t)sub << 8) | (8u * SLIPEST_CO_SIZE(slipest_co_od[o->first + sub]));
+        break;
+    }
     case SLIPEST_CO_KIND_DOMAIN:
         /* 0x1F50 read: the active slot's image, streamed from the NVM by the SDO server; no slot model (the built-in
          * one, or none): an empty DOMAIN, so the object answers in every state */

@@ -11,7 +11,8 @@
  * set (no object / no sub-index; *entry untouched). */
 const slipest_co_entry_t *slipest_co_od_find(uint16_t index, uint8_t sub, uint32_t *abort_code, uint16_t *entry);
 
-/* Read an entry's value, little-endian, into buf (32 bytes); *len receives its size.
+/* Read an entry's value, little-endian, into buf (32 bytes); *len receives its size. The entry is the one the
+ * SDO transfer in co->sdo names (a PDO mapping entry's value depends on its sub-index).
  * Returns 0 or an SDO abort code. */
 uint32_t slipest_co_od_read(const slipest_co_t *co, const slipest_co_entry_t *e, uint8_t buf[32], uint32_t *len);
 

@@ -27,7 +27,7 @@ static void frame8(slipest_co_t *co, slipest_frame_t *f)
 
 static void put_mux(slipest_frame_t *f, uint16_t index, uint8_t sub)
 {
-    slipest_le_put(&f->data[1], index, 2u);
+    slipest_put_le16(&f->data[1], index);
     f->data[3] = sub;
 }
 
@@ -203,11 +203,11 @@ static int download_segment(slipest_co_t *co, const slipest_frame_t *in, slipest
     } else if (co->sdo.done + len > co->sdo.size) {
         code = SLIPEST_CO_ABORT_TOO_HIGH;
     } else {
-        (void)memcpy(&co->sdo.buf[co->sdo.done], &in->data[1], len);
+        (void)memcpy(&co->sdo_buf[co->sdo.done], &in->data[1], len);
         co->sdo.done += len;
         code = 0u;
         if ((cmd & 0x01u) != 0u) {
-            code = (co->sdo.done == co->sdo.size) ? slipest_co_od_write(co, e, co->sdo.buf, co->sdo.done, &out[1], &n)
+            code = (co->sdo.done == co->sdo.size) ? slipest_co_od_write(co, e, co->sdo_buf, co->sdo.done, &out[1], &n)
                                                  : SLIPEST_CO_ABORT_TOO_LOW;
         }
     }
@@ -229,11 +229,11 @@ static int upload_initiate(slipest_co_t *co, const slipest_frame_t *in, slipest_
     uint32_t code, len = 0u;
     const slipest_co_entry_t *e = open_entry(co, in, out);
     if (e == NULL) return 1;
-    code = slipest_co_od_read(co, e, co->sdo.buf, &len);
+    code = slipest_co_od_read(co, e, co->sdo_buf, &len);
     if (code != 0u) return abort_cur(co, code, out);
     if (len <= 4u && !is_domain(co)) { /* expedited, size indicated (a DOMAIN, even an empty one, goes segmented) */
         answer(co, (uint8_t)(0x43u | ((4u - len) << 2)), out);
-        (void)memcpy(&out->data[4], co->sdo.buf, len);
+        (void)memcpy(&out->data[4], co->sdo_buf, len);
         return 1;
     }
     answer(co, 0x41u, out); /* segmented, size indicated */
@@ -265,7 +265,7 @@ static int upload_segment(slipest_co_t *co, const slipest_frame_t *in, slipest_f
             return abort_cur(co, SLIPEST_CO_ABORT_HARDWARE, out);
         }
     } else {
-        (void)memcpy(&out->data[1], &co->sdo.buf[co->sdo.done], len);
+        (void)memcpy(&out->data[1], &co->sdo_buf[co->sdo.done], len);
     }
     co->sdo.done += len;
     out->data[0] = (uint8_t)((co->sdo.toggle << 4) | ((7u - len) << 1));
@@ -418,7 +418,7 @@ static int block_upload(slipest_co_t *co, const slipest_frame_t *in, slipest_fra
         e = open_entry(co, in, out);
         if (e == NULL) return 1;
         if (SLIPEST_CO_KIND(*e) != SLIPEST_CO_KIND_DOMAIN) return abort_cur(co, SLIPEST_CO_ABORT_UNSUPPORTED, out);
-        code = slipest_co_od_read(co, e, co->sdo.buf, &len);
+        code = slipest_co_od_read(co, e, co->sdo_buf, &len);
         if (code == 0u && len == 0u) code = SLIPEST_CO_ABORT_NO_DATA; /* an empty DOMAIN: read it segmented */
         if (code == 0u && (in->data[4] == 0u || in->data[4] > 127u)) code = SLIPEST_CO_ABORT_COMMAND; /* blksize */
         if (code != 0u) return abort_cur(co, code, out);

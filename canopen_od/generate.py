@@ -232,11 +232,10 @@ def _check_mappings(ents) -> None:
     for e in ents:
         if e.kind != "map":
             continue
-        rec = e.arg
-        mapped = by.get((rec, e.sub))
-        if mapped is None or e.default != (rec << 16 | e.sub << 8 | 8 * od.TYPE_BYTES[mapped.dtype]):
+        mapped = by.get((e.arg, e.sub))
+        if mapped is None or e.default != (e.arg << 16 | e.sub << 8 | 8 * od.TYPE_BYTES[mapped.dtype]):
             raise ValueError(f"0x{e.index:04X} sub {e.sub}: mapping 0x{int(e.default):08X} is not what the node "
-                             f"computes from 0x{rec:04X} sub {e.sub}")
+                             f"computes from 0x{e.arg:04X} sub {e.sub}")
 
 
 def c_source() -> str:
@@ -252,8 +251,9 @@ def c_source() -> str:
         "",
         "const slipest_co_object_t slipest_co_objects[SLIPEST_CO_N_OBJECTS] = {",
     ]
-    rows = {index: row for row, (index, _, _) in enumerate(_objects(ents))}
-    for index, first, n in _objects(ents):
+    objs = _objects(ents)
+    rows = {index: row for row, (index, _, _) in enumerate(objs)}
+    for index, first, n in objs:
         lines.append(f"    {{0x{index:04X}u, {first}u, {n}u}},")
     lines += ["};", "", "const slipest_co_entry_t slipest_co_od[SLIPEST_CO_OD_N] = {"]
     for e in ents:

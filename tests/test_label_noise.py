@@ -20,6 +20,8 @@ from fleetlab.fusion.registry import Budget, FusedModel
 from fleetlab.models import build, flatten, load_flat
 from fleetlab.models.train import adjacent_transition, class_weights, weighted_ce, weighted_forward_ce, weighted_gce
 
+from small_models import fusion_inputs
+
 N = 20000
 
 
@@ -224,14 +226,7 @@ def test_forward_corrected_fitness_is_the_loss_of_each_model():
 
 
 def _small_inputs(noise_rate, seed=1):
-    from fleetlab.fusion.registry import FusionInputs
-
-    rng = np.random.default_rng(5)
-    x = rng.normal(size=(90, 12)).astype(np.float32)
-    y = np.digitize(x[:, 3], [-0.4, 0.6]).astype(np.int64)
-    flats = torch.stack([flatten(build("sn-s", seed=s)) for s in range(3)])
-    return FusionInputs("sn-s", ("earth", "a", "b"), flats, flats, None, x, y, seed=seed, buffer_seed=2,
-                        budget=Budget(steps=3, ants=8, noise_rate=noise_rate))
+    return fusion_inputs(Budget(steps=3, ants=8, noise_rate=noise_rate), seed)
 
 
 def test_the_assumed_noise_rate_reaches_the_forward_corrected_search():

@@ -11,10 +11,12 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from ..compute import device_label, torch_threads
 from ..data.calibration import calibration_set
+from ..data.label_noise import VoModel
 from ..evaluation.fuse_report import Row, scores, write_run
 from ..fusion import registry
 from ..fusion.baselines import model_from_flat
@@ -45,6 +47,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cal-size", type=int, default=DEFAULT_CAL_SIZE,
                    help=f"|D_Cal| rows drawn from the target data (default: {DEFAULT_CAL_SIZE})")
     p.add_argument("--calibration", type=Path, help="use this window CSV (Fleet-To-Lab format) as D_Cal instead of drawing one")
+    p.add_argument("--vo-labels", type=Path, metavar="FILE",
+                   help="label D_Cal by visual odometry: FILE has one row per window of --calibration, in order, with "
+                        "total_dist_vo (VO's travelled distance, m) and vo_dropout (1 where VO did not converge), as "
+                        "`fleetlab simulate --labels vo` writes NAME.vo_labels.csv. Every method then fits VO's classes; "
+                        "acomerge-vo fits what each reading says of each class, and leaves out the dropouts")
+    p.add_argument("--vo-error-scale", type=float, default=1.0, metavar="S",
+                   help="your VO's errors against the default VO model (2 %% of distance, 1 %% scale, 2 mm; "
+                        "docs/paper_table.md, 'Noisy calibration labels'), used for acomerge-vo's class probabilities "
+                        "(default: 1)")
     options.protocol(p)
     options.seed(p, "the experts, the split and the method's search")
     options.epochs(p)
@@ -72,7 +83,13 @@ def _fuse(args: argparse.Namespace) -> int:
     seconds: dict[str, float] = {}
     dataset = dataset_input.load(args.data)
     dataset.check_roles()
-    cal = calibration_set(dataset, args.protocol, args.cal_size, args.seed, args.calibration)  # bad input fails early
+    if not (np.isfinite(args.vo_error_scale) and args.vo_error_scale >= 0):
+        raise InputError(f"--vo-error-scale must be a number >= 0, got {args.vo_error_scale}")
+    cal = calibration_set(dataset, args.protocol, args.cal_size, args.seed, args.calibration,  # bad input fails early
+                          args.vo_labels, VoModel().scaled(args.vo_error_scale))
+    if registry.get(args.method).needs_label_probs and cal.y_cal_probs is None:  # before hours of training
+        raise InputError(f"{args.method} fits on what each label's VO reading says of it: give --calibration FILE "
+                         "with --vo-labels FILE")
 
     t0 = time.perf_counter()
     src = prepare_sources(dataset, args.arch, args.seed, args.epochs, joint=needs_joint([args.method]), progress=progress,
@@ -84,7 +101,8 @@ def _fuse(args: argparse.Namespace) -> int:
                     device=device, rng=args.rng, noise_rate=args.noise_rate)
     if device != "cpu" and progress:
         print(f"{label}: searching on {device_label(device)}", file=sys.stderr)
-    fused = fuse(args.method, src, cal.x_cal, cal.y_cal, seed=args.seed, buffer_seed=args.seed, budget=budget)
+    fused = fuse(args.method, src, cal.x_cal, cal.y_cal, seed=args.seed, buffer_seed=args.seed, budget=budget,
+                 y_cal_probs=cal.y_cal_probs)
     seconds[args.method] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

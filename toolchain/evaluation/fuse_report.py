@@ -79,6 +79,7 @@ def write_report(path: Path, run: dict, cal: CalibrationSet, rows: list[Row], fu
         f"- data: `{run['data']}`; architecture {fused.arch}; seed {run['seed']}; method {fused.method}; "
         f"rows rejected for NaN/Inf: {rejected_rows}",
         f"- D_Cal: {cal.info['size']} rows ({cal.info['source']}); test set: {cal.info['test_size']} target rows",
+        *([_vo_line(cal.info["labels"])] if "labels" in cal.info else []),
         search,
         f"- Earth+FullFinetune: {run['finetune_steps']} Adam steps on class-weighted CE over the same D_Cal",
         "- time: " + ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items()), "",
@@ -124,3 +125,9 @@ def write_run(out: Path, run: dict, dataset: Dataset, cal: CalibrationSet, fused
     if history["history"].get("best_so_far"):
         plot_convergence(history["history"], out / "convergence.png", label)
     write_report(out / "report.md", run, cal, rows, fused, label, seconds, dataset.rejected_nonfinite)
+
+
+def _vo_line(labels: dict) -> str:
+    return (f"- D_Cal's labels: {labels['source']}; VO did not converge on {labels['vo_dropouts']} window(s) "
+            f"(labelled low: the wheel odometry stands); VO's class differs from the file's slip_class in "
+            f"{labels['differ_from_file_labels']}")

@@ -26,6 +26,11 @@ def default_methods() -> tuple[str, ...]:
     return registry.default_methods()
 
 
+def needs_label_probs(name: str) -> bool:
+    """Whether method `name` fits on each label's class probabilities (registry.MethodSpec)."""
+    return registry.get(name).needs_label_probs
+
+
 def buffer_methods() -> tuple[str, ...]:
     return registry.in_group(BUFFER_ABLATION)
 

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from ..compute import torch_threads
+from ..data.contracts import N_CLASSES
 from ..data.dataset import TARGET, Dataset
 from ..data.label_noise import LabelNoise
 from ..data.splits import PROTOCOLS, make_split
@@ -28,7 +29,7 @@ from ..fusion.pipeline import Sources, fuse_many
 from ..fusion.registry import Budget
 from ..models import batched_logits, canonical_arch
 from ..models.train import EXPERT_EPOCHS, check_noise_rate
-from .methods import buffer_methods, default_methods, fleet_methods, selectable
+from .methods import buffer_methods, default_methods, fleet_methods, needs_label_probs, selectable
 from .metrics import SCALAR_METRICS, classification_metrics
 
 
@@ -62,6 +63,11 @@ class EvalSettings:
         unknown = set(self.methods) - set(selectable())
         if unknown or not self.methods:
             raise InputError(f"unknown or no methods: {sorted(unknown)}")
+        unmeasured = self.label_noise and LabelNoise.parse(self.label_noise).kind != "vo"
+        blind = [m for m in self.methods if unmeasured and needs_label_probs(m)]
+        if blind:  # refused before the experts train: these labels carry no measurement to weigh them by
+            raise InputError(f"{', '.join(blind)} fit(s) on what each label's measurement says of it, and "
+                             f"{self.label_noise} flips labels without one: use exact labels or --label-noise vo:SCALE")
 
     @property
     def all_methods(self) -> tuple[str, ...]:
@@ -121,18 +127,24 @@ def check_draws(dataset: Dataset, settings: EvalSettings, target: Target) -> Non
 
 
 def calibration_labels(settings: EvalSettings, cal_size: int, run: int, target: Target,
-                       cal: np.ndarray) -> tuple[np.ndarray, dict | None]:
-    """D_Cal's labels as the methods see them: exact, or corrupted by `settings.label_noise` (the test
-    rows keep their exact labels). Seeded by (seed, cal size, run), not the method: every method of a
-    draw sees the same noisy labels, so the comparison stays paired."""
+                       cal: np.ndarray) -> tuple[np.ndarray, dict | None, np.ndarray | None]:
+    """(labels, noise record, class probabilities) of D_Cal as the methods see them: exact, or corrupted by
+    `settings.label_noise` (the test rows keep their exact labels). Seeded by (seed, cal size, run), not the
+    method: every method of a draw sees the same noisy labels, so the comparison stays paired. The
+    probabilities (n, 3) are what a label's own measurement says of it: certain for exact labels, VO's reading
+    under `vo` (`label_noise.vo_class_probabilities`), None for flips that come with no reading."""
     y = target.y[cal]
     if not settings.label_noise:
-        return y, None
+        return y, None, np.eye(N_CLASSES)[y]
     noise = LabelNoise.parse(settings.label_noise)
     rng = np.random.default_rng(derive_seed(settings.seed, cal_size, run, NOISE_CODE))
     # every target row is measured (VO's lag reaches the window before, which may be a test row); D_Cal's are kept
-    noisy = noise.apply(target.y, rng, target.d_actual, target.d_commanded, target.groups, target.duration_s)[cal]
-    return noisy, noise.record(y, noisy)
+    noisy, probs = noise.apply_with_probabilities(target.y, rng, target.d_actual, target.d_commanded, target.groups,
+                                                  target.duration_s)
+    record = noise.record(y, noisy[cal])
+    if probs is not None:  # the windows whose VO did not converge: acomerge-vo leaves them out
+        record["vo_dropouts"] = int((probs[cal].sum(axis=1) == 0).sum())
+    return noisy[cal], record, None if probs is None else probs[cal]
 
 
 def run_job(cal_size: int, run: int, method: str, src: Sources, target: Target, settings: EvalSettings) -> dict:
@@ -152,12 +164,12 @@ def run_jobs(cal_size: int, runs: list[int], method: str, src: Sources, target: 
         splits = [make_split(settings.protocol, target.y, target.groups, cal_size, seed=r) for r in runs]
         labels = [calibration_labels(settings, cal_size, r, target, sp.cal) for r, sp in zip(runs, splits)]
         draws = [(target.x[sp.cal], y_cal, derive_seed(settings.seed, cal_size, r, method_code(method)),
-                  derive_seed(settings.seed, cal_size, r)) for r, sp, (y_cal, _) in zip(runs, splits, labels)]
+                  derive_seed(settings.seed, cal_size, r), probs) for r, sp, (y_cal, _, probs) in zip(runs, splits, labels)]
         t0 = time.perf_counter()
         fused_all = fuse_many(method, src, draws, budget=settings.budget)
         seconds = (time.perf_counter() - t0) / len(runs)
         out = []
-        for run, split, fused, (y_cal, noise) in zip(runs, splits, fused_all, labels):
+        for run, split, fused, (y_cal, noise, _) in zip(runs, splits, fused_all, labels):
             x_cal = target.x[split.cal]
             x_test, y_test = target.x[split.test], target.y[split.test]
             flat = fused.flat.cpu()

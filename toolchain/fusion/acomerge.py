@@ -418,17 +418,20 @@ def acomerge(
     seed: int = 0,
     progress: bool = False,
     buffer: torch.Tensor | None = None,
+    targets: np.ndarray | None = None,
 ) -> AcoMergeResult:
     """Fuse (K, T) aligned expert vectors into one (T,) vector by AcoMerge on D_Cal = (x_cal, y_cal).
 
-    `buffer` (M, T) replaces the default expert buffer (for the buffer ablation).
+    `buffer` (M, T) replaces the default expert buffer (for the buffer ablation); `targets` (N, 3), each
+    row's class probabilities, replace the labels in the fitness (`CalibrationFitness`).
     History (one entry per generation): best_so_far, iteration_best, iteration_mean,
     q0, tau_min, tau_max (the MMAS bounds after the update), tau_lowest, tau_highest (the
     pheromone actually held after the update), iwoa (whether an IWOA update followed).
     The whole-model IWOA ablation records only the first three.
     """
     cfg, experts, cand = checked_inputs(experts_flat, arch, config, seed, buffer)
-    fitness = CalibrationFitness(arch, x_cal, y_cal, chunk=cfg.chunk, loss=cfg.loss, noise_rate=cfg.noise_rate)
+    fitness = CalibrationFitness(arch, x_cal, y_cal, chunk=cfg.chunk, loss=cfg.loss, noise_rate=cfg.noise_rate,
+                                 targets=targets)
     return search(experts, cand, fitness, cfg, seed=seed, progress=progress)
 
 

@@ -2,7 +2,9 @@
 
 J(θ) = Σ_n w_{y_n} · (−log softmax(f_θ(x_n))_{y_n}) / Σ_n w_{y_n}, with w_c = N / (C · n_c)
 (torch's weighted 'mean' reduction, the same loss the experts are trained with).
-Lower is better.
+Lower is better. With `targets` (each row's class probabilities t_nc, e.g. from its VO reading) only the
+target changes: J = Σ_n w_{y_n} Σ_c t_nc (−log softmax(f_θ(x_n))_c) / Σ_n w_{y_n}, the row weights still
+those of the labels y. One-hot targets are labels, and take the labels' path (the same bits).
 
 `CalibrationFitness` evaluates P flat parameter vectors in one batched computation.
 For SN-S it uses a specialised path that never materialises LayerNorm statistics
@@ -76,7 +78,7 @@ class CalibrationFitness:
     any number at once and bounds its activations itself (piece_size)."""
 
     def __init__(self, arch: str, x: np.ndarray, y: np.ndarray, chunk: int = 100, loss: str = "ce",
-                 noise_rate: float = FC_RATE):
+                 noise_rate: float = FC_RATE, targets: np.ndarray | None = None):
         x = np.asarray(x, dtype=np.float32)
         y = np.asarray(y, dtype=np.int64)
         if x.ndim != 2 or x.shape[0] != y.shape[0] or x.shape[0] == 0:
@@ -87,6 +89,9 @@ class CalibrationFitness:
             raise InputError(f"calibration labels must be classes 0..{N_CLASSES - 1}, found {y.min()}..{y.max()}")
         if loss not in LOSSES:
             raise InputError(f"unknown fitness loss {loss!r}; choose one of {', '.join(LOSSES)}")
+        targets = _checked_targets(targets, y, loss)
+        if targets is not None and (targets[np.arange(y.shape[0]), y] == 1.0).all():  # each row certain of its label
+            targets = None
         self.arch = arch
         self.chunk = chunk
         self.loss = loss  # 'ce', 'gce' (bounded) or 'fc' (forward-corrected), for noisy labels: models/train.py
@@ -95,6 +100,10 @@ class CalibrationFitness:
         self.y = torch.from_numpy(y)
         self.class_weight = class_weights(y)
         self.weight_total = float(self.class_weight[self.y].sum())
+        # −t_nc w_{y_n} / Σ w_{y_n} in the (class, row) order of the logits: the loss is one matrix-vector product
+        self.soft_coef = None if targets is None else torch.as_tensor(
+            (-targets * self.class_weight[self.y].double().numpy()[:, None] / self.weight_total).T.reshape(-1),
+            dtype=torch.float32)
         n = x.shape[0]
         # Centre the inputs (the shift goes into the bias, see _snS): raw features reach ~10²,
         # and centring keeps the float32 quadratic form for the variance well conditioned.
@@ -141,6 +150,8 @@ class CalibrationFitness:
         over the classes, then the picked value times −w), so the same bits; picking with one
         `index_select` instead of the 2-D NLL kernel takes 40 % less time (issue 30)."""
         p = logits_t.shape[0]
+        if self.soft_coef is not None:
+            return torch.log_softmax(logits_t, dim=1).clamp_(min=-1e30).view(p, -1).mv(self.soft_coef)
         if self.loss == "fc":  # forward correction: log (Tᵀ p)_{y_n} = logsumexp_i (log p_i + log T[i, y_n])
             log_p = torch.logsumexp(torch.log_softmax(logits_t, dim=1).add_(self.log_t_cols), dim=1)
             return log_p.mul_(self.neg_row_weight).sum(dim=1).div_(self.weight_total)
@@ -204,3 +215,17 @@ class CalibrationFitness:
 
     def _generic(self, vals: torch.Tensor) -> torch.Tensor:
         return self._loss(batched_logits(self.arch, vals, self.x).transpose(1, 2))
+
+
+def _checked_targets(targets: np.ndarray | None, y: np.ndarray, loss: str) -> np.ndarray | None:
+    """Class probabilities per row (N, 3): non-negative, each row summing to 1."""
+    if targets is None:
+        return None
+    t = np.asarray(targets, dtype=np.float64)
+    if t.shape != (y.shape[0], N_CLASSES) or not np.isfinite(t).all() or (t < 0).any() \
+            or not np.allclose(t.sum(axis=1), 1.0, atol=1e-6):
+        raise InputError(f"calibration class probabilities must be ({y.shape[0]}, {N_CLASSES}) rows of non-negative "
+                         f"numbers, each summing to 1")
+    if loss != "ce":
+        raise InputError(f"class probabilities are fitted with the cross-entropy; the {loss!r} loss takes hard labels")
+    return t / t.sum(axis=1, keepdims=True)

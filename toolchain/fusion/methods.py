@@ -12,7 +12,7 @@ import torch
 
 from ..models import flatten
 from . import baselines as bl
-from .acomerge import AcoMergeConfig
+from .acomerge import AcoMergeConfig, AcoMergeResult, acomerge
 from .buffer import make_buffer
 from .label_audit import crossval_probabilities, flag_labels
 from .lockstep import run_acomerge_many
@@ -100,13 +100,15 @@ def _aco_runs(name: str, inps: list[FusionInputs], kept_buffers: list[tuple[torc
               phases: tuple[str, ...] | None = None, loss: str = "ce") -> list[FusedModel]:
     cfg = aco_config(inps[0].budget, phases, loss)
     runs = [(kept, inp.x_cal, inp.y_cal, inp.seed, buffer) for inp, (kept, buffer) in zip(inps, kept_buffers)]
-    out = []
-    for inp, res in zip(inps, run_acomerge_many(runs, inps[0].arch, cfg, desc=name)):
-        details = {"config": dataclasses.asdict(cfg), "best_fitness": res.best_fitness, "best_origin": res.best_origin,
-                   "evaluations": res.evaluations, "expert_fitness": res.expert_fitness, "history": res.history}
-        out.append(FusedModel(method=name, arch=inp.arch, flat=torch.as_tensor(res.best_flat, dtype=torch.float32),
-                              curve=[float(v) for v in res.history.get("best_so_far", [])], details=details))
-    return out
+    return [_aco_model(name, inp.arch, cfg, res) for inp, res in zip(inps, run_acomerge_many(runs, inps[0].arch, cfg,
+                                                                                            desc=name))]
+
+
+def _aco_model(name: str, arch: str, cfg: AcoMergeConfig, res: AcoMergeResult) -> FusedModel:
+    details = {"config": dataclasses.asdict(cfg), "best_fitness": res.best_fitness, "best_origin": res.best_origin,
+               "evaluations": res.evaluations, "expert_fitness": res.expert_fitness, "history": res.history}
+    return FusedModel(method=name, arch=arch, flat=torch.as_tensor(res.best_flat, dtype=torch.float32),
+                      curve=[float(v) for v in res.history.get("best_so_far", [])], details=details)
 
 
 def _one(fit_many):
@@ -191,8 +193,26 @@ def _acomerge_audit_many(inps: list[FusionInputs]) -> list[FusedModel]:
     return out
 
 
-def _register_many(name: str, fit_many, label: str, group: str) -> None:
-    register(name, _one(fit_many), label, group, fit_many=fit_many)
+def _acomerge_vo_many(inps: list[FusionInputs]) -> list[FusedModel]:
+    """AcoMerge whose fitness takes each label's class probabilities from its VO reading as the target
+    (`FusionInputs.y_cal_probs`, data/label_noise.py; the rows keep their labels' class weights), without
+    the windows whose VO did not converge. With exact labels the probabilities are certain and this is
+    AcoMerge bit for bit. The CPU search: the GPU engine's fitness takes hard labels."""
+    out = []
+    for inp in _on_cpu(inps):
+        measured = inp.y_cal_probs.sum(axis=1) > 0
+        cfg = aco_config(inp.budget)
+        buffer = make_run_buffer(inp.aligned, "experts", inp.buffer_seed, cfg.sigma, cfg.copies)
+        res = acomerge(inp.aligned, inp.arch, inp.x_cal[measured], inp.y_cal[measured], cfg, seed=inp.seed,
+                       buffer=buffer, targets=inp.y_cal_probs[measured])
+        fused = _aco_model("acomerge-vo", inp.arch, cfg, res)
+        fused.details["vo"] = {"rows_without_measurement": int((~measured).sum()), "of": int(measured.size)}
+        out.append(fused)
+    return out
+
+
+def _register_many(name: str, fit_many, label: str, group: str, needs_label_probs: bool = False) -> None:
+    register(name, _one(fit_many), label, group, fit_many=fit_many, needs_label_probs=needs_label_probs)
 
 
 # One line per method: name, fit, label, table group.
@@ -226,3 +246,5 @@ _register_many("acomerge-audit", _acomerge_audit_many, "AcoMerge (label audit)",
 register("earth-ft-fc", _earth_ft_fc, "Earth + FullFinetune (forward-corrected)", "Noise-robust")
 _register_many("acomerge-fc", _acomerge_fc_many, "AcoMerge (forward-corrected fitness)", "Noise-robust")
 _register_many("acomerge-robust-fc", _acomerge_robust_fc_many, "AcoMerge-robust (forward-corrected)", "Noise-robust")
+_register_many("acomerge-vo", _acomerge_vo_many, "AcoMerge (VO class probabilities)", "Noise-robust",
+               needs_label_probs=True)

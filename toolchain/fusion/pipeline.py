@@ -89,21 +89,21 @@ def needs_joint(methods) -> bool:
 
 
 def _inputs(src: Sources, x_cal: np.ndarray, y_cal: np.ndarray, seed: int, buffer_seed: int,
-            budget: Budget) -> FusionInputs:
+            budget: Budget, y_cal_probs: np.ndarray | None = None) -> FusionInputs:
     return FusionInputs(
         arch=src.arch, roles=tuple(src.roles), experts=torch.as_tensor(src.experts),
         aligned=torch.as_tensor(src.aligned), joint=None if src.joint is None else torch.as_tensor(src.joint),
-        x_cal=x_cal, y_cal=y_cal, seed=seed, buffer_seed=buffer_seed, budget=budget)
+        x_cal=x_cal, y_cal=y_cal, seed=seed, buffer_seed=buffer_seed, budget=budget, y_cal_probs=y_cal_probs)
 
 
 def fuse(method: str, src: Sources, x_cal: np.ndarray, y_cal: np.ndarray, seed: int, buffer_seed: int,
-         budget: Budget = Budget()) -> FusedModel:
-    """Fit registered method `method` on one calibration set."""
-    return registry.fit(method, _inputs(src, x_cal, y_cal, seed, buffer_seed, budget))
+         budget: Budget = Budget(), y_cal_probs: np.ndarray | None = None) -> FusedModel:
+    """Fit registered method `method` on one calibration set (`y_cal_probs`: FusionInputs)."""
+    return registry.fit(method, _inputs(src, x_cal, y_cal, seed, buffer_seed, budget, y_cal_probs))
 
 
-def fuse_many(method: str, src: Sources, draws: list[tuple[np.ndarray, np.ndarray, int, int]],
+def fuse_many(method: str, src: Sources, draws: list[tuple[np.ndarray, np.ndarray, int, int, np.ndarray | None]],
               budget: Budget = Budget()) -> list[FusedModel]:
-    """Fit `method` on several calibration sets (x_cal, y_cal, seed, buffer_seed), batched where
-    the method can batch its runs (AcoMerge on a GPU), in order."""
-    return registry.fit_many(method, [_inputs(src, x, y, s, b, budget) for x, y, s, b in draws])
+    """Fit `method` on several calibration sets (x_cal, y_cal, seed, buffer_seed, y_cal_probs), batched
+    where the method can batch its runs (AcoMerge on a GPU), in order."""
+    return registry.fit_many(method, [_inputs(src, x, y, s, b, budget, p) for x, y, s, b, p in draws])

@@ -53,6 +53,9 @@ class FusionInputs:
     seed: int  # the method's own search seed
     buffer_seed: int  # shared by the methods of one draw, so buffer-based methods see one buffer
     budget: Budget = field(default_factory=Budget)
+    # (N, 3) what each D_Cal label's own measurement says of it: the probability of each class (all zero:
+    # no measurement, e.g. VO did not converge); None where the labels come without one
+    y_cal_probs: np.ndarray | None = None
 
 
 @dataclass
@@ -84,6 +87,7 @@ class MethodSpec:
     group: str  # table group ("Merging", ...); ablation groups are only run on request
     needs_joint: bool = False  # the joint model must be trained first
     fit_many: FitManyFunction | None = None  # batched runs, where the method has them
+    needs_label_probs: bool = False  # fits on FusionInputs.y_cal_probs, so the labels must come with them
 
 
 # Groups that only run through their ablation switch, never through `--methods all`.
@@ -95,13 +99,14 @@ _REGISTRY: dict[str, MethodSpec] = {}
 
 
 def register(name: str, fit: FitFunction, label: str | None = None, group: str = "Other",
-             needs_joint: bool = False, fit_many: FitManyFunction | None = None) -> MethodSpec:
+             needs_joint: bool = False, fit_many: FitManyFunction | None = None,
+             needs_label_probs: bool = False) -> MethodSpec:
     """Add a method under `name` (lower-case, no commas or spaces); names are unique."""
     if not name or name != name.strip().lower() or any(c in name for c in ", "):
         raise InputError(f"method name {name!r}: use lower-case letters, digits and dashes")
     if name in _REGISTRY and _REGISTRY[name].fit is not fit:
         raise InputError(f"fusion method {name!r} is registered already")
-    spec = MethodSpec(name, fit, label or name, group, needs_joint, fit_many)
+    spec = MethodSpec(name, fit, label or name, group, needs_joint, fit_many, needs_label_probs)
     _REGISTRY[name] = spec
     return spec
 
@@ -136,17 +141,27 @@ def in_group(group: str) -> tuple[str, ...]:
     return tuple(n for n, s in all_methods().items() if s.group == group)
 
 
-def fit_many(name: str, inputs: list[FusionInputs]) -> list[FusedModel]:
-    """Run method `name` on several draws: batched where it registered `fit_many`, else one by one."""
+LABEL_PROBS_HINT = ("exact labels, `--label-noise vo:SCALE`, or a calibration file with VO's readings "
+                    "(`fleetlab fuse --vo-labels`)")
+
+
+def check_inputs(name: str, inputs: list[FusionInputs]) -> MethodSpec:
+    """The spec of `name`, once `inputs` hold what it needs."""
     spec = get(name)
     if spec.needs_joint and any(i.joint is None for i in inputs):
         raise InputError(f"{name} needs the joint model, which was not trained")
+    if spec.needs_label_probs and any(i.y_cal_probs is None for i in inputs):
+        raise InputError(f"{name} needs each calibration label's class probabilities from its own measurement, "
+                         f"and these labels have none: use {LABEL_PROBS_HINT}")
+    return spec
+
+
+def fit_many(name: str, inputs: list[FusionInputs]) -> list[FusedModel]:
+    """Run method `name` on several draws: batched where it registered `fit_many`, else one by one."""
+    spec = check_inputs(name, inputs)
     return spec.fit_many(inputs) if spec.fit_many else [spec.fit(i) for i in inputs]
 
 
 def fit(name: str, inputs: FusionInputs) -> FusedModel:
     """Run method `name` on `inputs`."""
-    spec = get(name)
-    if spec.needs_joint and inputs.joint is None:
-        raise InputError(f"{name} needs the joint model, which was not trained")
-    return spec.fit(inputs)
+    return check_inputs(name, [inputs]).fit(inputs)

@@ -55,7 +55,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="corrupt D_Cal's labels (only; the test rows keep exact labels), per run and seeded: "
                         "symmetric:RATE (any other class), adjacent:RATE (low<->moderate, moderate<->high, the "
                         "confusion visual odometry makes), vo:SCALE (the slip measured again by a visual-odometry "
-                        "model, SCALE times its default errors). The table says how many labels were changed")
+                        "model, SCALE times its default errors; each label then also carries its reading's class "
+                        "probabilities, which acomerge-vo fits). The table says how many labels were changed")
     options.noise_rate(p)
     p.add_argument("--label-noise-sweep", metavar="KIND:R1,R2,...",
                    help="run the whole evaluation at each rate (source models trained once), e.g. "

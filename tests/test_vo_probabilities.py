@@ -10,6 +10,7 @@ import pytest
 import torch
 
 from fleetlab.cli import main
+from fleetlab.data.csvio import read_windows_csv
 from fleetlab.data.label_noise import LabelNoise, VoModel, vo_class_probabilities
 from fleetlab.data.labels import slip_class, slip_ratio
 from fleetlab.evaluation.protocol import EvalSettings, Target, run_jobs
@@ -188,6 +189,11 @@ def test_fuse_labels_d_cal_by_the_vo_file_and_acomerge_vo_fits_its_readings(sim_
     assert labels["vo_dropouts"] == int(readings["vo_dropout"].sum()) > 0
     assert labels["differ_from_file_labels"] == int((readings["slip_class_vo"] != readings["slip_class"]).sum())
     assert "VO did not converge on" in (tmp_path / "run" / "report.md").read_text()
+    # the report's CE is the plain weighted CE on VO's classes (not the search's objective on the measured rows)
+    model, _ = load_model(tmp_path / "run" / "fused.pt")
+    x = read_windows_csv(cal).features.astype(np.float32)
+    ce = float(CalibrationFitness("sn-s", x, readings["slip_class_vo"].astype(np.int64))(flatten(model)))
+    assert meta["fitness"] == pytest.approx(ce, rel=1e-5)
     assert json.loads((tmp_path / "run" / "history.json").read_text())["method"] == "acomerge-vo"
     capsys.readouterr()
     # without VO's readings acomerge-vo has nothing to fit: refused before the experts train

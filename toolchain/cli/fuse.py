@@ -110,13 +110,14 @@ def _fuse(args: argparse.Namespace) -> int:
     tuned = finetune(earth, cal.x_cal, cal.y_cal, steps=args.finetune_steps, seed=args.seed)
     seconds["finetune"] = time.perf_counter() - t0
 
+    # One table, one loss: every row's weighted CE on D_Cal as the report's column says, from one call (issue 42:
+    # the same bits within a call). A search's own best fitness is another number wherever it minimised another
+    # objective (GCE, forward-corrected, VO's probabilities) or fewer rows (the audit, VO's dropouts).
     cal_loss = CalibrationFitness(args.arch, cal.x_cal, cal.y_cal)
-    details = fused.details
-    fused_j = details.get("best_fitness", float(cal_loss(fused.flat)))
-    expert_j = details.get("expert_fitness") or [float(cal_loss(torch.as_tensor(a))) for a in src.aligned]
+    fused_j, tuned_j, *expert_j = (float(j) for j in cal_loss(torch.stack(
+        [fused.flat, flatten(tuned), *(torch.as_tensor(a) for a in src.aligned)])))
     rows = [Row(f"{label} (fused)", fused_j, scores(fused.module(), cal.x_test, cal.y_test)),
-            Row("Earth+FullFinetune", float(cal_loss(flatten(tuned))),
-                scores(tuned, cal.x_test, cal.y_test))]
+            Row("Earth+FullFinetune", tuned_j, scores(tuned, cal.x_test, cal.y_test))]
     for role, flat, j in zip(src.roles, src.aligned, expert_j):
         model = model_from_flat(args.arch, torch.as_tensor(flat)).eval()
         rows.append(Row(f"expert {role} (no adaptation)", j, scores(model, cal.x_test, cal.y_test)))

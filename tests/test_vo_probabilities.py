@@ -126,6 +126,8 @@ def test_acomerge_vo_is_acomerge_on_certain_labels_and_leaves_out_the_unmeasured
     assert fused.details["best_fitness"] != plain.details["best_fitness"]
     with pytest.raises(ValueError, match="vo:SCALE"):
         registry.fit("acomerge-vo", _inputs(None))
+    with pytest.raises(ValueError, match="VO did not converge on any of D_Cal's 90 windows"):
+        registry.fit("acomerge-vo", _inputs(lambda y: np.zeros((y.size, 3))))
 
 
 def test_evaluate_refuses_acomerge_vo_on_flips_without_a_reading_before_any_work():

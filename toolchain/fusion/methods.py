@@ -201,6 +201,8 @@ def _acomerge_vo_many(inps: list[FusionInputs]) -> list[FusedModel]:
     out = []
     for inp in _on_cpu(inps):
         measured = inp.y_cal_probs.sum(axis=1) > 0
+        if not measured.any():
+            raise InputError(f"VO did not converge on any of D_Cal's {measured.size} windows: no label to fuse on")
         cfg = aco_config(inp.budget)
         buffer = make_run_buffer(inp.aligned, "experts", inp.buffer_seed, cfg.sigma, cfg.copies)
         res = acomerge(inp.aligned, inp.arch, inp.x_cal[measured], inp.y_cal[measured], cfg, seed=inp.seed,

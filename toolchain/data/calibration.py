@@ -60,10 +60,10 @@ def calibration_set(dataset: Dataset, protocol: str, cal_size: int, seed: int,
 def _vo_labelled(table, file_labels: np.ndarray, vo_labels: Path, vo: VoModel,
                  calibration_csv: Path) -> tuple[np.ndarray, np.ndarray, dict]:
     """(VO's labels, their class probabilities, what the report says of them) for the windows of `table`."""
-    measured, dropped = read_vo_readings(vo_labels)
     if table.rejected_nonfinite:  # a rejected window would shift every VO row after it onto the wrong window
         raise InputError(f"{calibration_csv}: {table.rejected_nonfinite} window(s) with NaN/Inf were rejected, so the "
                          f"rows of {vo_labels} no longer line up with the windows; remove them from both files")
+    measured, dropped = read_vo_readings(vo_labels)
     if measured.size != len(table):
         raise InputError(f"{vo_labels}: {measured.size} VO readings for the {len(table)} windows of {calibration_csv}; "
                          "the file needs one row per window, in order")

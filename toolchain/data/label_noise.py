@@ -193,7 +193,7 @@ def vo_labels(d_actual: np.ndarray, d_commanded: np.ndarray, duration_s: np.ndar
     n = len(d_actual)
     measured, dropped = vo.measure(d_actual, np.zeros(n, dtype=np.int64), duration_s, rng,
                                    low_texture=np.full(n, low_texture))
-    measured = np.where(dropped, d_commanded, measured)
+    measured = believed_distance(measured, dropped, d_commanded)
     true_slip, vo_slip = slip_ratio(d_actual, d_commanded), slip_ratio(measured, d_commanded)
     return dict(zip(VO_LABEL_COLUMNS, (100.0 * true_slip, slip_class(true_slip), measured, 100.0 * vo_slip,
                                        slip_class(vo_slip), dropped.astype(np.int64))))
@@ -242,6 +242,11 @@ def vo_calibration_labels(measured: np.ndarray, dropped: np.ndarray, d_commanded
                           vo: VoModel = VoModel()) -> tuple[np.ndarray, np.ndarray]:
     """(labels, class probabilities) of windows read by VO: the class of VO's slip, or low where VO dropped out
     (the wheel odometry stands), and what the reading says of each class (`vo_class_probabilities`)."""
-    d_cmd = np.asarray(d_commanded, dtype=np.float64)
-    seen = np.where(dropped, d_cmd, measured)  # a dropout's distance is never used
-    return slip_class(slip_ratio(seen, d_cmd)), vo_class_probabilities(seen, d_cmd, dropped, vo)
+    seen = believed_distance(measured, dropped, d_commanded)  # a dropout's own distance is never used
+    return slip_class(slip_ratio(seen, d_commanded)), vo_class_probabilities(seen, d_commanded, dropped, vo)
+
+
+def believed_distance(measured: np.ndarray, dropped: np.ndarray, d_commanded: np.ndarray) -> np.ndarray:
+    """The distance a rover takes for each window: VO's, or where VO did not converge the commanded one (no VO
+    update: the wheel odometry stands, so the window shows no slip)."""
+    return np.where(dropped, np.asarray(d_commanded, dtype=np.float64), measured)

@@ -63,8 +63,8 @@ class EvalSettings:
         unknown = set(self.methods) - set(selectable())
         if unknown or not self.methods:
             raise InputError(f"unknown or no methods: {sorted(unknown)}")
-        unmeasured = self.label_noise and LabelNoise.parse(self.label_noise).kind != "vo"
-        blind = [m for m in self.methods if unmeasured and needs_label_probs(m)]
+        flipped = self.label_noise and LabelNoise.parse(self.label_noise).kind != "vo"
+        blind = [m for m in self.methods if needs_label_probs(m)] if flipped else []
         if blind:  # refused before the experts train: these labels carry no measurement to weigh them by
             raise InputError(f"{', '.join(blind)} fit(s) on what each label's measurement says of it, and "
                              f"{self.label_noise} flips labels without one: use exact labels or --label-noise vo:SCALE")

@@ -11,7 +11,7 @@ import torch
 
 from fleetlab.cli import main
 from fleetlab.data.csvio import read_windows_csv
-from fleetlab.data.label_noise import LabelNoise, VoModel, vo_class_probabilities
+from fleetlab.data.label_noise import LabelNoise, VoModel, read_vo_readings, vo_calibration_labels, vo_class_probabilities
 from fleetlab.data.labels import slip_class, slip_ratio
 from fleetlab.evaluation.protocol import EvalSettings, Target, run_jobs
 from fleetlab.fusion import registry
@@ -216,3 +216,19 @@ def test_a_bad_vo_file_is_one_clear_error(sim_vo, tmp_path, capsys, edit, match)
     assert _fuse(sim_vo, tmp_path / "run", "--vo-labels", str(bad))[1] == 1
     err = capsys.readouterr().err
     assert match in err and "Traceback" not in err
+
+
+def test_a_vo_file_written_by_another_tool_reads_by_column_name(tmp_path):
+    """pandas' CSV (LF line ends, other columns first and between, the dropout's distance left empty) gives the
+    same readings as the rows it was written from."""
+    import pandas as pd
+
+    frame = pd.DataFrame({"t_s": [0.0, 2.0, 4.0], "vo_dropout": [0, 1, 0], "note": ["a", "b", "c"],
+                          "total_dist_vo": [0.41, None, 0.305]})
+    frame.to_csv(tmp_path / "mine.csv", index=False)
+    measured, dropped = read_vo_readings(tmp_path / "mine.csv")
+    np.testing.assert_array_equal(dropped, [False, True, False])
+    np.testing.assert_array_equal(measured[~dropped], [0.41, 0.305])
+    assert np.isnan(measured[1])
+    labels, probs = vo_calibration_labels(measured, dropped, np.array([0.4, 0.4, 0.4]), VoModel())
+    assert labels[1] == 0 and np.all(probs[1] == 0) and np.all(np.isfinite(probs))  # the dropout: low, no label
